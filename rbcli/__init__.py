@@ -1,0 +1,38 @@
+"""rbsim: rigid-body dynamics from YAML scenes (package `rbcli`).
+
+Public API: `load_scene`, `simulate`, `prepare`, `run_to_file`, `Trajectory`, `SimulationDiverged`,
+`__version__`. Units are SI throughout (m, kg, s, rad); quaternions are (w, x, y, z), world-from-body.
+Attributes are imported lazily so that `rbsim --help` and `rbsim validate` stay light.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from rbcli._version import __version__
+
+__all__ = [
+    "__version__",
+    "load_scene",
+    "simulate",
+    "prepare",
+    "run_to_file",
+    "Trajectory",
+    "SimulationDiverged",
+]
+
+if TYPE_CHECKING:
+    from rbcli.api import SimulationDiverged, load_scene, prepare, run_to_file, simulate
+    from rbcli.record.memory_sink import Trajectory
+
+
+def __getattr__(name: str) -> Any:
+    if name == "Trajectory":
+        from rbcli.record.memory_sink import Trajectory
+
+        return Trajectory
+    if name in __all__:
+        from rbcli import api
+
+        return getattr(api, name)
+    raise AttributeError(f"module 'rbcli' has no attribute {name!r}")

@@ -1,0 +1,80 @@
+"""The Python API: the same functions the CLI calls.
+
+import rbcli
+scene = rbcli.load_scene("scenes/t_handle.yaml")
+traj = rbcli.simulate(scene, dt=1e-3, duration=2.0, integrator="euler-matrix")
+traj.x  # (T, N, 3) centre-of-mass positions [m]
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+from rbcli.record.frame import RunSummary, Sink
+from rbcli.record.memory_sink import SinkMemory, Trajectory
+from rbcli.scene.compile import CompiledScene, compile_scene
+from rbcli.scene.spec import SceneSpec
+
+
+class SimulationDiverged(RuntimeError):
+    """The state became non-finite or blew up; `trajectory` holds every frame up to that point."""
+
+    def __init__(self, message: str, trajectory: Trajectory):
+        super().__init__(message)
+        self.trajectory = trajectory
+
+
+def load_scene(path: str | Path) -> SceneSpec:
+    """Read, validate and resolve a scene file; raises SceneError listing every located issue."""
+    from rbcli.scene.load import load_scene as _load
+
+    return _load(path)
+
+
+def prepare(
+    scene: SceneSpec | str | Path,
+    *,
+    dt: float | None = None,
+    duration: float | None = None,
+    integrator: str | None = None,
+    record_every: int | None = None,
+) -> CompiledScene:
+    """Load (when given a path) and compile a scene with overrides."""
+    spec = scene if isinstance(scene, SceneSpec) else load_scene(scene)
+    return compile_scene(spec, dt=dt, duration=duration, integrator=integrator, record_every=record_every)
+
+
+def simulate(
+    scene: SceneSpec | str | Path,
+    *,
+    dt: float | None = None,
+    duration: float | None = None,
+    integrator: str | None = None,
+    record_every: int | None = None,
+    sinks: Sequence[Sink] = (),
+    on_diverge: str = "raise",
+) -> Trajectory:
+    """Run a scene and return its recorded Trajectory (also streaming to any extra sinks).
+
+    on_diverge: "raise" (SimulationDiverged, carrying the partial trajectory) or "return".
+    """
+    from rbcli.runner.loop import run
+
+    compiled = prepare(scene, dt=dt, duration=duration, integrator=integrator, record_every=record_every)
+    memory = SinkMemory()
+    summary = run(compiled, [memory, *sinks])
+    trajectory = memory.trajectory()
+    if summary.status == "diverged" and on_diverge == "raise":
+        raise SimulationDiverged(summary.message, trajectory)
+    return trajectory
+
+
+def run_to_file(compiled: CompiledScene, output: str | Path, *, progress=None) -> RunSummary:  # noqa: ANN001
+    """Run a compiled scene streaming to an .mcap or .rrd file (memory stays flat)."""
+    from rbcli.record.sinks import open_file_sink
+    from rbcli.runner.loop import run
+
+    output = Path(output)
+    output.parent.mkdir(parents=True, exist_ok=True)
+    return run(compiled, [open_file_sink(output)], progress=progress)

@@ -1,0 +1,102 @@
+"""`rbsim run SCENE`: integrate a scene and record every step to an .mcap or .rrd file."""
+
+from __future__ import annotations
+
+import sys
+import threading
+import time
+from pathlib import Path
+
+import typer
+
+EXIT_INVALID = 1
+EXIT_DIVERGED = 3
+EXIT_INTERRUPTED = 130
+
+
+def run(
+    scene: Path = typer.Argument(..., help="Scene YAML file."),
+    output: Path | None = typer.Option(
+        None, "--output", "-o", help="Output file, .mcap or .rrd [default: the scene's output, else outputs/<name>.rrd]."
+    ),
+    dt: float | None = typer.Option(None, "--dt", help="Override the time step [s]."),
+    duration: float | None = typer.Option(None, "--duration", help="Override the duration [s]."),
+    integrator: str | None = typer.Option(None, "--integrator", help="Override the integrator (see docs)."),
+    record_every: int | None = typer.Option(None, "--record-every", min=1, help="Record every N-th step."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar or summary."),
+) -> None:
+    """Integrate SCENE and record it; exits 1 on an invalid scene (writing nothing), 3 on divergence."""
+    from rich.console import Console
+
+    from rbcli.api import prepare
+    from rbcli.physics.integrators import get_integrator
+    from rbcli.record.sinks import output_format
+    from rbcli.scene.spec import SceneError
+
+    err = Console(stderr=True, highlight=False)
+    if not scene.is_file():
+        err.print(f"[red]error:[/] scene file not found: {scene}")
+        raise typer.Exit(EXIT_INVALID)
+    try:
+        compiled = prepare(scene, dt=dt, duration=duration, integrator=integrator, record_every=record_every)
+        get_integrator(compiled.settings.integrator)
+        target = output or Path(compiled.spec.simulation.output or Path("outputs") / f"{compiled.spec.name}.rrd")
+        output_format(target)
+    except SceneError as exc:
+        for issue in exc.issues:
+            err.print(str(issue), markup=False)
+        raise typer.Exit(EXIT_INVALID) from None
+    except (KeyError, ValueError) as exc:
+        err.print(f"[red]error:[/] {exc.args[0] if exc.args else exc}", markup=False)
+        raise typer.Exit(EXIT_INVALID) from None
+
+    _warm_up_kernels(compiled, err, quiet)
+    summary, wall = _run_with_progress(compiled, target, err, quiet)
+    settings = compiled.settings
+    if not quiet:
+        rate = summary.steps * compiled.model.body_count / max(wall, 1e-9)
+        err.print(
+            f"{summary.status}: {summary.steps} steps x {compiled.model.body_count} bodies "
+            f"({settings.integrator}, dt = {settings.dt:g} s) in {wall:.2f} s "
+            f"({rate:.3g} body-steps/s); {summary.frames} frames -> {target}",
+            markup=False,
+        )
+    if summary.status == "diverged":
+        err.print(f"[red]error:[/] {summary.message}; the log up to that point is complete: {target}")
+        raise typer.Exit(EXIT_DIVERGED)
+    if summary.status == "interrupted":
+        err.print(f"[yellow]{summary.message}[/]; the log up to that point is complete: {target}")
+        raise typer.Exit(EXIT_INTERRUPTED)
+
+
+def _warm_up_kernels(compiled, err, quiet: bool) -> None:  # noqa: ANN001
+    """Compile (or load from cache) the step kernels, saying so if it takes noticeable time."""
+    from rbcli.runner.loop import warm_up
+
+    timer = threading.Timer(0.5, lambda: err.print("compiling kernels (first run only)…") if not quiet else None)
+    timer.start()
+    try:
+        warm_up(compiled)
+    finally:
+        timer.cancel()
+
+
+def _run_with_progress(compiled, target: Path, err, quiet: bool):  # noqa: ANN001, ANN202
+    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+    from rbcli.api import run_to_file
+
+    started = time.perf_counter()
+    if quiet or not sys.stderr.isatty():
+        summary = run_to_file(compiled, target)
+        return summary, time.perf_counter() - started
+    columns = (TextColumn("simulating"), BarColumn(), TextColumn("t = {task.fields[t]:.4g} s"), TimeRemainingColumn())
+    with Progress(*columns, console=err, transient=True) as bar:
+        task = bar.add_task("run", total=compiled.settings.steps, t=0.0)
+        dt = compiled.settings.dt
+
+        def progress(done: int, total: int) -> None:
+            bar.update(task, completed=done, t=done * dt)
+
+        summary = run_to_file(compiled, target, progress=progress)
+    return summary, time.perf_counter() - started

@@ -1,0 +1,166 @@
+"""The model: constant per-body and per-particle arrays, built once from a scene.
+
+Per the tutorial's precomputation: M = sum m_i, x_cm = sum m_i x_i / M, r0_i = x0_i - x_cm,
+I0 = sum m_i (r0_i . r0_i 1 - r0_i r0_i^T). rbsim then diagonalises I0: internally the body frame is
+the principal frame (I0 = diag(I1, I2, I3)), which makes omega = I^-1 L three multiplications and
+is what the splitting and exact integrators need. `body_frame_q` keeps the fixed rotation from the
+principal frame to the user's particle frame so every output is reported in the user's frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from rbcli.physics.rotation import matrix_to_quat, quat_to_matrix
+
+# A principal moment below this fraction of the largest makes I0 singular (collinear or single-point
+# particle clouds); 1e-12 is far above round-off (~1e-16) and far below any real body's anisotropy.
+INERTIA_DEGENERACY_RATIO = 1e-12
+
+
+def mass_properties(positions: np.ndarray, masses: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """Total mass M [kg], centre of mass x_cm [m] (3,), inertia I0 [kg m^2] (3, 3) about x_cm.
+
+    The tutorial's precomputation, in the frame the positions are given in.
+    """
+    positions = np.asarray(positions, dtype=np.float64)
+    masses = np.asarray(masses, dtype=np.float64)
+    total = float(masses.sum())
+    centre = (masses[:, None] * positions).sum(axis=0) / total
+    r0 = positions - centre
+    r0_sq = np.einsum("ij,ij->i", r0, r0)
+    inertia = np.einsum("i,jk->jk", masses * r0_sq, np.eye(3)) - np.einsum("i,ij,ik->jk", masses, r0, r0)
+    return total, centre, inertia
+
+
+def principal_axes(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Principal moments (3,) ascending and the right-handed rotation E (3, 3) with I0 = E diag E^T.
+
+    Columns of E are the principal axes expressed in the user's frame.
+    """
+    moments, axes = np.linalg.eigh(0.5 * (inertia + inertia.T))
+    if np.linalg.det(axes) < 0.0:  # eigh may return a reflection; flip one axis to make it a rotation
+        axes[:, 2] = -axes[:, 2]
+    return moments, axes
+
+
+def inertia_is_degenerate(moments: np.ndarray) -> bool:
+    """True when the smallest principal moment is negligible: I0 cannot be inverted."""
+    return bool(moments.min() <= INERTIA_DEGENERACY_RATIO * max(moments.max(), np.finfo(float).tiny))
+
+
+class KernelModel(NamedTuple):
+    """The model's arrays as compiled kernels take them (a numba-friendly named tuple)."""
+
+    body_mass: np.ndarray  # [kg], (body_count,)
+    body_inertia: np.ndarray  # principal moments [kg m^2], (body_count, 3)
+    body_inertia_inv: np.ndarray  # 1 / principal moments [1/(kg m^2)], (body_count, 3)
+    particle_offset: np.ndarray  # [m], (particle_count, 3), principal body frame, about the centre of mass
+    particle_mass: np.ndarray  # [kg], (particle_count,)
+    body_particle_start: np.ndarray  # int64 (body_count,): first particle of each body
+    body_particle_count: np.ndarray  # int64 (body_count,)
+    body_frame: np.ndarray  # E, user-from-principal rotation, (body_count, 3, 3)
+
+
+@dataclass(frozen=True)
+class Model:
+    """Constant description of the bodies; read-only after compilation.
+
+    body_frame_q: (body_count, 4) wxyz, rotation user-frame-from-principal-frame (the E above).
+    particle_offset_user: (particle_count, 3) [m], user frame, about the centre of mass (for output).
+    """
+
+    body_names: tuple[str, ...]
+    body_mass: np.ndarray
+    body_inertia: np.ndarray
+    body_frame_q: np.ndarray
+    particle_offset: np.ndarray
+    particle_offset_user: np.ndarray
+    particle_mass: np.ndarray
+    particle_radius: np.ndarray
+    body_particle_start: np.ndarray
+    body_particle_count: np.ndarray
+
+    @property
+    def body_count(self) -> int:
+        return len(self.body_names)
+
+    @property
+    def particle_count(self) -> int:
+        return int(self.particle_mass.shape[0])
+
+    def kernel(self) -> KernelModel:
+        """Arrays for compiled kernels."""
+        return KernelModel(
+            self.body_mass,
+            self.body_inertia,
+            1.0 / self.body_inertia,
+            self.particle_offset,
+            self.particle_mass,
+            self.body_particle_start,
+            self.body_particle_count,
+            quat_to_matrix(self.body_frame_q),
+        )
+
+    def particle_slice(self, body: int) -> slice:
+        start = int(self.body_particle_start[body])
+        return slice(start, start + int(self.body_particle_count[body]))
+
+
+def build_model(
+    names: list[str],
+    particle_positions: list[np.ndarray],
+    particle_masses: list[np.ndarray],
+    particle_radii: list[np.ndarray | None] | None = None,
+) -> tuple[Model, np.ndarray]:
+    """Precompute every body's mass properties; returns the model and each body's centre of mass in
+    its user frame, shape (body_count, 3) (needed to place bodies and to report particles).
+
+    Raises ValueError naming the body when its inertia is singular (collinear or single-point cloud).
+    """
+    count = len(names)
+    body_mass = np.empty(count)
+    body_inertia = np.empty((count, 3))
+    body_frame_q = np.empty((count, 4))
+    centres = np.empty((count, 3))
+    offsets_user, offsets_principal, masses, radii = [], [], [], []
+    for b in range(count):  # once per body at compile time, not in a step
+        pos = np.asarray(particle_positions[b], dtype=np.float64).reshape(-1, 3)
+        mass = np.broadcast_to(np.asarray(particle_masses[b], dtype=np.float64), (pos.shape[0],))
+        total, centre, inertia = mass_properties(pos, mass)
+        moments, axes = principal_axes(inertia)
+        if inertia_is_degenerate(moments):
+            raise ValueError(
+                f"body {names[b]!r}: its inertia I0 is singular (principal moments {moments.tolist()}); "
+                "its particles are collinear or a single point, so it has no inertia about some axis"
+            )
+        body_mass[b] = total
+        body_inertia[b] = moments
+        body_frame_q[b] = matrix_to_quat(axes)
+        centres[b] = centre
+        r0 = pos - centre
+        offsets_user.append(r0)
+        offsets_principal.append(r0 @ axes)  # components along the principal axes: E^T r0
+        masses.append(np.array(mass))
+        rad = None if particle_radii is None else particle_radii[b]
+        radii.append(np.zeros(pos.shape[0]) if rad is None else np.broadcast_to(rad, (pos.shape[0],)).copy())
+    counts = np.array([m.shape[0] for m in masses], dtype=np.int64)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+    model = Model(
+        body_names=tuple(names),
+        body_mass=body_mass,
+        body_inertia=body_inertia,
+        body_frame_q=body_frame_q,
+        particle_offset=np.concatenate(offsets_principal) if count else np.zeros((0, 3)),
+        particle_offset_user=np.concatenate(offsets_user) if count else np.zeros((0, 3)),
+        particle_mass=np.concatenate(masses) if count else np.zeros(0),
+        particle_radius=np.concatenate(radii) if count else np.zeros(0),
+        body_particle_start=starts,
+        body_particle_count=counts,
+    )
+    for arr in (model.body_mass, model.body_inertia, model.body_frame_q, model.particle_offset):
+        arr.setflags(write=False)
+    return model, centres

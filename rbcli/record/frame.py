@@ -1,0 +1,90 @@
+"""What flows from the runner to the sinks: a run header once, then blocks of recorded frames.
+
+Sinks implement `Sink` (open / write / close). Arrays are float64, SI units, world frame; quaternions
+are (w, x, y, z) world-from-body in the user's body frame (the frame the scene's particles were given
+in), so outputs read exactly as the scene was written. Convert to (x, y, z, w) only inside a sink.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class RunHeader:
+    """Everything about a run that does not change per step.
+
+    body_particle_offset: per body, particle positions relative to the centre of mass [m], shape
+    (n_i, 3), in the user's body frame (so a static point cloud under the body transform is right).
+    """
+
+    scene_name: str
+    scene_text: str
+    scene_path: str | None
+    scene_sha256: str
+    body_names: tuple[str, ...]
+    body_mass: np.ndarray  # [kg], shape (body_count,)
+    body_particle_offset: tuple[np.ndarray, ...]
+    integrator: str
+    dt: float  # [s]
+    duration: float  # [s]
+    record_every: int
+    streams: tuple[str, ...]
+    rbsim_version: str
+    seed: int = 0
+    invariant_names: tuple[str, ...] = ()
+    units: str = "SI (m, kg, s, rad)"
+    quaternion_order: str = "wxyz"
+
+
+@dataclass
+class FrameBlock:
+    """K consecutive recorded frames of all N bodies.
+
+    step: (K,) int64 step index; t: (K,) [s]; x: (K, N, 3) centre of mass [m]; q: (K, N, 4) wxyz;
+    v: (K, N, 3) [m/s]; omega: (K, N, 3) world angular velocity [rad/s]; P: (K, N, 3) [kg m/s];
+    L: (K, N, 3) world angular momentum [kg m^2/s].
+    invariants: name -> (K,) time series (energies [J], momentum components, norms).
+    particle_position: (K, particle_count, 3) world [m], present only when the particles stream is on.
+    """
+
+    step: np.ndarray
+    t: np.ndarray
+    x: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
+    omega: np.ndarray
+    P: np.ndarray
+    L: np.ndarray
+    invariants: dict[str, np.ndarray] = field(default_factory=dict)
+    particle_position: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """How a run ended. status: "completed", "diverged" or "interrupted"."""
+
+    status: str
+    steps: int
+    frames: int
+    t_end: float
+    message: str = ""
+
+
+class Sink(Protocol):
+    """A recorder: open with the header, write blocks in order, close with the summary.
+
+    close() must leave a complete, readable file whatever the status (diverged runs included).
+    """
+
+    def open(self, header: RunHeader) -> None: ...
+
+    def write(self, block: FrameBlock) -> None: ...
+
+    def close(self, summary: RunSummary) -> None: ...

@@ -1,0 +1,179 @@
+"""The run loop: owns time, chunks of compiled steps, recording cadence, divergence and interrupts.
+
+Python regains control only between chunks: to hand a block of frames to the sinks, report progress,
+or stop. Chunks are sized to ~0.2 s of work so Ctrl-C and progress stay responsive.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+import time
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+from rbcli._version import __version__
+from rbcli.physics.energy import INVARIANT_NAMES
+from rbcli.physics.integrators import get_integrator
+from rbcli.record.frame import RunHeader, RunSummary, Sink
+from rbcli.runner.blocks import make_block
+from rbcli.scene.compile import CompiledScene
+
+# Frame buffers are sized to about this many bytes so memory stays flat however long the run.
+BLOCK_BYTES = 8 * 1024 * 1024
+MAX_BLOCK_FRAMES = 1024
+CHUNK_SECONDS = 0.2
+
+ProgressCallback = Callable[[int, int], None]
+
+
+def run_header(compiled: CompiledScene) -> RunHeader:
+    """The header every sink receives before the first frame."""
+    spec, model, settings = compiled.spec, compiled.model, compiled.settings
+    return RunHeader(
+        scene_name=spec.name,
+        scene_text=spec.source_text,
+        scene_path=spec.source_path,
+        scene_sha256=compiled.scene_sha256,
+        body_names=model.body_names,
+        body_mass=model.body_mass.copy(),
+        body_particle_offset=tuple(
+            model.particle_offset_user[model.particle_slice(b)].copy() for b in range(model.body_count)
+        ),
+        integrator=settings.integrator,
+        dt=settings.dt,
+        duration=settings.duration,
+        record_every=settings.record_every,
+        streams=settings.streams,
+        rbsim_version=__version__,
+        seed=settings.seed,
+        invariant_names=INVARIANT_NAMES if "invariants" in settings.streams else (),
+    )
+
+
+class _InterruptFlag:
+    """SIGINT sets a flag checked between chunks (main thread only), so a chunk is never cut mid-way."""
+
+    def __init__(self) -> None:
+        self.set = False
+        self._previous = None
+
+    def __enter__(self) -> _InterruptFlag:
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.signal(signal.SIGINT, self._handle)
+        return self
+
+    def _handle(self, signum, frame) -> None:  # noqa: ANN001
+        self.set = True
+
+    def __exit__(self, *exc: object) -> None:
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+
+
+def warm_up(compiled: CompiledScene) -> None:
+    """Compile or load from cache the chunk kernel for this scene's integrator and force types."""
+    from rbcli.physics.step import empty_buffers, run_chunk
+
+    kernel = get_integrator(compiled.settings.integrator).load()
+    state = compiled.initial_state.copy()
+    n = compiled.model.body_count
+    buf = empty_buffers(1, n)
+    run_chunk(
+        kernel.step, compiled.model.kernel(), compiled.forces, compiled.settings.dt, 0, 0, 1,
+        state.x, state.q, state.P, state.L, np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, kernel.SCRATCH_WIDTH)),
+        buf["step"], buf["x"], buf["q"], buf["P"], buf["L"], 0,
+    )  # fmt: skip
+
+
+def run(compiled: CompiledScene, sinks: Sequence[Sink], *, progress: ProgressCallback | None = None) -> RunSummary:
+    """Integrate the compiled scene, streaming frames to every sink; always closes the sinks."""
+    from rbcli.physics.step import STATUS_DIVERGED, empty_buffers, run_chunk
+
+    model, settings = compiled.model, compiled.settings
+    kernel = get_integrator(settings.integrator).load()
+    state = compiled.initial_state.copy()
+    n = model.body_count
+    capacity = int(np.clip(BLOCK_BYTES // max(1, 13 * 8 * n), 1, MAX_BLOCK_FRAMES))
+    buf = empty_buffers(capacity, n)
+    F, tau = np.zeros((n, 3)), np.zeros((n, 3))
+    scratch = np.zeros((n, kernel.SCRATCH_WIDTH))
+    kmodel = compiled.model.kernel()
+    every, total = settings.record_every, settings.steps
+
+    header = run_header(compiled)
+    for sink in sinks:
+        sink.open(header)
+
+    def flush(frames: int) -> None:
+        if frames:
+            block = make_block(compiled, buf["step"][:frames], buf["x"][:frames], buf["q"][:frames],
+                               buf["P"][:frames], buf["L"][:frames])  # fmt: skip
+            for sink in sinks:
+                sink.write(block)
+
+    def record_current(frames: int) -> int:
+        buf["step"][frames] = state.step
+        for key in ("x", "q", "P", "L"):
+            buf[key][frames] = getattr(state, key)
+        return frames + 1
+
+    status, message, recorded = "completed", "", 0
+    try:
+        frames = record_current(0)  # the initial state is frame 0
+        chunk_steps = max(1, min(total, 64))
+        with _InterruptFlag() as interrupted:
+            while state.step < total:
+                started = time.perf_counter()
+                todo = min(chunk_steps, total - state.step)
+                done, frames, code = run_chunk(
+                    kernel.step, kmodel, compiled.forces, settings.dt, state.step, todo, every,
+                    state.x, state.q, state.P, state.L, F, tau, scratch,
+                    buf["step"], buf["x"], buf["q"], buf["P"], buf["L"], frames,
+                )  # fmt: skip
+                state.step += int(done)
+                elapsed = time.perf_counter() - started
+                if code == STATUS_DIVERGED:
+                    status = "diverged"
+                    message = (
+                        f"diverged at step {state.step} (t = {state.step * settings.dt:.6g} s): the state became "
+                        f"non-finite or exceeded 1e100 with integrator {settings.integrator!r} at dt = "
+                        f"{settings.dt:g} s; try a smaller dt or a more stable integrator"
+                    )
+                    break
+                if frames == capacity:
+                    flush(frames)
+                    recorded += frames
+                    frames = 0
+                if progress is not None:
+                    progress(state.step, total)
+                if interrupted.set:
+                    status, message = (
+                        "interrupted",
+                        f"interrupted at step {state.step} (t = {state.step * settings.dt:.6g} s)",
+                    )
+                    break
+                # aim each chunk at CHUNK_SECONDS of work, growing or shrinking by at most 4x per chunk
+                rate = done / max(elapsed, 1e-9)
+                chunk_steps = int(np.clip(rate * CHUNK_SECONDS, max(1, chunk_steps // 4), chunk_steps * 4))
+            if status != "diverged" and state.step % every != 0:
+                if frames == capacity:
+                    flush(frames)
+                    recorded += frames
+                    frames = 0
+                frames = record_current(frames)  # always record the final state
+            flush(frames)
+            recorded += frames
+    except BaseException as exc:  # a failing sink or an unexpected error: still leave readable files
+        summary = RunSummary("error", state.step, recorded, state.step * settings.dt, f"{type(exc).__name__}: {exc}")
+        for sink in sinks:
+            try:
+                sink.close(summary)
+            except Exception:  # noqa: BLE001 - the original error is the one to report
+                pass
+        raise
+    summary = RunSummary(status, state.step, recorded, state.step * settings.dt, message)
+    for sink in sinks:
+        sink.close(summary)
+    return summary

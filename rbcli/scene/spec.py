@@ -1,0 +1,114 @@
+"""Typed, validated scene specification: what `scene/load.py` produces and `scene/compile.py` consumes.
+
+Everything here is already checked and resolved to numbers (shapes sampled to particles, orientations
+to unit quaternions); no raw YAML reaches the physics. Units are SI throughout: m, kg, s, rad.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class SourceLocation:
+    """A place in a scene file, 1-based line and column (as editors show them)."""
+
+    file: str
+    line: int
+    column: int
+
+    def __str__(self) -> str:
+        return f"{self.file}:{self.line}:{self.column}"
+
+
+@dataclass(frozen=True)
+class SceneIssue:
+    """One problem found in a scene: where, what is wrong, and what was expected."""
+
+    location: SourceLocation | None
+    message: str
+    expected: str = ""
+    severity: str = "error"  # "error" or "warning"
+
+    def __str__(self) -> str:
+        where = str(self.location) if self.location else "<scene>"
+        tail = f" — expected {self.expected}" if self.expected else ""
+        return f"{where}: {self.severity}: {self.message}{tail}"
+
+
+class SceneError(Exception):
+    """A scene that cannot be run; carries every issue found, each with its location."""
+
+    def __init__(self, issues: list[SceneIssue]):
+        self.issues = list(issues)
+        super().__init__("\n".join(str(i) for i in self.issues))
+
+
+@dataclass(frozen=True)
+class RecordSpec:
+    """What the recorder writes: every `every`-th step, and which streams."""
+
+    every: int = 1
+    streams: tuple[str, ...] = ("bodies", "invariants")  # also "particles"
+
+
+@dataclass(frozen=True)
+class SimulationSpec:
+    """Time stepping: step `dt` [s] over `duration` [s] with the named integrator."""
+
+    dt: float
+    duration: float
+    integrator: str = "euler-matrix"
+    tolerance: float | None = None  # adaptive error control instead of a fixed dt (integrators issue)
+    record: RecordSpec = field(default_factory=RecordSpec)
+    output: str | None = None  # output path; format from the extension (.mcap or .rrd)
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class BodySpec:
+    """One rigid body as a particle cloud with its initial state.
+
+    particle_position: [m], shape (n, 3), the body's own (user) frame, any origin.
+    particle_mass: [kg], shape (n,).
+    position: world position of the centre of mass [m], shape (3,).
+    orientation_wxyz: unit quaternion, world-from-body rotation, scalar first.
+    Exactly one of velocity [m/s] / momentum [kg m/s] may be given (None: at rest), and at most one of
+    angular_momentum [kg m^2/s, world] / angular_velocity [rad/s, frame in angular_velocity_frame].
+    """
+
+    name: str
+    particle_position: np.ndarray
+    particle_mass: np.ndarray
+    position: np.ndarray
+    orientation_wxyz: np.ndarray
+    particle_radius: np.ndarray | None = None
+    velocity: np.ndarray | None = None
+    momentum: np.ndarray | None = None
+    angular_momentum: np.ndarray | None = None
+    angular_velocity: np.ndarray | None = None
+    angular_velocity_frame: str = "world"  # "world" or "body"
+    location: SourceLocation | None = None
+
+
+@dataclass(frozen=True)
+class ForceSpec:
+    """Base of the force terms declared in a scene's `forces:` list (forces issue)."""
+
+    kind: str
+    location: SourceLocation | None = None
+
+
+@dataclass(frozen=True)
+class SceneSpec:
+    """A whole scene, validated: simulation settings, bodies, uniform gravity and force terms."""
+
+    name: str
+    simulation: SimulationSpec
+    bodies: tuple[BodySpec, ...]
+    gravity: np.ndarray | None = None  # [m/s^2], shape (3,), world frame
+    forces: tuple[ForceSpec, ...] = ()
+    source_path: str | None = None
+    source_text: str = ""
