@@ -1,0 +1,5 @@
+"""`python -m rbcli` is `rbsim`."""
+
+from rbcli.cli.app import main
+
+main()
