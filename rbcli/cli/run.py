@@ -17,7 +17,10 @@ EXIT_INTERRUPTED = 130
 def run(
     scene: Path = typer.Argument(..., help="Scene YAML file."),
     output: Path | None = typer.Option(
-        None, "--output", "-o", help="Output file, .mcap or .rrd [default: the scene's output, else outputs/<name>.rrd]."
+        None,
+        "--output",
+        "-o",
+        help="Output file, .mcap or .rrd [default: the scene's output, else outputs/<name>.rrd].",
     ),
     dt: float | None = typer.Option(None, "--dt", help="Override the time step [s]."),
     duration: float | None = typer.Option(None, "--duration", help="Override the duration [s]."),

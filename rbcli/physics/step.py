@@ -1,7 +1,29 @@
-"""Chunks of steps in compiled code: the runner calls `run_chunk` and gets control back only to
-record a block of frames, check for divergence or report progress."""
+"""Chunks of steps in compiled code: the runner calls an integrator's `run_chunk` and gets control back
+only to record a block of frames, check for divergence or report progress.
+
+Why every integrator module has its own 8-line `run_chunk` instead of one loop taking `step` as an
+argument: numba cannot cache a function whose signature holds a dispatcher type (the cache index then
+refers to dispatcher objects that no longer exist in the next process, and saving a new overload fails
+with "underlying object has vanished"). A loop that calls its module's `step` as a global caches
+cleanly. The shared parts — recording, the divergence check — live here:
+
+    @numba.njit(cache=True)
+    def run_chunk(model, forces, dt, step0, n_steps, record_every, x, q, P, L, F, tau, scratch, frames, filled):
+        for k in range(n_steps):
+            step(model, forces, (step0 + k) * dt, dt, x, q, P, L, F, tau, scratch)
+            filled, stop = record_if_due(step0 + k + 1, record_every, x, q, P, L, frames, filled)
+            if stop != STATUS_OK:
+                return k + 1, filled, stop
+        return n_steps, filled, chunk_status(x, q, P, L)
+
+Returns (steps_done, frames_filled, status): STATUS_OK (ran n_steps), STATUS_FULL (the frame buffers
+are full: flush them and call again), STATUS_DIVERGED (the last step left a non-finite or blown-up state,
+which was not recorded). Time is t = step * dt, never accumulated.
+"""
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -12,17 +34,38 @@ BLOWUP_LIMIT = 1e100
 
 STATUS_OK = 0
 STATUS_DIVERGED = 1
+STATUS_FULL = 2
+
+
+class FrameBuffers(NamedTuple):
+    """Preallocated recorded frames: step (K,) int64, x (K,N,3), q (K,N,4), P (K,N,3), L (K,N,3)."""
+
+    step: np.ndarray
+    x: np.ndarray
+    q: np.ndarray
+    P: np.ndarray
+    L: np.ndarray
+
+
+def empty_buffers(capacity: int, body_count: int) -> FrameBuffers:
+    """Frame buffers for `run_chunk`."""
+    return FrameBuffers(
+        np.zeros(capacity, dtype=np.int64),
+        np.zeros((capacity, body_count, 3)),
+        np.zeros((capacity, body_count, 4)),
+        np.zeros((capacity, body_count, 3)),
+        np.zeros((capacity, body_count, 3)),
+    )
 
 
 @numba.njit(cache=True)
 def state_is_sane(x, q, P, L) -> bool:  # noqa: ANN001
     """True when every state value is finite and below BLOWUP_LIMIT in magnitude."""
-    for arr in (x, P, L):
-        for b in range(arr.shape[0]):
-            for k in range(3):
-                if not (abs(arr[b, k]) < BLOWUP_LIMIT):  # also False for NaN
-                    return False
-    for b in range(q.shape[0]):
+    for b in range(x.shape[0]):
+        for k in range(3):
+            # written as "not (a < limit)" so that NaN also fails
+            if not (abs(x[b, k]) < BLOWUP_LIMIT and abs(P[b, k]) < BLOWUP_LIMIT and abs(L[b, k]) < BLOWUP_LIMIT):
+                return False
         for k in range(4):
             if not (abs(q[b, k]) < BLOWUP_LIMIT):
                 return False
@@ -30,45 +73,28 @@ def state_is_sane(x, q, P, L) -> bool:  # noqa: ANN001
 
 
 @numba.njit(cache=True)
-def run_chunk(
-    step, model, forces, dt, step0, n_steps, record_every,  # noqa: ANN001
-    x, q, P, L, F, tau, scratch,
-    out_step, out_x, out_q, out_P, out_L, frame0,
-):  # fmt: skip
-    """Advance up to n_steps from step index step0 (time t = step * dt, never accumulated).
+def record_if_due(index, record_every, x, q, P, L, frames, filled):  # noqa: ANN001
+    """After step `index`: when it is a recording step, check the state and copy it into the next frame.
 
-    After every step whose index is a multiple of record_every, check the state and copy it into the
-    out_* buffers at the next frame slot; stop early when the buffers are full or the state diverged.
-    Returns (steps_done, frames_filled, status).
+    Returns (filled, status); status is STATUS_DIVERGED for a bad state (not recorded) and STATUS_FULL
+    when this frame filled the buffers.
     """
-    frames = frame0
-    capacity = out_step.shape[0]
-    for k in range(n_steps):
-        t = (step0 + k) * dt
-        step(model, forces, t, dt, x, q, P, L, F, tau, scratch)
-        index = step0 + k + 1
-        if index % record_every == 0:
-            if not state_is_sane(x, q, P, L):
-                return k + 1, frames, STATUS_DIVERGED
-            out_step[frames] = index
-            out_x[frames] = x
-            out_q[frames] = q
-            out_P[frames] = P
-            out_L[frames] = L
-            frames += 1
-            if frames == capacity:
-                return k + 1, frames, STATUS_OK
+    if index % record_every != 0:
+        return filled, STATUS_OK
     if not state_is_sane(x, q, P, L):
-        return n_steps, frames, STATUS_DIVERGED
-    return n_steps, frames, STATUS_OK
+        return filled, STATUS_DIVERGED
+    frames.step[filled] = index
+    frames.x[filled] = x
+    frames.q[filled] = q
+    frames.P[filled] = P
+    frames.L[filled] = L
+    filled += 1
+    if filled == frames.step.shape[0]:
+        return filled, STATUS_FULL
+    return filled, STATUS_OK
 
 
-def empty_buffers(capacity: int, body_count: int) -> dict[str, np.ndarray]:
-    """Frame buffers for `run_chunk`."""
-    return {
-        "step": np.zeros(capacity, dtype=np.int64),
-        "x": np.zeros((capacity, body_count, 3)),
-        "q": np.zeros((capacity, body_count, 4)),
-        "P": np.zeros((capacity, body_count, 3)),
-        "L": np.zeros((capacity, body_count, 3)),
-    }
+@numba.njit(cache=True)
+def chunk_status(x, q, P, L) -> int:  # noqa: ANN001
+    """Status at the end of a chunk: the state is checked even when no frame was due."""
+    return STATUS_OK if state_is_sane(x, q, P, L) else STATUS_DIVERGED

@@ -74,22 +74,21 @@ class _InterruptFlag:
 
 def warm_up(compiled: CompiledScene) -> None:
     """Compile or load from cache the chunk kernel for this scene's integrator and force types."""
-    from rbcli.physics.step import empty_buffers, run_chunk
+    from rbcli.physics.step import empty_buffers
 
     kernel = get_integrator(compiled.settings.integrator).load()
     state = compiled.initial_state.copy()
     n = compiled.model.body_count
-    buf = empty_buffers(1, n)
-    run_chunk(
-        kernel.step, compiled.model.kernel(), compiled.forces, compiled.settings.dt, 0, 0, 1,
+    kernel.run_chunk(
+        compiled.model.kernel(), compiled.forces, compiled.settings.dt, 0, 0, 1,
         state.x, state.q, state.P, state.L, np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, kernel.SCRATCH_WIDTH)),
-        buf["step"], buf["x"], buf["q"], buf["P"], buf["L"], 0,
+        empty_buffers(1, n), 0,
     )  # fmt: skip
 
 
 def run(compiled: CompiledScene, sinks: Sequence[Sink], *, progress: ProgressCallback | None = None) -> RunSummary:
     """Integrate the compiled scene, streaming frames to every sink; always closes the sinks."""
-    from rbcli.physics.step import STATUS_DIVERGED, empty_buffers, run_chunk
+    from rbcli.physics.step import STATUS_DIVERGED, empty_buffers
 
     model, settings = compiled.model, compiled.settings
     kernel = get_integrator(settings.integrator).load()
@@ -108,15 +107,15 @@ def run(compiled: CompiledScene, sinks: Sequence[Sink], *, progress: ProgressCal
 
     def flush(frames: int) -> None:
         if frames:
-            block = make_block(compiled, buf["step"][:frames], buf["x"][:frames], buf["q"][:frames],
-                               buf["P"][:frames], buf["L"][:frames])  # fmt: skip
+            block = make_block(compiled, buf.step[:frames], buf.x[:frames], buf.q[:frames], buf.P[:frames],
+                               buf.L[:frames])  # fmt: skip
             for sink in sinks:
                 sink.write(block)
 
     def record_current(frames: int) -> int:
-        buf["step"][frames] = state.step
+        buf.step[frames] = state.step
         for key in ("x", "q", "P", "L"):
-            buf[key][frames] = getattr(state, key)
+            getattr(buf, key)[frames] = getattr(state, key)
         return frames + 1
 
     status, message, recorded = "completed", "", 0
@@ -127,10 +126,10 @@ def run(compiled: CompiledScene, sinks: Sequence[Sink], *, progress: ProgressCal
             while state.step < total:
                 started = time.perf_counter()
                 todo = min(chunk_steps, total - state.step)
-                done, frames, code = run_chunk(
-                    kernel.step, kmodel, compiled.forces, settings.dt, state.step, todo, every,
+                done, frames, code = kernel.run_chunk(
+                    kmodel, compiled.forces, settings.dt, state.step, todo, every,
                     state.x, state.q, state.P, state.L, F, tau, scratch,
-                    buf["step"], buf["x"], buf["q"], buf["P"], buf["L"], frames,
+                    buf, frames,
                 )  # fmt: skip
                 state.step += int(done)
                 elapsed = time.perf_counter() - started

@@ -1,0 +1,526 @@
+"""MCAP recording: protobuf messages in zstd chunks, readable by Foxglove and by the Rerun viewer.
+
+Topics; log_time = publish_time = simulated time [ns], so identical runs give byte-identical files:
+
+    /rbsim/state               rbsim.State per recorded step: the exact float64 record
+    /tf                        foxglove.FrameTransforms per recorded step: "world" -> each body
+    /bodies/<name>/particles   foxglove.PointCloud once at t = 0, in the body's frame (frame_id = name)
+    /rbsim/invariants          rbsim.Invariants per recorded step (only when the run has invariants)
+    /particles                 foxglove.PointCloud of all particles, world frame (only with that stream)
+
+plus the attachment `scene.yaml` and the metadata records `rbsim` (run parameters, written at open)
+and `rbsim.summary` (how the run ended, written at close). The .proto text of the project messages
+lives in schemas/; here their descriptors are built at run time, so there is no protoc step.
+
+This is the only module that imports mcap, mcap_protobuf and foxglove_schemas_protobuf, so the
+readers of the files it writes live here too (`read_mcap_contents`, `iter_mcap_blocks`,
+`read_mcap_invariants`); `record.read` wraps them.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import struct
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
+from foxglove_schemas_protobuf.PackedElementField_pb2 import PackedElementField
+from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
+from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+from mcap.reader import make_reader
+from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
+from mcap_protobuf.decoder import DecoderFactory
+from mcap_protobuf.schema import build_file_descriptor_set
+
+from rbcli.record.frame import FrameBlock, RunHeader, RunSummary
+
+TOPIC_STATE = "/rbsim/state"
+TOPIC_TF = "/tf"
+TOPIC_INVARIANTS = "/rbsim/invariants"
+TOPIC_PARTICLES = "/particles"
+WORLD_FRAME = "world"
+METADATA_RUN = "rbsim"
+METADATA_SUMMARY = "rbsim.summary"
+SCENE_ATTACHMENT = "scene.yaml"
+FORMAT_VERSION = "1"
+
+# (FrameBlock attribute, rbsim.State field name, field number, components per body)
+STATE_FIELDS = (
+    ("x", "position", 3, 3),
+    ("q", "orientation", 4, 4),
+    ("v", "linear_velocity", 5, 3),
+    ("omega", "angular_velocity", 6, 3),
+    ("P", "momentum", 7, 3),
+    ("L", "angular_momentum", 8, 3),
+)
+
+
+def particle_topic(body_name: str) -> str:
+    """The topic of a body's static particle cloud."""
+    return f"/bodies/{body_name}/particles"
+
+
+# --- project message descriptors, built at run time (their text is schemas/rbsim_*.proto) ----------
+
+_FDP = descriptor_pb2.FieldDescriptorProto
+
+
+def invariant_field_names(names: Sequence[str]) -> tuple[str, ...]:
+    """Protobuf field names for invariant names: [A-Za-z0-9_] kept, others -> '_', a leading digit
+    prefixed with 'f_'; ValueError on a clash or on 'step' / 'time'."""
+    fields = []
+    for name in names:
+        f = re.sub(r"[^A-Za-z0-9_]", "_", name)
+        fields.append(f if f and (f[0].isalpha() or f[0] == "_") else f"f_{f}")
+    taken = {"step", "time"}
+    for f in fields:
+        if f in taken:
+            raise ValueError(f"invariant names {list(names)!r} give the protobuf field {f!r} twice")
+        taken.add(f)
+    return tuple(fields)
+
+
+def _file_proto(file_name: str, message: str, fields: Sequence[tuple[str, int, int, int]]):
+    """A proto3 FileDescriptorProto in package rbsim with one message; fields: (name, number, type, label)."""
+    fdp = descriptor_pb2.FileDescriptorProto(name=file_name, package="rbsim", syntax="proto3")
+    msg = fdp.message_type.add(name=message)
+    for name, number, ftype, label in fields:
+        msg.field.add(name=name, number=number, type=ftype, label=label, json_name=_json_name(name))
+    return fdp
+
+
+def _json_name(name: str) -> str:
+    head, *rest = name.split("_")
+    return head + "".join(p[:1].upper() + p[1:] for p in rest)
+
+
+def state_file_proto() -> descriptor_pb2.FileDescriptorProto:
+    """rbsim/state.proto as a descriptor (text: schemas/rbsim_state.proto)."""
+    fields = [("step", 1, _FDP.TYPE_UINT64, _FDP.LABEL_OPTIONAL), ("time", 2, _FDP.TYPE_DOUBLE, _FDP.LABEL_OPTIONAL)]
+    fields += [(name, num, _FDP.TYPE_DOUBLE, _FDP.LABEL_REPEATED) for _, name, num, _ in STATE_FIELDS]
+    return _file_proto("rbsim/state.proto", "State", fields)
+
+
+def invariants_file_proto(invariant_names: Sequence[str]) -> descriptor_pb2.FileDescriptorProto:
+    """rbsim/invariants.proto for this run's invariants (text: schemas/rbsim_invariants.proto)."""
+    fields = [("step", 1, _FDP.TYPE_UINT64, _FDP.LABEL_OPTIONAL), ("time", 2, _FDP.TYPE_DOUBLE, _FDP.LABEL_OPTIONAL)]
+    fields += [
+        (f, 3 + i, _FDP.TYPE_DOUBLE, _FDP.LABEL_OPTIONAL) for i, f in enumerate(invariant_field_names(invariant_names))
+    ]
+    return _file_proto("rbsim/invariants.proto", "Invariants", fields)
+
+
+def message_class(fdp: descriptor_pb2.FileDescriptorProto) -> Any:
+    """The generated class of the file's first message, in a private pool (runs may differ in schema)."""
+    pool = descriptor_pool.DescriptorPool()
+    pool.Add(fdp)
+    return message_factory.GetMessageClass(pool.FindMessageTypeByName(f"rbsim.{fdp.message_type[0].name}"))
+
+
+# --- wire-format encoders --------------------------------------------------------------------------
+# One protobuf object per body per step costs microseconds each (1000 bodies: milliseconds per frame),
+# so the two per-step messages are written straight in protobuf wire format with numpy structured
+# arrays: a packed `repeated double` is key, byte length, raw little-endian float64; a message field is
+# key, length, payload. The tests decode every message with the real classes and compare.
+
+
+def _varint(value: int) -> bytes:
+    out = bytearray()
+    while value >= 0x80:
+        out.append((value & 0x7F) | 0x80)
+        value >>= 7
+    out.append(value)
+    return bytes(out)
+
+
+def _key(number: int, wire_type: int) -> bytes:
+    return _varint(number << 3 | wire_type)
+
+
+def _u1(data: bytes) -> np.ndarray:
+    return np.frombuffer(data, dtype=np.uint8)
+
+
+def _time_ns(t: np.ndarray) -> np.ndarray:
+    """Simulated time [s] -> integer ns, rounded (t = k dt is rarely an exact float)."""
+    return np.rint(np.asarray(t, dtype=np.float64) * 1e9).astype(np.int64)
+
+
+def _step_time_head(step: int, t: float) -> bytes:
+    """Fields 1 (uint64 step) and 2 (double time), omitted when zero as proto3 serializers do."""
+    tb = struct.pack("<d", t)
+    return (b"\x08" + _varint(step) if step else b"") + (b"\x11" + tb if tb != bytes(8) else b"")
+
+
+class StateEncoder:
+    """rbsim.State bytes for every frame of a block, identical to the canonical SerializeToString."""
+
+    def __init__(self, body_count: int) -> None:
+        n = body_count
+        spec: list[tuple[str, Any, tuple[int, ...]]] = []
+        self._keys = {}
+        for attr, _, number, width in STATE_FIELDS if n else ():
+            key = _key(number, 2) + _varint(8 * width * n)
+            spec += [(f"k_{attr}", np.uint8, (len(key),)), (attr, "<f8", (n * width,))]
+            self._keys[attr] = _u1(key)
+        self.dtype = np.dtype(spec)
+
+    def encode(self, block: FrameBlock) -> list[bytes]:
+        k_count = len(block)
+        rec = np.empty(k_count, dtype=self.dtype)
+        for attr, key in self._keys.items():
+            rec[f"k_{attr}"] = key
+            rec[attr] = np.asarray(getattr(block, attr), dtype=np.float64).reshape(k_count, -1)
+        step, t = block.step.tolist(), np.asarray(block.t, dtype=np.float64).tolist()
+        return [_step_time_head(step[k], t[k]) + rec[k].tobytes() for k in range(k_count)]
+
+
+def _timestamp_payload(ns: int) -> bytes:
+    """google.protobuf.Timestamp payload (seconds = 1, nanos = 2; zero fields omitted)."""
+    sec, nanos = divmod(int(ns), 1_000_000_000)
+    return (b"\x08" + _varint(sec) if sec else b"") + (b"\x10" + _varint(nanos) if nanos else b"")
+
+
+class TransformsEncoder:
+    """foxglove.FrameTransforms bytes (world -> each body) for every frame of a block.
+
+    Each FrameTransform is written as: timestamp, parent_frame_id, child_frame_id, translation
+    (x, y, z), rotation (x, y, z, w), with every double present even when zero (valid proto3; it keeps
+    the layout fixed). A record's length then depends only on its frame ids and on the timestamp, which
+    is the same for all bodies of a frame; transforms are grouped by the byte length of their ids (body
+    order within a group), so within a frame each group is a run of equal-size records that numpy fills
+    with strided views. Consumers key transforms by child_frame_id, so the order is free.
+    """
+
+    # A record is: head (0x0a, length, 0x0a, ts length), ts, ids, then this fixed 67-byte tail:
+    # 0x22 0x1b (Vector3, 27 bytes) 0x09 x 0x11 y 0x19 z, 0x2a 0x24 (Quaternion, 36 bytes) 0x09 qx 0x11 qy
+    # 0x19 qz 0x21 qw. Doubles sit 9 bytes apart (key byte + 8).
+    _TAIL = b"\x22\x1b\x09" + bytes(8) + b"\x11" + bytes(8) + b"\x19" + bytes(8)
+    _TAIL += b"\x2a\x24\x09" + bytes(8) + b"\x11" + bytes(8) + b"\x19" + bytes(8) + b"\x21" + bytes(8)
+    _TAIL_X, _TAIL_QX = 3, 32
+
+    def __init__(self, body_names: Sequence[str], parent: str = WORLD_FRAME) -> None:
+        pb = parent.encode()
+        ids = [
+            b"\x12" + _varint(len(pb)) + pb + b"\x1a" + _varint(len(nb)) + nb for nb in (s.encode() for s in body_names)
+        ]
+        by_length: dict[int, list[int]] = {}
+        for i, b in enumerate(ids):
+            by_length.setdefault(len(b), []).append(i)
+        # (bodies: a slice when contiguous, else an index array; their id bytes)
+        self._runs: list[tuple[slice | np.ndarray, list[bytes]]] = []
+        for _, idx in sorted(by_length.items()):
+            contiguous = idx == list(range(idx[0], idx[0] + len(idx)))
+            self._runs.append((slice(idx[0], idx[-1] + 1) if contiguous else np.array(idx), [ids[i] for i in idx]))
+        self._layouts: dict[int, tuple[np.ndarray, list[tuple[int, int, int, int]]]] = {}
+
+    def _layout(self, ts_len: int) -> tuple[np.ndarray, list[tuple[int, int, int, int]]]:
+        """A frame's constant bytes and, per run: (offset, record count, record size, ts offset)."""
+        if ts_len not in self._layouts:
+            parts, runs, offset = [], [], 0
+            for _, id_list in self._runs:
+                payload = 2 + ts_len + len(id_list[0]) + len(self._TAIL)
+                head = b"\x0a" + _varint(payload) + b"\x0a" + _varint(ts_len)
+                size = len(head) + payload - 2
+                parts += [head + bytes(ts_len) + ids + self._TAIL for ids in id_list]
+                runs.append((offset, len(id_list), size, len(head)))
+                offset += size * len(id_list)
+            self._layouts[ts_len] = (_u1(b"".join(parts)), runs)
+        return self._layouts[ts_len]
+
+    def encode(self, block: FrameBlock) -> list[bytes]:
+        k_count = len(block)
+        ts = [_timestamp_payload(ns) for ns in _time_ns(block.t).tolist()]
+        x, q = np.asarray(block.x, dtype=np.float64), np.asarray(block.q, dtype=np.float64)
+        out: list[bytes] = [b""] * k_count
+        ts_lens = np.array([len(s) for s in ts])
+        for ts_len in np.unique(ts_lens).tolist():
+            frames = np.flatnonzero(ts_lens == ts_len)
+            rows = slice(None) if len(frames) == k_count else frames
+            template, runs = self._layout(ts_len)
+            g, size = len(frames), template.size
+            buf = np.empty((g, size), dtype=np.uint8)
+            buf[...] = template
+            ts_arr = _u1(b"".join(ts[f] for f in frames.tolist())).reshape(g, ts_len)
+            for (bodies, _), (offset, count, rec, ts_off) in zip(self._runs, runs, strict=True):
+                # each field of this run is a strided view: frames apart by `size`, records by `rec`
+                tail = offset + rec - len(self._TAIL)
+                if ts_len:
+                    _strided(buf, offset + ts_off, (g, count, ts_len), "u1", (size, rec, 1))[...] = ts_arr[:, None, :]
+                _strided(buf, tail + self._TAIL_X, (g, count, 3), "<f8", (size, rec, 9))[...] = x[rows][:, bodies]
+                rot = _strided(buf, tail + self._TAIL_QX, (g, count, 4), "<f8", (size, rec, 9))
+                qs = q[rows][:, bodies]
+                rot[..., :3], rot[..., 3] = qs[..., 1:], qs[..., 0]
+            for row, f in enumerate(frames.tolist()):
+                out[f] = buf[row].tobytes()
+        return out
+
+
+def _strided(buf: np.ndarray, offset: int, shape: tuple[int, ...], dtype: str, strides: tuple[int, ...]) -> np.ndarray:
+    """A writable view into a contiguous byte buffer (unaligned doubles are fine for numpy)."""
+    return np.ndarray(shape, dtype, buffer=buf, offset=offset, strides=strides)
+
+
+def _point_cloud(points: np.ndarray, frame_id: str, ns: int) -> PointCloud:
+    """A foxglove.PointCloud of float64 x, y, z (exact) with an identity pose."""
+    cloud = PointCloud(frame_id=frame_id, point_stride=24, data=np.ascontiguousarray(points, "<f8").tobytes())
+    cloud.timestamp.FromNanoseconds(int(ns))
+    cloud.pose.orientation.w = 1.0  # an all-zero quaternion would be invalid
+    for i, axis in enumerate("xyz"):
+        cloud.fields.add(name=axis, offset=8 * i, type=PackedElementField.FLOAT64)
+    return cloud
+
+
+# --- the sink --------------------------------------------------------------------------------------
+
+
+def run_metadata(header: RunHeader) -> dict[str, str]:
+    """The `rbsim` metadata record: run parameters as strings (floats as repr, so they read back exactly)."""
+    return {
+        "format_version": FORMAT_VERSION,
+        "rbsim_version": header.rbsim_version,
+        "scene_name": header.scene_name,
+        "scene_path": header.scene_path or "",
+        "scene_sha256": header.scene_sha256,
+        "integrator": header.integrator,
+        "dt": repr(float(header.dt)),
+        "duration": repr(float(header.duration)),
+        "record_every": str(int(header.record_every)),
+        "seed": str(int(header.seed)),
+        "units": header.units,
+        "quaternion_order": header.quaternion_order,
+        "streams": json.dumps(list(header.streams)),
+        "body_count": str(len(header.body_names)),
+        "body_names": json.dumps(list(header.body_names)),
+        "body_mass": json.dumps([float(m) for m in np.asarray(header.body_mass, dtype=np.float64)]),
+        "invariant_names": json.dumps(list(header.invariant_names)),
+    }
+
+
+class SinkMcap:
+    """Records a run to an MCAP file (see the module docstring for the layout).
+
+    compression: "zstd" (default), "lz4" or "none"; chunk_size: uncompressed bytes per chunk.
+    """
+
+    def __init__(self, path: str | Path, *, compression: str = "zstd", chunk_size: int = 4 * 1024 * 1024) -> None:
+        self.path = Path(path)
+        self._compression = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}[
+            compression
+        ]
+        self._chunk_size = chunk_size
+        self._file: IO[bytes] | None = None
+        self._writer: Writer | None = None
+        self._closed = False
+        self._schemas: dict[str, int] = {}
+        self.frames_written = 0
+
+    def open(self, header: RunHeader) -> None:
+        self._header = header
+        self._file = open(self.path, "wb")  # closed in close()
+        w = self._writer = Writer(self._file, chunk_size=self._chunk_size, compression=self._compression)
+        w.start(profile="", library=f"rbsim/{header.rbsim_version} {LIBRARY_IDENTIFIER}")
+        self._state = StateEncoder(len(header.body_names))
+        self._tf = TransformsEncoder(header.body_names)
+        self._invariant_names = tuple(header.invariant_names)
+        self._ch_state = self._channel(TOPIC_STATE, state_file_proto())
+        self._ch_tf = self._channel(TOPIC_TF, FrameTransforms)
+        self._ch_inv = None
+        if self._invariant_names:
+            fdp = invariants_file_proto(self._invariant_names)
+            self._inv_class = message_class(fdp)
+            self._inv_fields = invariant_field_names(self._invariant_names)
+            meta = {"invariant_names": json.dumps(list(self._invariant_names))}
+            self._ch_inv = self._channel(TOPIC_INVARIANTS, fdp, meta)
+        self._ch_particles = None
+        w.add_metadata(METADATA_RUN, run_metadata(header))
+        w.add_attachment(0, 0, SCENE_ATTACHMENT, "application/yaml", header.scene_text.encode())
+        for name, offsets in zip(header.body_names, header.body_particle_offset, strict=True):
+            channel = self._channel(particle_topic(name), PointCloud)
+            self._add(channel, 0, _point_cloud(np.asarray(offsets).reshape(-1, 3), name, 0).SerializeToString())
+
+    def _channel(self, topic: str, schema: Any, metadata: dict[str, str] | None = None) -> int:
+        """Register a protobuf schema (a generated class or a FileDescriptorProto) and a channel on it."""
+        assert self._writer is not None
+        is_file = isinstance(schema, descriptor_pb2.FileDescriptorProto)
+        name = f"rbsim.{schema.message_type[0].name}" if is_file else schema.DESCRIPTOR.full_name
+        if name not in self._schemas:  # one schema record per message type, however many channels
+            fds = descriptor_pb2.FileDescriptorSet(file=[schema]) if is_file else build_file_descriptor_set(schema)
+            self._schemas[name] = self._writer.register_schema(name, "protobuf", fds.SerializeToString())
+        schema_id = self._schemas[name]
+        return self._writer.register_channel(topic, "protobuf", schema_id, metadata or {})
+
+    def _add(self, channel: int, ns: int, data: bytes, sequence: int = 0) -> None:
+        assert self._writer is not None
+        self._writer.add_message(channel, log_time=ns, data=data, publish_time=ns, sequence=sequence)
+
+    def write(self, block: FrameBlock) -> None:
+        if self._writer is None or self._closed:
+            raise RuntimeError("SinkMcap.write before open() or after close()")
+        k_count = len(block)
+        states, tfs = self._state.encode(block), self._tf.encode(block)
+        ns, steps = _time_ns(block.t).tolist(), block.step.tolist()
+        inv = None
+        if self._ch_inv is not None:
+            columns = [np.asarray(block.invariants[n], dtype=np.float64).tolist() for n in self._invariant_names]
+            inv = [
+                self._inv_class(
+                    step=steps[k],
+                    time=float(block.t[k]),
+                    **{f: c[k] for f, c in zip(self._inv_fields, columns, strict=True)},
+                ).SerializeToString()
+                for k in range(k_count)
+            ]
+        particles = block.particle_position
+        if particles is not None and self._ch_particles is None:
+            self._ch_particles = self._channel(TOPIC_PARTICLES, PointCloud)
+        for k in range(k_count):
+            seq = steps[k] & 0xFFFFFFFF
+            self._add(self._ch_state, ns[k], states[k], seq)
+            self._add(self._ch_tf, ns[k], tfs[k], seq)
+            if inv is not None:
+                self._add(self._ch_inv, ns[k], inv[k], seq)
+            if particles is not None and self._ch_particles is not None:
+                cloud = _point_cloud(particles[k], WORLD_FRAME, ns[k]).SerializeToString()
+                self._add(self._ch_particles, ns[k], cloud, seq)
+        self.frames_written += k_count
+
+    def close(self, summary: RunSummary) -> None:
+        """Write the summary metadata, the index and the footer; safe to call more than once."""
+        if self._closed or self._writer is None:
+            self._closed = True
+            return
+        self._closed = True
+        try:
+            self._writer.add_metadata(
+                METADATA_SUMMARY,
+                {
+                    "status": summary.status,
+                    "steps": str(int(summary.steps)),
+                    "frames": str(int(summary.frames)),
+                    "frames_written": str(self.frames_written),
+                    "t_end": repr(float(summary.t_end)),
+                    "message": summary.message,
+                },
+            )
+            self._writer.finish()
+        finally:
+            assert self._file is not None
+            self._file.close()
+
+
+# --- reading ---------------------------------------------------------------------------------------
+
+
+@dataclass
+class McapContents:
+    """What an rbsim MCAP file holds besides the per-step arrays."""
+
+    metadata: dict[str, dict[str, str]]  # record name -> key/value
+    scene_text: str
+    message_counts: dict[str, int]  # topic -> messages
+    particle_offset: dict[str, np.ndarray] = field(default_factory=dict)  # body -> (n_i, 3) body frame [m]
+    invariant_names: tuple[str, ...] = ()
+    library: str = ""
+
+
+def _invariant_names(summary: Any) -> tuple[str, ...]:
+    """The invariant names a file's /rbsim/invariants channel carries in its metadata."""
+    for ch in summary.channels.values() if summary else ():
+        if ch.topic == TOPIC_INVARIANTS:
+            return tuple(json.loads(ch.metadata.get("invariant_names", "[]")))
+    return ()
+
+
+def read_mcap_contents(path: str | Path) -> McapContents:
+    """Metadata, scene attachment, message counts and the t = 0 particle clouds of an rbsim MCAP file."""
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        try:
+            header, summary = reader.get_header(), reader.get_summary()
+        except Exception as exc:  # the mcap library raises several types for a damaged file
+            raise ValueError(f"not a complete MCAP file, was it cut short? ({exc})") from exc
+        if summary is None:
+            raise ValueError("the MCAP file has no summary section (was the recording cut short?)")
+        topics = {ch.id: ch.topic for ch in summary.channels.values()}
+        counts = {topics[cid]: int(n) for cid, n in summary.statistics.channel_message_counts.items()}
+        metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+        scene = next((a.data.decode() for a in reader.iter_attachments() if a.name == SCENE_ATTACHMENT), "")
+        inv_names = _invariant_names(summary)
+        clouds = [t for t in counts if t.startswith("/bodies/") and t.endswith("/particles")]
+        offsets: dict[str, np.ndarray] = {}
+        for _, _, _, cloud in reader.iter_decoded_messages(topics=clouds):
+            offsets[cloud.frame_id] = _cloud_points(cloud)
+    return McapContents(metadata, scene, counts, offsets, inv_names, header.library)
+
+
+def _cloud_points(cloud: Any) -> np.ndarray:
+    """(n, 3) float64 x, y, z of a foxglove.PointCloud written by this module or by any float writer."""
+    types = {PackedElementField.FLOAT64: "<f8", PackedElementField.FLOAT32: "<f4"}
+    offs = {f.name: (f.offset, types[f.type]) for f in cloud.fields if f.name in ("x", "y", "z") and f.type in types}
+    raw = np.frombuffer(cloud.data, dtype=np.uint8).reshape(-1, cloud.point_stride)
+    cols = [raw[:, o : o + np.dtype(t).itemsize].copy().view(t)[:, 0] for o, t in (offs[a] for a in "xyz")]
+    return np.stack(cols, axis=1).astype(np.float64) if cols[0].size else np.zeros((0, 3))
+
+
+def iter_mcap_blocks(path: str | Path, block_frames: int = 256) -> Iterator[FrameBlock]:
+    """FrameBlocks decoded from /rbsim/state and /rbsim/invariants with the file's own schemas."""
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        inv_names = _invariant_names(reader.get_summary())
+        inv_fields = invariant_field_names(inv_names)
+        rows: list[Any] = []
+        inv_rows: dict[int, Any] = {}
+        for _, channel, _, msg in reader.iter_decoded_messages(
+            topics=[TOPIC_STATE, TOPIC_INVARIANTS], log_time_order=False
+        ):
+            if channel.topic == TOPIC_INVARIANTS:
+                inv_rows[msg.step] = msg
+                continue
+            # a step's invariants follow its state, so a full block is emitted only at the next state
+            if len(rows) == block_frames:
+                yield _block_from_messages(rows, inv_rows, inv_names, inv_fields)
+                rows = []
+            rows.append(msg)
+        if rows:
+            yield _block_from_messages(rows, inv_rows, inv_names, inv_fields)
+
+
+def _block_from_messages(
+    rows: list[Any], inv_rows: dict[int, Any], names: tuple[str, ...], fields: tuple[str, ...]
+) -> FrameBlock:
+    k_count, n = len(rows), len(rows[0].position) // 3
+    arrays = {}
+    for attr, name, _, width in STATE_FIELDS:
+        flat = np.array([np.asarray(getattr(m, name), dtype=np.float64) for m in rows])
+        arrays[attr] = flat.reshape(k_count, n, width)
+    steps = np.array([m.step for m in rows], dtype=np.int64)
+    invariants = {
+        name: np.array([getattr(inv_rows[s], f) if s in inv_rows else math.nan for s in steps.tolist()])
+        for name, f in zip(names, fields, strict=True)
+    }
+    for s in steps.tolist():
+        inv_rows.pop(s, None)
+    return FrameBlock(step=steps, t=np.array([m.time for m in rows], dtype=np.float64), invariants=invariants, **arrays)
+
+
+def read_mcap_invariants(path: str | Path) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """(t [s], step, name -> series) from /rbsim/invariants alone: cheap, whatever the body count."""
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        names = _invariant_names(reader.get_summary())
+        fields = invariant_field_names(names)
+        rows = [msg for _, _, _, msg in reader.iter_decoded_messages(topics=[TOPIC_INVARIANTS], log_time_order=False)]
+    t = np.array([m.time for m in rows], dtype=np.float64)
+    step = np.array([m.step for m in rows], dtype=np.int64)
+    return (
+        t,
+        step,
+        {n: np.array([getattr(m, f) for m in rows], dtype=np.float64) for n, f in zip(names, fields, strict=True)},
+    )

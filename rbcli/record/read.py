@@ -1,0 +1,259 @@
+"""Read rbsim recordings back (.mcap or .rrd) for `rbsim info`, `rbsim replay` and the tests.
+
+The file formats are owned by their sinks: the MCAP readers live in `record/mcap_sink.py` and the RRD
+reader in `record/rerun_sink.py` (each third-party library is imported by exactly one module). This
+module imports them lazily and turns what they find into one shape, `RecordedRun`, and into the
+summary `rbsim info` prints, `RunInfo`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+# |f(0)| below this (SI units) makes a relative drift meaningless: the value is zero up to rounding,
+# as for a momentum component that starts at zero.
+RELATIVE_DRIFT_FLOOR = 1e-12
+
+
+@dataclass
+class RecordedRun:
+    """A recording read back. Arrays are per recorded step, bodies in `body_names` order.
+
+    t: (T,) [s]; step: (T,); x: (T, N, 3) centre of mass [m]; q: (T, N, 4) (w, x, y, z);
+    v, omega, P, L: (T, N, 3) [m/s, rad/s, kg m/s, kg m^2/s], exact float64 from MCAP; None from an .rrd,
+    which holds transforms only (as float32). invariants: name -> (T,).
+    """
+
+    path: Path
+    format: str  # "mcap" or "rrd"
+    metadata: dict[str, str]  # run parameters, as written by the sink
+    summary: dict[str, str]  # how the run ended: status, steps, frames, t_end, message
+    scene_text: str
+    body_names: tuple[str, ...]
+    t: np.ndarray
+    step: np.ndarray
+    x: np.ndarray
+    q: np.ndarray
+    v: np.ndarray | None = None
+    omega: np.ndarray | None = None
+    P: np.ndarray | None = None
+    L: np.ndarray | None = None
+    invariants: dict[str, np.ndarray] = field(default_factory=dict)
+    particle_offset: tuple[np.ndarray, ...] = ()  # per body (n_i, 3) [m], body frame
+    message_counts: dict[str, int] = field(default_factory=dict)  # MCAP topic -> messages
+    entity_paths: tuple[str, ...] = ()  # RRD entities
+
+    @property
+    def frames(self) -> int:
+        return int(self.t.shape[0])
+
+
+def recording_format(path: str | Path) -> str:
+    """'mcap' or 'rrd' from the file extension; ValueError otherwise."""
+    suffix = Path(path).suffix.lower()
+    if suffix not in (".mcap", ".rrd"):
+        raise ValueError(f"{str(path)!r}: not a recording (expected a .mcap or .rrd file)")
+    return suffix[1:]
+
+
+def _json_list(value: str | None) -> list:
+    return json.loads(value) if value else []
+
+
+def read_mcap(path: str | Path) -> RecordedRun:
+    """Everything an rbsim MCAP file holds, decoded with the schemas embedded in the file."""
+    from rbcli.record.mcap_sink import METADATA_RUN, METADATA_SUMMARY, iter_mcap_blocks, read_mcap_contents
+
+    contents = read_mcap_contents(path)
+    meta = contents.metadata.get(METADATA_RUN, {})
+    names = tuple(_json_list(meta.get("body_names")))
+    blocks = list(iter_mcap_blocks(path))
+
+    def cat(attr: str, width: int) -> np.ndarray:
+        if not blocks:
+            return np.zeros((0, len(names), width))
+        return np.concatenate([getattr(b, attr) for b in blocks], axis=0)
+
+    inv_names = contents.invariant_names
+    return RecordedRun(
+        path=Path(path),
+        format="mcap",
+        metadata=meta,
+        summary=contents.metadata.get(METADATA_SUMMARY, {}),
+        scene_text=contents.scene_text,
+        body_names=names,
+        t=np.concatenate([b.t for b in blocks]) if blocks else np.zeros(0),
+        step=np.concatenate([b.step for b in blocks]) if blocks else np.zeros(0, dtype=np.int64),
+        x=cat("x", 3),
+        q=cat("q", 4),
+        v=cat("v", 3),
+        omega=cat("omega", 3),
+        P=cat("P", 3),
+        L=cat("L", 3),
+        invariants={n: np.concatenate([b.invariants[n] for b in blocks]) if blocks else np.zeros(0) for n in inv_names},
+        particle_offset=tuple(contents.particle_offset.get(n, np.zeros((0, 3))) for n in names),
+        message_counts=contents.message_counts,
+    )
+
+
+def read_rrd(path: str | Path, *, bodies: bool = True) -> RecordedRun:
+    """An rbsim .rrd read with rerun's own reader: transforms per body (float32 -> float64), invariants.
+
+    bodies=False skips the body transforms (x and q come back with no bodies).
+    """
+    from rbcli.record.rerun_sink import body_entity, read_rrd_file
+
+    contents = read_rrd_file(path, bodies=bodies)
+    meta = contents.properties.get("rbsim", {})
+    names = tuple(_json_list(meta.get("body_names")))
+    entities = ["/" + body_entity(n) for n in names]
+    recorded = [e for e in entities if e in contents.body_translation]
+    if bodies and recorded:
+        steps = [contents.body_step[e] for e in recorded]
+        if len(recorded) < len(entities) or any(not np.array_equal(s, steps[0]) for s in steps):
+            missing = sorted(set(entities) - set(recorded))
+            raise ValueError(f"{path}: bodies without transforms {missing} or with differing steps")
+        x = np.stack([contents.body_translation[e] for e in entities], axis=1)
+        q = np.stack([contents.body_quaternion[e] for e in entities], axis=1)
+        t, step = contents.body_time[entities[0]], steps[0]
+    else:
+        # no body transforms read (bodies=False, or no frame recorded): times from the invariants
+        first = next(iter(contents.invariant_time), None)
+        t = contents.invariant_time[first] if first else np.zeros(0)
+        step = np.zeros(0, dtype=np.int64)
+        width = len(names) if bodies else 0
+        x, q = np.zeros((len(t), width, 3)), np.zeros((len(t), width, 4))
+    return RecordedRun(
+        path=Path(path),
+        format="rrd",
+        metadata=meta,
+        summary=contents.properties.get("rbsim.summary", {}),
+        scene_text=contents.scene_text,
+        body_names=names,
+        t=t,
+        step=step,
+        x=x,
+        q=q,
+        invariants=contents.invariants,
+        particle_offset=tuple(contents.particle_offset.get(e, np.zeros((0, 3))) for e in entities),
+        entity_paths=tuple(contents.entity_paths),
+    )
+
+
+def read_recording(path: str | Path) -> RecordedRun:
+    """read_mcap or read_rrd by extension."""
+    return read_mcap(path) if recording_format(path) == "mcap" else read_rrd(path)
+
+
+# --- the summary `rbsim info` prints ---------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class InvariantDrift:
+    """How far an invariant strayed: max over the run of |f(t) - f(0)|, and that over |f(0)|.
+
+    relative is None where |f(0)| <= RELATIVE_DRIFT_FLOOR (a quantity that starts at zero). Non-finite
+    samples (a diverged run) are left out of the maxima and counted.
+    """
+
+    name: str
+    initial: float
+    final: float
+    max_abs: float
+    relative: float | None
+    nonfinite: int = 0
+
+
+def invariant_drift(name: str, series: np.ndarray) -> InvariantDrift:
+    """The drift of one invariant time series."""
+    f = np.asarray(series, dtype=np.float64)
+    finite = np.isfinite(f)
+    if not finite.any():
+        return InvariantDrift(name, math.nan, math.nan, math.nan, None, int(f.size))
+    values = f[finite]
+    f0 = float(values[0])
+    max_abs = float(np.max(np.abs(values - f0)))
+    relative = max_abs / abs(f0) if abs(f0) > RELATIVE_DRIFT_FLOOR else None
+    return InvariantDrift(name, f0, float(values[-1]), max_abs, relative, int(f.size - finite.sum()))
+
+
+@dataclass
+class RunInfo:
+    """What `rbsim info` reports about a recording."""
+
+    path: Path
+    format: str
+    scene_name: str
+    body_names: tuple[str, ...]
+    integrator: str
+    dt: float
+    duration: float
+    record_every: int
+    frames: int
+    steps: int
+    t_end: float
+    status: str
+    message: str
+    rbsim_version: str
+    drifts: list[InvariantDrift]
+
+    def __str__(self) -> str:
+        shown = ", ".join(self.body_names[:8]) + (
+            f", ... ({len(self.body_names)} in all)" if len(self.body_names) > 8 else ""
+        )
+        lines = [
+            f"file         {self.path} ({self.format})",
+            f"scene        {self.scene_name}",
+            f"bodies       {len(self.body_names)}: {shown}",
+            f"integrator   {self.integrator}, dt = {self.dt:g} s",
+            f"duration     {self.t_end:g} s of {self.duration:g} s simulated; {self.steps} steps, "
+            f"{self.frames} frames recorded (every {self.record_every})",
+            f"status       {self.status}" + (f": {self.message}" if self.message else ""),
+            f"written by   rbsim {self.rbsim_version}",
+        ]
+        if self.drifts:
+            width = max(len(d.name) for d in self.drifts)
+            lines += ["", f"{'invariant':<{width}}  {'f(0)':>14}  {'max|f-f(0)|':>12}  {'relative':>10}"]
+            for d in self.drifts:
+                rel = f"{d.relative:10.3e}" if d.relative is not None else f"{'-':>10}"
+                extra = f"  ({d.nonfinite} non-finite)" if d.nonfinite else ""
+                lines.append(f"{d.name:<{width}}  {d.initial:14.6e}  {d.max_abs:12.3e}  {rel}{extra}")
+        return "\n".join(lines)
+
+
+def summarize(path: str | Path) -> RunInfo:
+    """The `rbsim info` summary of a .mcap or .rrd; reads metadata and invariants, not body states."""
+    fmt = recording_format(path)
+    if fmt == "mcap":
+        from rbcli.record.mcap_sink import METADATA_RUN, METADATA_SUMMARY, read_mcap_contents, read_mcap_invariants
+
+        contents = read_mcap_contents(path)
+        meta, ending = contents.metadata.get(METADATA_RUN, {}), contents.metadata.get(METADATA_SUMMARY, {})
+        t, _, invariants = read_mcap_invariants(path)
+        frames = contents.message_counts.get("/rbsim/state", 0)
+    else:
+        run = read_rrd(path, bodies=False)
+        meta, ending, t, invariants = run.metadata, run.summary, run.t, run.invariants
+        frames = int(ending.get("frames_written", len(t)))
+    return RunInfo(
+        path=Path(path),
+        format=fmt,
+        scene_name=meta.get("scene_name", "?"),
+        body_names=tuple(_json_list(meta.get("body_names"))),
+        integrator=meta.get("integrator", "?"),
+        dt=float(meta.get("dt", "nan")),
+        duration=float(meta.get("duration", "nan")),
+        record_every=int(meta.get("record_every", "1")),
+        frames=frames,
+        steps=int(ending.get("steps", "-1")),
+        t_end=float(ending.get("t_end", t[-1] if len(t) else "nan")),
+        status=ending.get("status", "unknown (no summary record: was the recording cut short?)"),
+        message=ending.get("message", ""),
+        rbsim_version=meta.get("rbsim_version", "?"),
+        drifts=[invariant_drift(n, s) for n, s in invariants.items()],
+    )
