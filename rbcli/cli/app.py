@@ -10,7 +10,10 @@ from __future__ import annotations
 import typer
 
 from rbcli._version import __version__
+from rbcli.cli import info as _info
+from rbcli.cli import replay as _replay
 from rbcli.cli import run as _run
+from rbcli.cli import schema as _schema
 from rbcli.cli import validate as _validate
 
 app = typer.Typer(
@@ -39,6 +42,9 @@ def _root(
 
 app.command("run")(_run.run)
 app.command("validate")(_validate.validate)
+app.command("replay")(_replay.replay)
+app.command("info")(_info.info)
+app.command("schema")(_schema.schema)
 
 
 def main() -> None:

@@ -27,16 +27,35 @@ INVARIANT_NAMES = (
 )
 
 
+def kinetic_energy(model: Model, P: np.ndarray, L: np.ndarray, omega: np.ndarray) -> np.ndarray:
+    """Total kinetic energy [J] per frame, (K,): sum_b |P_b|^2/(2 M_b) + L_b . omega_b / 2."""
+    return (np.einsum("kbi,kbi->kb", P, P) / (2.0 * model.body_mass)).sum(-1) + 0.5 * np.einsum("kbi,kbi->k", L, omega)
+
+
 def invariants(
     model: Model, forces: ForceTables, x: np.ndarray, q: np.ndarray, P: np.ndarray, L: np.ndarray,
     omega: np.ndarray,
 ) -> dict[str, np.ndarray]:  # fmt: skip
     """Invariant time series for frames of shape (K, body_count, ...); each value has shape (K,)."""
-    kinetic = (np.einsum("kbi,kbi->kb", P, P) / (2.0 * model.body_mass)).sum(-1)
-    kinetic = kinetic + 0.5 * np.einsum("kbi,kbi->k", L, omega)
+    return invariants_from_kinetic(model, forces, x, q, P, L, kinetic_energy(model, P, L, omega))
+
+
+def invariants_from_kinetic(
+    model: Model, forces: ForceTables, x: np.ndarray, q: np.ndarray, P: np.ndarray, L: np.ndarray,
+    kinetic: np.ndarray,
+) -> dict[str, np.ndarray]:  # fmt: skip
+    """As `invariants`, given the total kinetic energy per frame (K,) already computed."""
     potential = potential_energy(model, forces, x, q)
     momentum = P.sum(axis=1)
-    ang = (np.cross(x, P) + L).sum(axis=1)
+    # sum_b x_b x P_b + L_b, written out: np.cross on (K, N, 3) is several times slower
+    ang = np.stack(
+        [
+            (x[..., 1] * P[..., 2] - x[..., 2] * P[..., 1]).sum(1),
+            (x[..., 2] * P[..., 0] - x[..., 0] * P[..., 2]).sum(1),
+            (x[..., 0] * P[..., 1] - x[..., 1] * P[..., 0]).sum(1),
+        ],
+        axis=-1,
+    ) + L.sum(axis=1)
     return {
         "energy_kinetic": kinetic,
         "energy_potential": potential,

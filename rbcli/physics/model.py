@@ -21,10 +21,15 @@ from rbcli.physics.rotation import matrix_to_quat, quat_to_matrix
 INERTIA_DEGENERACY_RATIO = 1e-12
 
 
-def mass_properties(positions: np.ndarray, masses: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+def mass_properties(
+    positions: np.ndarray, masses: np.ndarray, radii: np.ndarray | None = None
+) -> tuple[float, np.ndarray, np.ndarray]:
     """Total mass M [kg], centre of mass x_cm [m] (3,), inertia I0 [kg m^2] (3, 3) about x_cm.
 
-    The tutorial's precomputation, in the frame the positions are given in.
+    The tutorial's precomputation, in the frame the positions are given in. A particle with a radius r
+    is a small solid sphere and adds its own 2/5 m r^2 about every axis (parallel-axis theorem): this
+    is what gives a rod of particles on one line a non-zero inertia about its axis, and it makes
+    sampled shapes' inertia converge faster (box error M s^2/15 instead of M s^2/6 at spacing s).
     """
     positions = np.asarray(positions, dtype=np.float64)
     masses = np.asarray(masses, dtype=np.float64)
@@ -33,6 +38,8 @@ def mass_properties(positions: np.ndarray, masses: np.ndarray) -> tuple[float, n
     r0 = positions - centre
     r0_sq = np.einsum("ij,ij->i", r0, r0)
     inertia = np.einsum("i,jk->jk", masses * r0_sq, np.eye(3)) - np.einsum("i,ij,ik->jk", masses, r0, r0)
+    if radii is not None:
+        inertia += 0.4 * float(np.sum(masses * np.asarray(radii, dtype=np.float64) ** 2)) * np.eye(3)
     return total, centre, inertia
 
 
@@ -130,7 +137,9 @@ def build_model(
     for b in range(count):  # once per body at compile time, not in a step
         pos = np.asarray(particle_positions[b], dtype=np.float64).reshape(-1, 3)
         mass = np.broadcast_to(np.asarray(particle_masses[b], dtype=np.float64), (pos.shape[0],))
-        total, centre, inertia = mass_properties(pos, mass)
+        rad = None if particle_radii is None or particle_radii[b] is None else particle_radii[b]
+        rad = None if rad is None else np.broadcast_to(np.asarray(rad, dtype=np.float64), (pos.shape[0],)).copy()
+        total, centre, inertia = mass_properties(pos, mass, rad)
         moments, axes = principal_axes(inertia)
         if inertia_is_degenerate(moments):
             raise ValueError(
@@ -145,8 +154,7 @@ def build_model(
         offsets_user.append(r0)
         offsets_principal.append(r0 @ axes)  # components along the principal axes: E^T r0
         masses.append(np.array(mass))
-        rad = None if particle_radii is None else particle_radii[b]
-        radii.append(np.zeros(pos.shape[0]) if rad is None else np.broadcast_to(rad, (pos.shape[0],)).copy())
+        radii.append(np.zeros(pos.shape[0]) if rad is None else rad)
     counts = np.array([m.shape[0] for m in masses], dtype=np.int64)
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
     model = Model(

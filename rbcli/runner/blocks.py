@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from rbcli.physics.energy import invariants
-from rbcli.physics.frames import body_angular_velocity, body_velocity, particle_world, user_orientation
+from rbcli.physics.energy import invariants_from_kinetic
+from rbcli.physics.frames import particle_world
+from rbcli.physics.outputs import derive_outputs
 from rbcli.record.frame import FrameBlock
 from rbcli.scene.compile import CompiledScene
 
@@ -15,19 +16,21 @@ def make_block(
 ) -> FrameBlock:
     """A FrameBlock of K frames from raw (K, N, ...) arrays; copies, so buffers can be reused."""
     model, settings = compiled.model, compiled.settings
-    omega = body_angular_velocity(model, q, L)
+    q_user, v, omega = np.empty_like(q), np.empty_like(P), np.empty_like(L)
+    kinetic = np.empty(P.shape[:2])
+    derive_outputs(model.body_mass, 1.0 / model.body_inertia, model.body_frame_q, q, P, L, q_user, v, omega, kinetic)
     block = FrameBlock(
         step=step.astype(np.int64, copy=True),
         t=step * settings.dt,
         x=x.copy(),
-        q=user_orientation(model, q),
-        v=body_velocity(model, P),
+        q=q_user,
+        v=v,
         omega=omega,
         P=P.copy(),
         L=L.copy(),
     )
     if "invariants" in settings.streams:
-        block.invariants = invariants(model, compiled.forces, x, q, P, L, omega)
+        block.invariants = invariants_from_kinetic(model, compiled.forces, x, q, P, L, kinetic.sum(axis=1))
     if "particles" in settings.streams:
         block.particle_position, _ = particle_world(model, x, q, P, L)
     return block

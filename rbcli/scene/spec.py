@@ -112,3 +112,4 @@ class SceneSpec:
     forces: tuple[ForceSpec, ...] = ()
     source_path: str | None = None
     source_text: str = ""
+    warnings: tuple[SceneIssue, ...] = ()  # non-fatal issues found while loading (e.g. a normalised quaternion)

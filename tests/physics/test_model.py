@@ -57,3 +57,11 @@ def test_flat_arrays_index_bodies():
     assert model.body_particle_start.tolist() == [0, 4]
     assert model.body_particle_count.tolist() == [4, 3]
     assert model.particle_count == 7
+
+
+def test_particle_radius_adds_a_solid_spheres_inertia():
+    """Each particle of radius r is a solid sphere: I0 gains 2/5 m r^2 on the diagonal."""
+    cloud = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]])  # collinear: singular without radii
+    model, _ = build_model(["rod"], [cloud], [np.ones(3)], [np.float64(0.1)])
+    sphere = 0.4 * 3 * 0.1**2
+    np.testing.assert_allclose(np.sort(model.body_inertia[0]), [sphere, 2 + sphere, 2 + sphere], rtol=1e-13)

@@ -1,0 +1,374 @@
+"""Scene files to `SceneSpec`: safe YAML with locations, schema validation, semantic checks.
+
+    read (yaml_located) ─▶ merge `defaults` ─▶ JSON Schema (all errors) ─▶ finite numbers ─▶ resolve
+                                                                             (simulation, bodies, forces)
+
+Every stage reports to one `IssueCollector`, so a scene gets all its problems at once, each located at
+file:line:col. A subtree with schema errors is not resolved further (its numbers cannot be trusted), but
+every other subtree still is. `schemas/scene.schema.json` is the single source of truth for the format.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rbcli.scene.bodies import MAX_GENERATED_BODIES, SAMPLING_KEYS, BodyResolver
+from rbcli.scene.issues import IssueCollector, did_you_mean, quoted_list
+from rbcli.scene.schema_errors import SchemaErrorFormatter
+from rbcli.scene.schema_path import scene_schema
+from rbcli.scene.spec import (
+    BodySpec,
+    ForceSpec,
+    RecordSpec,
+    SceneError,
+    SceneIssue,
+    SceneSpec,
+    SimulationSpec,
+)
+from rbcli.scene.yaml_located import (
+    MAX_SCENE_BYTES,
+    LocatedDocument,
+    YamlPath,
+    decode_scene_bytes,
+    parse_located_yaml,
+)
+
+# alternatives: a body that gives one of a group replaces whatever `defaults` gives from that group
+EXCLUSIVE_GROUPS = (
+    ("particles", "shape", "mesh", "compound"),
+    ("velocity", "momentum"),
+    ("angular_momentum", "angular_velocity"),
+    ("spacing", "count"),
+    ("density", "mass"),
+)
+
+# a run longer than this many steps is more likely a unit slip (dt in ms?) than intended
+MANY_STEPS = 1_000_000_000
+
+
+def known_integrator_names() -> tuple[str, ...]:
+    """Names a scene's `simulation.integrator` may take (the integrator registry; metadata only, no numba)."""
+    from rbcli.physics.integrators import integrator_names
+
+    return integrator_names()
+
+
+def _adaptive_integrator_names() -> tuple[str, ...]:
+    from rbcli.physics.integrators import INTEGRATORS
+
+    return tuple(name for name, info in INTEGRATORS.items() if info.adaptive)
+
+
+@cache
+def _validator() -> Any:
+    from jsonschema import Draft202012Validator
+
+    return Draft202012Validator(scene_schema())
+
+
+def load_scene(path: str | Path) -> SceneSpec:
+    """Read, validate and resolve a scene file; SceneError with every issue (located) if it has errors."""
+    spec, issues = analyse_scene(path)
+    if spec is None:
+        raise SceneError(issues)
+    return spec
+
+
+def check_scene(path: str | Path) -> list[SceneIssue]:
+    """Every error and warning of a scene file, in file order (empty: valid and clean)."""
+    return analyse_scene(path)[1]
+
+
+def load_scene_text(text: str | bytes, file: str = "<string>", base_dir: str | Path | None = None) -> SceneSpec:
+    """Like `load_scene` for scene text; mesh paths resolve against `base_dir` (default: current directory)."""
+    spec, issues = analyse_scene_text(text, file, base_dir)
+    if spec is None:
+        raise SceneError(issues)
+    return spec
+
+
+def analyse_scene(path: str | Path) -> tuple[SceneSpec | None, list[SceneIssue]]:
+    """(spec or None when there are errors, all issues) for a scene file."""
+    file = str(path)
+    try:
+        with open(path, "rb") as handle:
+            raw = handle.read(MAX_SCENE_BYTES + 1)
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        return None, [SceneIssue(None, f"cannot read scene file '{file}': {reason}", "a readable YAML file")]
+    return analyse_scene_text(raw, file, Path(path).resolve().parent)
+
+
+def analyse_scene_text(
+    text: str | bytes, file: str = "<string>", base_dir: str | Path | None = None
+) -> tuple[SceneSpec | None, list[SceneIssue]]:
+    """(spec or None when there are errors, all issues) for scene text."""
+    try:
+        decoded = decode_scene_bytes(text, file) if isinstance(text, bytes) else text
+        doc = parse_located_yaml(decoded, file)
+    except SceneError as exc:
+        return None, exc.issues
+    return _analyse(doc, decoded, Path(base_dir) if base_dir is not None else None, file)
+
+
+def _analyse(
+    doc: LocatedDocument, text: str, base_dir: Path | None, file: str
+) -> tuple[SceneSpec | None, list[SceneIssue]]:
+    issues = IssueCollector(doc, file)
+    data = doc.value
+    if not isinstance(data, dict):
+        issues.error((), "a scene must be a mapping", "keys such as name, simulation and bodies")
+        return None, issues.sorted()
+    data = _merge_defaults(doc, data)
+    bad_paths = _check_finite(data, (), issues)
+    errors = sorted(_validator().iter_errors(data), key=lambda e: list(map(str, e.absolute_path)))
+    bad_paths |= SchemaErrorFormatter(scene_schema(), issues).report(errors, skip_paths=bad_paths)
+
+    def clean(prefix: YamlPath) -> bool:
+        return not any(p[: len(prefix)] == prefix or prefix[: len(p)] == p for p in bad_paths)
+
+    simulation = _simulation(data["simulation"], issues) if "simulation" in data and clean(("simulation",)) else None
+    bodies: list[BodySpec] = []
+    resolver = BodyResolver(issues, base_dir)
+    entries = data["bodies"] if isinstance(data.get("bodies"), list) else []
+    for i, entry in enumerate(entries):
+        if not clean(("bodies", i)):
+            continue
+        if "grid" in entry:
+            bodies.extend(resolver.grid(entry, ("bodies", i)))
+        elif "random" in entry:
+            bodies.extend(resolver.random(entry, ("bodies", i)))
+        else:
+            body = resolver.body(entry, ("bodies", i))
+            if body is not None:
+                bodies.append(body)
+    _check_unique_names(entries, issues)
+    forces = _forces(data, clean, issues)
+    if issues.error_count or simulation is None:
+        return None, issues.sorted()
+    gravity = data.get("gravity")
+    spec = SceneSpec(
+        name=str(data.get("name") or Path(file).stem),
+        simulation=simulation,
+        bodies=tuple(bodies),
+        gravity=None if gravity is None else _frozen_vector(gravity),
+        forces=forces,
+        source_path=file,
+        source_text=text,
+    )
+    warnings = issues.sorted()
+    return (replace(spec, warnings=tuple(warnings)) if warnings else spec), warnings
+
+
+def _frozen_vector(value: list[float]) -> Any:
+    v = np.asarray(value, dtype=float).reshape(3)
+    v.flags.writeable = False
+    return v
+
+
+def _forces(data: dict[str, Any], clean: Any, issues: IssueCollector) -> tuple[ForceSpec, ...]:
+    """Typed force specs from `forces:` (scene/force_specs.py maps each entry; docs/forces.md)."""
+    from rbcli.scene.force_specs import force_spec_from_mapping
+
+    entries = data["forces"] if isinstance(data.get("forces"), list) else []
+    forces = []
+    for i, entry in enumerate(entries):
+        if not clean(("forces", i)):
+            continue
+        try:
+            forces.append(force_spec_from_mapping(entry, issues.locate(("forces", i))))
+        # the schema's `forces` is a placeholder until the forces issue fills it in, so the mapper still sees
+        # unvalidated values and may fail in any way; each failure is this entry's error, not a crash
+        except Exception as exc:  # noqa: BLE001
+            issues.error(("forces", i), f"cannot read this force: {exc}", "a force entry as docs/forces.md describes")
+    return tuple(forces)
+
+
+# ---- defaults -----------------------------------------------------------------------------------------
+def _merge_defaults(doc: LocatedDocument, data: dict[str, Any]) -> dict[str, Any]:
+    """`defaults` merged into each body and generator template (locations copied from `defaults`)."""
+    defaults = data.get("defaults")
+    bodies = data.get("bodies")
+    if not isinstance(defaults, dict) or not defaults or not isinstance(bodies, list):
+        return data
+    merged_bodies = []
+    for i, entry in enumerate(bodies):
+        if not isinstance(entry, dict):
+            merged_bodies.append(entry)
+            continue
+        kind = "grid" if "grid" in entry else "random" if "random" in entry else None
+        if kind is None:
+            merged_bodies.append(_merge_into(doc, defaults, entry, ("bodies", i), skip=("name",)))
+            continue
+        gen = entry[kind]
+        if not isinstance(gen, dict) or not isinstance(gen.get("template"), dict):
+            merged_bodies.append(entry)
+            continue
+        skip = ["name", "position"]
+        if kind == "random" and gen.get("random_orientation") is True:
+            skip.append("orientation")
+        template = _merge_into(doc, defaults, gen["template"], ("bodies", i, kind, "template"), skip=tuple(skip))
+        merged_bodies.append({**entry, kind: {**gen, "template": template}})
+    return {**data, "bodies": merged_bodies}
+
+
+def _merge_into(
+    doc: LocatedDocument, defaults: dict[str, Any], target: dict[str, Any], path: YamlPath, skip: tuple[str, ...]
+) -> dict[str, Any]:
+    merged = dict(target)
+    explicit_particles = "particles" in target or ("particles" in defaults and not _gives_source(target))
+    for key, value in defaults.items():
+        if key in target or key in skip:
+            continue
+        group = next((g for g in EXCLUSIVE_GROUPS if key in g), ())
+        if any(k in target for k in group):
+            continue
+        if explicit_particles and key in SAMPLING_KEYS:
+            continue  # sampling settings mean nothing to a body given by its particles
+        merged[key] = value
+        doc.copy_locations(("defaults", key), (*path, key))
+    return merged
+
+
+def _gives_source(entry: dict[str, Any]) -> bool:
+    return any(k in entry for k in EXCLUSIVE_GROUPS[0])
+
+
+# ---- numbers ------------------------------------------------------------------------------------------
+def _check_finite(value: Any, path: YamlPath, issues: IssueCollector) -> set[YamlPath]:
+    """Report non-finite floats (.nan, .inf) and integers too large for a float64 or int64."""
+    bad: set[YamlPath] = set()
+    stack: list[tuple[Any, YamlPath]] = [(value, path)]
+    while stack:
+        item, where = stack.pop()
+        if isinstance(item, dict):
+            stack.extend((v, (*where, k)) for k, v in item.items())
+        elif isinstance(item, list):
+            stack.extend((v, (*where, i)) for i, v in enumerate(item))
+        elif isinstance(item, float) and not math.isfinite(item):
+            issues.error(where, f"{item} is not a finite number", "a finite number")
+            bad.add(where)
+        elif isinstance(item, int) and not isinstance(item, bool) and abs(item) >= 2**63:
+            issues.error(where, "integer is too large", "an integer below 2^63 in magnitude")
+            bad.add(where)
+    return bad
+
+
+# ---- simulation ---------------------------------------------------------------------------------------
+def _simulation(sim: dict[str, Any], issues: IssueCollector) -> SimulationSpec | None:
+    path: YamlPath = ("simulation",)
+    before = issues.error_count
+    dt = float(sim["dt"])
+    integrator = str(sim.get("integrator", "euler-matrix"))
+    names = known_integrator_names()
+    if integrator not in names:
+        hint = did_you_mean(integrator, names)
+        guess = f" — did you mean '{hint}'?" if hint else ""
+        issues.error((*path, "integrator"), f"unknown integrator '{integrator}'{guess}", f"one of {quoted_list(names)}")
+    if "tolerance" in sim and integrator in names and integrator not in _adaptive_integrator_names():
+        adaptive = quoted_list(_adaptive_integrator_names())
+        issues.error(
+            (*path, "tolerance"),
+            f"tolerance needs an adaptive integrator, and '{integrator}' is not one",
+            f"integrator: one of {adaptive} with a tolerance, or no tolerance (fixed dt)",
+            key=True,
+        )
+    if "steps" in sim:
+        duration = int(sim["steps"]) * dt
+    else:
+        duration = float(sim["duration"])
+        steps = duration / dt
+        if not math.isfinite(steps):
+            issues.error((*path, "duration"), "duration / dt overflows", "a number of steps below 1e300")
+        elif steps < 1.0 - 1e-9:
+            issues.error((*path, "dt"), f"dt = {dt:g} s is longer than duration = {duration:g} s", "dt <= duration")
+        elif abs(steps - round(steps)) > 1e-6 * max(1.0, steps):
+            issues.warning(
+                (*path, "duration"),
+                f"duration / dt = {steps:.6g} is not a whole number of steps",
+                "a duration that is a multiple of dt (or give steps)",
+            )
+    if math.isfinite(duration / dt) and duration / dt > MANY_STEPS:
+        issues.warning(
+            (*path, "dt"), f"{duration / dt:.3g} steps: a very long run", "check the units of dt and duration"
+        )
+    record = _record(sim.get("record", {}), dt, issues)
+    if issues.error_count > before or record is None:
+        return None
+    return SimulationSpec(
+        dt=dt,
+        duration=duration,
+        integrator=integrator,
+        tolerance=float(sim["tolerance"]) if "tolerance" in sim else None,
+        record=record,
+        output=sim.get("output"),
+        seed=int(sim.get("seed", 0)),
+    )
+
+
+def _record(record: dict[str, Any], dt: float, issues: IssueCollector) -> RecordSpec | None:
+    path: YamlPath = ("simulation", "record")
+    every = int(record.get("every", 1))
+    if "rate" in record:
+        rate = float(record["rate"])
+        with np.errstate(all="ignore"):
+            steps_per_record = float(np.float64(1.0) / (rate * dt))
+        if not math.isfinite(steps_per_record) or steps_per_record > 2**62:
+            issues.error((*path, "rate"), f"record rate {rate:g} Hz is too slow to represent", "a larger rate")
+            return None
+        if steps_per_record < 1.0 - 1e-9:
+            issues.error(
+                (*path, "rate"),
+                f"record rate {rate:g} Hz is faster than the step rate 1/dt = {1.0 / dt:g} Hz",
+                f"a rate <= {1.0 / dt:g} Hz",
+            )
+            return None
+        every = max(1, round(steps_per_record))
+        if abs(steps_per_record - every) > 1e-6 * steps_per_record:
+            issues.warning(
+                (*path, "rate"),
+                f"{rate:g} Hz is not a whole number of steps; recording every {every} steps "
+                f"({1.0 / (every * dt):g} Hz)",
+                "a rate that divides 1/dt",
+            )
+    streams = tuple(record.get("streams", RecordSpec().streams))
+    return RecordSpec(every=every, streams=streams)
+
+
+def _check_unique_names(entries: list[Any], issues: IssueCollector) -> None:
+    """Duplicate body names, from the entries as written (so bodies with other errors are checked too)."""
+    first: dict[str, YamlPath] = {}
+    for i, entry in enumerate(entries):
+        for name, name_path in _entry_names(entry, ("bodies", i)):
+            if name in first:
+                line = issues.locate(first[name]).line
+                issues.error(
+                    name_path, f"duplicate body name '{name}' (first at line {line})", "a unique name per body"
+                )
+            else:
+                first[name] = name_path
+
+
+def _entry_names(entry: Any, path: YamlPath) -> list[tuple[str, YamlPath]]:
+    """Names a body entry gives: its `name`, or a generator's `<name>_<n>` (when its count is readable)."""
+    if not isinstance(entry, dict):
+        return []
+    for kind in ("grid", "random"):
+        gen = entry.get(kind)
+        if isinstance(gen, dict) and isinstance(gen.get("name"), str):
+            count = gen.get("count")
+            if kind == "grid" and isinstance(count, list) and len(count) == 3:
+                count = math.prod(c if isinstance(c, int) and not isinstance(c, bool) and c > 0 else 0 for c in count)
+            if not isinstance(count, int) or isinstance(count, bool) or not 0 < count <= MAX_GENERATED_BODIES:
+                return []
+            return [(f"{gen['name']}_{n}", (*path, kind, "name")) for n in range(count)]
+        if gen is not None:
+            return []
+    name = entry.get("name")
+    return [(name, (*path, "name"))] if isinstance(name, str) else []

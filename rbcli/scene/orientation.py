@@ -1,0 +1,172 @@
+"""Orientation forms of a scene resolved to unit quaternions (w, x, y, z), world-from-body.
+
+Forms: `{wxyz: [...]}`, `{xyzw: [...]}`, `{matrix: 3x3}`, `{axis_angle: {axis, angle, degrees?}}`,
+`{euler: {angles, convention, degrees?}}` with scipy's convention names (lowercase extrinsic, uppercase
+intrinsic). Numbers here are plain numpy; the physics keeps its own rotation kernels.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+
+# Report(subpath, message, expected, severity): how resolution tells the loader about a problem.
+Report = Callable[[tuple[str | int, ...], str, str, str], None]
+
+# a typed matrix with four decimals (0.7071) deviates ~1e-4 from orthonormal; accept that, refuse real errors
+MATRIX_TOLERANCE = 1e-3
+# below this a deviation is rounding, not worth a warning
+QUIET_TOLERANCE = 1e-9
+
+
+def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product a * b of quaternions (w, x, y, z); rotation b first, then a."""
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return np.array(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ]
+    )
+
+
+def matrix_from_quat(q: np.ndarray) -> np.ndarray:
+    """Rotation matrix of a unit quaternion (w, x, y, z), shape (3, 3)."""
+    w, x, y, z = q
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def quat_from_matrix(r: np.ndarray) -> np.ndarray:
+    """Unit quaternion (w, x, y, z) of a rotation matrix, Shepperd's method (divide by the largest term)."""
+    trace = np.trace(r)
+    diag = np.diag(r)
+    k = int(np.argmax([trace, *diag]))
+    if k == 0:
+        s = 2.0 * np.sqrt(1.0 + trace)
+        q = [0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s]
+    elif k == 1:
+        s = 2.0 * np.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2])
+        q = [(r[2, 1] - r[1, 2]) / s, 0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s]
+    elif k == 2:
+        s = 2.0 * np.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2])
+        q = [(r[0, 2] - r[2, 0]) / s, (r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s]
+    else:
+        s = 2.0 * np.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1])
+        q = [(r[1, 0] - r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s]
+    q = np.asarray(q, dtype=float)
+    q /= np.linalg.norm(q)
+    return q if q[0] >= 0 else -q
+
+
+def quat_from_axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rotation by `angle` [rad] about `axis` (normalised here), right-hand rule."""
+    axis = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    return np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * axis])
+
+
+_AXES = {"x": np.array([1.0, 0, 0]), "y": np.array([0, 1.0, 0]), "z": np.array([0, 0, 1.0])}
+
+
+def quat_from_euler(angles: np.ndarray, convention: str) -> np.ndarray:
+    """Euler angles [rad] as scipy's `Rotation.from_euler(convention, angles)`.
+
+    Intrinsic (uppercase) 'XYZ' = Rx(a) Ry(b) Rz(c); extrinsic (lowercase) 'xyz' = Rz(c) Ry(b) Rx(a):
+    each rotation about the fixed world axis is applied after the previous one.
+    """
+    parts = [quat_from_axis_angle(_AXES[c.lower()], a) for c, a in zip(convention, angles, strict=True)]
+    q = np.array([1.0, 0, 0, 0])
+    for p in parts:
+        q = quat_multiply(q, p) if convention.isupper() else quat_multiply(p, q)
+    return q / np.linalg.norm(q)
+
+
+def random_unit_quaternions(rng: np.random.Generator, count: int) -> np.ndarray:
+    """Uniformly distributed rotations: normalised 4D Gaussian samples (Haar measure on SO(3)), (count, 4)."""
+    q = rng.standard_normal((count, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    q[q[:, 0] < 0] *= -1
+    return q
+
+
+def resolve_orientation(spec: Mapping[str, Any] | None, report: Report) -> np.ndarray | None:
+    """Unit quaternion (w, x, y, z) of a validated orientation mapping; None after reporting an error."""
+    with np.errstate(all="ignore"):  # absurd magnitudes overflow to inf and are reported, not warned about
+        return _resolve_orientation(spec, report)
+
+
+def _resolve_orientation(spec: Mapping[str, Any] | None, report: Report) -> np.ndarray | None:
+    if spec is None:
+        return np.array([1.0, 0.0, 0.0, 0.0])
+    if "wxyz" in spec or "xyzw" in spec:
+        form = "wxyz" if "wxyz" in spec else "xyzw"
+        q = np.asarray(spec[form], dtype=float)
+        if form == "xyzw":
+            q = np.roll(q, 1)
+        norm = float(np.linalg.norm(q))
+        if not np.isfinite(norm) or norm < 1e-12:
+            what = "quaternion is zero" if np.isfinite(norm) else "quaternion is too large to normalise"
+            report((form,), what, "a non-zero quaternion of modest size (it is normalised)", "error")
+            return None
+        if abs(norm - 1.0) > 1e-6:
+            report((form,), f"quaternion has norm {norm:.6g}; normalised", "a unit quaternion", "warning")
+        return q / norm
+    if "matrix" in spec:
+        r = np.asarray(spec["matrix"], dtype=float)
+        deviation = float(np.max(np.abs(r.T @ r - np.eye(3))))
+        det = float(np.linalg.det(r)) if np.all(np.isfinite(r.T @ r)) else float("nan")
+        if not deviation <= MATRIX_TOLERANCE:  # nan (overflow) counts as not orthonormal
+            report(
+                ("matrix",),
+                f"matrix is not orthonormal (max |R^T R - I| = {deviation:.3g})",
+                "a rotation matrix: orthonormal rows and columns, determinant +1",
+                "error",
+            )
+            return None
+        if det < 0:
+            report(("matrix",), "matrix is a reflection (determinant -1)", "a rotation: determinant +1", "error")
+            return None
+        if deviation > QUIET_TOLERANCE:
+            report(("matrix",), f"matrix orthonormalised (deviation {deviation:.3g})", "", "warning")
+        # nearest rotation (polar decomposition) before converting
+        u, _, vt = np.linalg.svd(r)
+        return quat_from_matrix(u @ vt)
+    if "axis_angle" in spec:
+        aa = spec["axis_angle"]
+        axis = np.asarray(aa["axis"], dtype=float)
+        axis_norm = np.linalg.norm(axis)
+        if not np.isfinite(axis_norm):
+            report(("axis_angle", "axis"), "rotation axis is too large", "an axis of modest size", "error")
+            return None
+        if axis_norm < 1e-12:
+            report(("axis_angle", "axis"), "rotation axis is zero", "a non-zero axis", "error")
+            return None
+        angle = float(np.radians(aa["angle"]) if aa.get("degrees", False) else aa["angle"])
+        return quat_from_axis_angle(axis, angle)
+    if "euler" in spec:
+        eu = spec["euler"]
+        convention = str(eu["convention"])
+        if any(a.lower() == b.lower() for a, b in zip(convention, convention[1:], strict=False)):
+            report(
+                ("euler", "convention"),
+                f"convention '{convention}' turns about the same axis twice in a row",
+                "three axes with no axis twice in a row, e.g. 'xyz', 'zyz', 'ZYX'",
+                "error",
+            )
+            return None
+        angles = np.asarray(eu["angles"], dtype=float)
+        if eu.get("degrees", False):
+            angles = np.radians(angles)
+        return quat_from_euler(angles, convention)
+    report((), "no orientation form given", "one of wxyz, xyzw, matrix, axis_angle, euler", "error")
+    return None
