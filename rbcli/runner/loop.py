@@ -88,6 +88,7 @@ def warm_up(compiled: CompiledScene) -> None:
 
 def run(compiled: CompiledScene, sinks: Sequence[Sink], *, progress: ProgressCallback | None = None) -> RunSummary:
     """Integrate the compiled scene, streaming frames to every sink; always closes the sinks."""
+    from rbcli.physics.forces.impulse import apply_impulses, impulse_step_indices
     from rbcli.physics.step import STATUS_DIVERGED, empty_buffers
 
     model, settings = compiled.model, compiled.settings
@@ -100,6 +101,8 @@ def run(compiled: CompiledScene, sinks: Sequence[Sink], *, progress: ProgressCal
     scratch = np.zeros((n, kernel.SCRATCH_WIDTH))
     kmodel = compiled.model.kernel()
     every, total = settings.record_every, settings.steps
+    # impulses change P and L exactly between steps: chunks end at the steps that carry one
+    impulse_at = impulse_step_indices(compiled.forces, settings.dt)
 
     header = run_header(compiled)
     for sink in sinks:
@@ -126,6 +129,15 @@ def run(compiled: CompiledScene, sinks: Sequence[Sink], *, progress: ProgressCal
             while state.step < total:
                 started = time.perf_counter()
                 todo = min(chunk_steps, total - state.step)
+                if impulse_at.size:
+                    if state.step in impulse_at:
+                        t0 = state.step * settings.dt
+                        apply_impulses(
+                            kmodel, compiled.forces, t0, t0 + settings.dt, state.x, state.q, state.P, state.L
+                        )
+                    later = impulse_at[impulse_at > state.step]
+                    if later.size:
+                        todo = min(todo, int(later[0]) - state.step)
                 done, frames, code = kernel.run_chunk(
                     kmodel, compiled.forces, settings.dt, state.step, todo, every,
                     state.x, state.q, state.P, state.L, F, tau, scratch,

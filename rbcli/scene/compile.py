@@ -8,11 +8,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rbcli.physics.forces import ForceTables, build_force_tables
+from rbcli.physics.forces import ForceTables
 from rbcli.physics.frames import internal_orientation
 from rbcli.physics.model import Model, build_model
 from rbcli.physics.rotation import quat_rotate, quat_rotate_inverse
 from rbcli.physics.state import State
+from rbcli.scene.compile_forces import compile_force_tables
 from rbcli.scene.spec import SceneError, SceneIssue, SceneSpec
 
 
@@ -64,7 +65,7 @@ def compile_scene(
     """Build model, forces, initial state and settings; keyword arguments override the scene."""
     sim = spec.simulation
     try:
-        model, _centres = build_model(
+        model, centres = build_model(
             [b.name for b in spec.bodies],
             [b.particle_position for b in spec.bodies],
             [b.particle_mass for b in spec.bodies],
@@ -86,7 +87,9 @@ def compile_scene(
     )
     if settings.dt <= 0 or not math.isfinite(settings.dt):
         raise SceneError([SceneIssue(None, f"dt must be a positive number of seconds, got {settings.dt}")])
-    return CompiledScene(spec, model, build_force_tables(spec.gravity), state, settings)
+    body_index = {name: i for i, name in enumerate(model.body_names)}
+    forces = compile_force_tables(spec.gravity, spec.forces, model, body_index, centres)
+    return CompiledScene(spec, model, forces, state, settings)
 
 
 def initial_state(spec: SceneSpec, model: Model) -> State:

@@ -163,7 +163,19 @@ def _analyse(
         source_text=text,
     )
     warnings = issues.sorted()
+    # the compile step finds what only the assembled scene shows (force terms naming unknown bodies or
+    # particles, singular inertia): run it here so `validate` reports it, still without simulating
+    from rbcli.scene.compile import compile_scene
+
+    try:
+        compile_scene(spec)
+    except SceneError as exc:
+        return None, sorted([*warnings, *exc.issues], key=_issue_order)
     return (replace(spec, warnings=tuple(warnings)) if warnings else spec), warnings
+
+
+def _issue_order(issue: SceneIssue) -> tuple[int, int]:
+    return (issue.location.line, issue.location.column) if issue.location else (0, 0)
 
 
 def _frozen_vector(value: list[float]) -> Any:

@@ -176,8 +176,8 @@ def test_adaptive_tolerance():
     assert s.tolerance == 1e-8
 
 
-def test_forces_placeholder_keeps_type_and_location():
-    text = SIM + "bodies:\n  - name: b\n    " + PARTICLES + "\nforces:\n  - {type: spring, stiffness: 10}\n"
+def test_forces_keep_type_and_location():
+    text = SIM + "bodies:\n  - name: b\n    " + PARTICLES + "\nforces:\n  - {type: spring, body: b, anchor: [0, 0, 1], stiffness: 10}\n"
     spec = load_scene_text(text, "s.yaml")
     assert [f.kind for f in spec.forces] == ["spring"] and spec.forces[0].location.line == 6
 

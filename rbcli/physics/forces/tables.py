@@ -1,0 +1,226 @@
+"""Parameter tables of the force terms: one named tuple of flat arrays per force type.
+
+A table has one row per (term, touched body); a scene that does not use a type gets the same table
+with 0 rows, so the compiled wrench loops over nothing and the numba types stay the same for every
+scene (one compiled kernel serves all). Points are body-fixed offsets about the centre of mass in the
+PRINCIPAL frame (`KernelModel.particle_offset`'s frame), converted once at compile time from the
+user's body frame: r = E^T (p_user - centre_user). Vectors flagged `body_frame` are in the principal
+frame too (v = E^T v_user); the others are world-frame. Parameter arrays are read-only; only
+`ForceTables.term_evaluations` is written at run time.
+
+This module imports numpy only (no numba), so `scene/compile.py` can build tables cheaply.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+# Row column `schedule` value meaning "no schedule": the force acts at full strength at all times.
+NO_SCHEDULE = -1
+# Row column `body_b` of a spring meaning "the second end is a world anchor".
+WORLD = -1
+
+SCHEDULE_CONSTANT = 0
+SCHEDULE_PIECEWISE_LINEAR = 1
+SCHEDULE_SINE = 2
+SCHEDULE_KINDS = {"constant": SCHEDULE_CONSTANT, "piecewise_linear": SCHEDULE_PIECEWISE_LINEAR, "sine": SCHEDULE_SINE}
+
+# Indices into ForceTables.term_evaluations, and the names force_terms_present reports.
+TERM_NAMES = ("gravity", "field", "point_force", "torque", "spring", "drag", "impulse")
+TERM_GRAVITY, TERM_FIELD, TERM_POINT_FORCE, TERM_TORQUE, TERM_SPRING, TERM_DRAG, TERM_IMPULSE = range(7)
+
+
+class ScheduleTable(NamedTuple):
+    """Time profiles s(t) [1] that multiply a row's force or torque; rows refer to them by index.
+
+    s(t) = 0 outside the window start <= t < stop; inside it, by kind:
+      constant:          s = offset
+      piecewise_linear:  linear interpolation through the knots (knot_time ascending, knot_value),
+                         held at the first / last value before / after them
+      sine:              s = offset + amplitude sin(2 pi frequency t + phase), t the absolute time.
+    Knots of schedule j: knot_time[knot_start[j] : knot_start[j] + knot_count[j]].
+    """
+
+    kind: np.ndarray  # int64 (schedule_count,)
+    start: np.ndarray  # [s] (schedule_count,)
+    stop: np.ndarray  # [s] (schedule_count,)
+    amplitude: np.ndarray  # [1] (schedule_count,)
+    frequency: np.ndarray  # [Hz] (schedule_count,)
+    phase: np.ndarray  # [rad] (schedule_count,)
+    offset: np.ndarray  # [1] (schedule_count,)
+    knot_start: np.ndarray  # int64 (schedule_count,)
+    knot_count: np.ndarray  # int64 (schedule_count,)
+    knot_time: np.ndarray  # [s] (knot_count_total,)
+    knot_value: np.ndarray  # [1] (knot_count_total,)
+
+
+class FieldTable(NamedTuple):
+    """Per-particle force fields, one row per (field, body): a(x) = value + gradient x at each particle.
+
+    per_mass: F_i = s(t) m_i a(x_i) (an acceleration field [m/s^2], [1/s^2] for the gradient);
+    otherwise F_i = s(t) a(x_i) (a force per particle [N], [N/m]). x_i is the particle's world
+    position; the body gets F = sum F_i and tau = sum r_i x F_i, r_i = x_i - x the world offset.
+    """
+
+    body: np.ndarray  # int64 (row_count,)
+    per_mass: np.ndarray  # bool (row_count,)
+    value: np.ndarray  # (row_count, 3), world
+    gradient: np.ndarray  # (row_count, 3, 3), world: a_j += gradient[j, k] x_k
+    schedule: np.ndarray  # int64 (row_count,), NO_SCHEDULE or a ScheduleTable row
+
+
+class PointForceTable(NamedTuple):
+    """Forces at body-fixed points: F += s(t) f, tau += r x s(t) f with r = R point (world offset)."""
+
+    body: np.ndarray  # int64 (row_count,)
+    point: np.ndarray  # [m] (row_count, 3), principal frame, about the centre of mass
+    vector: np.ndarray  # [N] (row_count, 3), world, or principal frame where body_frame
+    body_frame: np.ndarray  # bool (row_count,): vector turns with the body (f = R vector)
+    schedule: np.ndarray  # int64 (row_count,)
+
+
+class TorqueTable(NamedTuple):
+    """Pure torques (couples): tau += s(t) vector, world or turning with the body."""
+
+    body: np.ndarray  # int64 (row_count,)
+    vector: np.ndarray  # [N m] (row_count, 3), world, or principal frame where body_frame
+    body_frame: np.ndarray  # bool (row_count,)
+    schedule: np.ndarray  # int64 (row_count,)
+
+
+class SpringTable(NamedTuple):
+    """Springs-dampers between a body point and a world anchor or another body's point.
+
+    With d = p_a - p_b, l = |d|, e = d / l: f = -(k (l - l0) + c dl/dt) e on end a (at p_a) and -f on
+    end b; dl/dt = e . (v_a - v_b). Potential V = k (l - l0)^2 / 2.
+    """
+
+    body_a: np.ndarray  # int64 (row_count,)
+    point_a: np.ndarray  # [m] (row_count, 3), principal frame of body_a, about its centre of mass
+    body_b: np.ndarray  # int64 (row_count,), WORLD for an anchored spring
+    point_b: np.ndarray  # [m] (row_count, 3), principal frame of body_b; the world anchor if WORLD
+    stiffness: np.ndarray  # k [N/m] (row_count,)
+    rest_length: np.ndarray  # l0 [m] (row_count,)
+    damping: np.ndarray  # c [N s/m] (row_count,)
+
+
+class DragTable(NamedTuple):
+    """Drag at the centre of mass: F = -(b + c |v|) v, tau = -(b_r + c_r |omega|) omega."""
+
+    body: np.ndarray  # int64 (row_count,)
+    linear: np.ndarray  # b [N s/m] (row_count,)
+    quadratic: np.ndarray  # c [N s^2/m^2] (row_count,)
+    angular_linear: np.ndarray  # b_r [N m s] (row_count,)
+    angular_quadratic: np.ndarray  # c_r [N m s^2] (row_count,)
+
+
+class ImpulseTable(NamedTuple):
+    """Impulses J at body points, applied between steps (see impulse.py), rows sorted by time."""
+
+    body: np.ndarray  # int64 (row_count,)
+    time: np.ndarray  # [s] (row_count,), ascending
+    vector: np.ndarray  # J [N s] (row_count, 3), world, or principal frame where body_frame
+    point: np.ndarray  # [m] (row_count, 3), principal frame, about the centre of mass
+    body_frame: np.ndarray  # bool (row_count,)
+
+
+class ForceTables(NamedTuple):
+    """Every force term of a scene as arrays (numba-friendly).
+
+    gravity: uniform field [m/s^2], (3,), world; acts at the centre of mass, so no torque.
+    has_gravity: False when the scene has no gravity (the term is skipped).
+    has_torque: False when no term can produce a torque: integrators may skip the torque kick, and
+      the wrench leaves tau untouched (all zeros).
+    term_evaluations: int64 (len(TERM_NAMES),), a diagnostic counter (Rapier's stage counters): each
+      evaluation of a term adds the rows (field: particles; impulse: impulses applied) it processed.
+      It accumulates over runs of the same tables; reset with `term_evaluations[:] = 0`.
+    """
+
+    gravity: np.ndarray
+    has_gravity: bool
+    has_torque: bool
+    schedule: ScheduleTable
+    field: FieldTable
+    point_force: PointForceTable
+    torque: TorqueTable
+    spring: SpringTable
+    drag: DragTable
+    impulse: ImpulseTable
+    term_evaluations: np.ndarray
+
+
+# ---- constructors: every table has the same dtypes and layouts whether empty or not ----------------
+
+
+def _f(values, *shape: int) -> np.ndarray:  # noqa: ANN001
+    out = np.ascontiguousarray(np.asarray(values, dtype=np.float64).reshape((-1, *shape)))
+    out.setflags(write=False)
+    return out
+
+
+def _i(values) -> np.ndarray:  # noqa: ANN001
+    out = np.ascontiguousarray(np.asarray(values, dtype=np.int64).reshape(-1))
+    out.setflags(write=False)
+    return out
+
+
+def _b(values) -> np.ndarray:  # noqa: ANN001
+    out = np.ascontiguousarray(np.asarray(values, dtype=np.bool_).reshape(-1))
+    out.setflags(write=False)
+    return out
+
+
+def schedule_table(
+    kind=(), start=(), stop=(), amplitude=(), frequency=(), phase=(), offset=(), knots=()
+) -> ScheduleTable:  # noqa: ANN001
+    """A ScheduleTable from per-schedule sequences; knots: per schedule a (times, values) pair."""
+    counts = [len(t) for t, _ in knots]
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]]) if counts else []
+    times = np.concatenate([np.asarray(t, dtype=np.float64) for t, _ in knots]) if counts else []
+    values = np.concatenate([np.asarray(v, dtype=np.float64) for _, v in knots]) if counts else []
+    return ScheduleTable(
+        _i(kind), _f(start), _f(stop), _f(amplitude), _f(frequency), _f(phase), _f(offset),
+        _i(starts), _i(counts), _f(times), _f(values),
+    )  # fmt: skip
+
+
+def field_table(body=(), per_mass=(), value=(), gradient=(), schedule=()) -> FieldTable:  # noqa: ANN001
+    return FieldTable(_i(body), _b(per_mass), _f(value, 3), _f(gradient, 3, 3), _i(schedule))
+
+
+def point_force_table(body=(), point=(), vector=(), body_frame=(), schedule=()) -> PointForceTable:  # noqa: ANN001
+    return PointForceTable(_i(body), _f(point, 3), _f(vector, 3), _b(body_frame), _i(schedule))
+
+
+def torque_table(body=(), vector=(), body_frame=(), schedule=()) -> TorqueTable:  # noqa: ANN001
+    return TorqueTable(_i(body), _f(vector, 3), _b(body_frame), _i(schedule))
+
+
+def spring_table(body_a=(), point_a=(), body_b=(), point_b=(), stiffness=(), rest_length=(), damping=()) -> SpringTable:  # noqa: ANN001
+    return SpringTable(
+        _i(body_a), _f(point_a, 3), _i(body_b), _f(point_b, 3), _f(stiffness), _f(rest_length), _f(damping)
+    )
+
+
+def drag_table(body=(), linear=(), quadratic=(), angular_linear=(), angular_quadratic=()) -> DragTable:  # noqa: ANN001
+    return DragTable(_i(body), _f(linear), _f(quadratic), _f(angular_linear), _f(angular_quadratic))
+
+
+def impulse_table(body=(), time=(), vector=(), point=(), body_frame=()) -> ImpulseTable:  # noqa: ANN001
+    """An ImpulseTable with its rows sorted by time (stable, so equal times keep their given order)."""
+    time = np.asarray(time, dtype=np.float64).reshape(-1)
+    order = np.argsort(time, kind="stable")
+    return ImpulseTable(
+        _i(np.asarray(body, dtype=np.int64).reshape(-1)[order]),
+        _f(time[order]),
+        _f(np.asarray(vector, dtype=np.float64).reshape(-1, 3)[order], 3),
+        _f(np.asarray(point, dtype=np.float64).reshape(-1, 3)[order], 3),
+        _b(np.asarray(body_frame, dtype=np.bool_).reshape(-1)[order]),
+    )
+
+
+def table_rows(table: NamedTuple) -> int:
+    """Number of rows of a force table (the length of its first column)."""
+    return int(table[0].shape[0])
