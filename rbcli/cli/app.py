@@ -11,9 +11,11 @@ import typer
 
 from rbcli._version import __version__
 from rbcli.cli import info as _info
+from rbcli.cli import integrators as _integrators
 from rbcli.cli import replay as _replay
 from rbcli.cli import run as _run
 from rbcli.cli import schema as _schema
+from rbcli.cli import study as _study
 from rbcli.cli import validate as _validate
 
 app = typer.Typer(
@@ -44,7 +46,9 @@ app.command("run")(_run.run)
 app.command("validate")(_validate.validate)
 app.command("replay")(_replay.replay)
 app.command("info")(_info.info)
+app.command("integrators")(_integrators.integrators)
 app.command("schema")(_schema.schema)
+app.command("study")(_study.study)
 
 
 def main() -> None:

@@ -61,9 +61,7 @@ def matrix_to_quat(R: np.ndarray) -> np.ndarray:
     R = np.asarray(R, dtype=np.float64)
     r00, r11, r22 = R[..., 0, 0], R[..., 1, 1], R[..., 2, 2]
     # 4 w^2, 4 x^2, 4 y^2, 4 z^2 (up to the same constant); pick the largest per rotation
-    squares = np.stack(
-        [1 + r00 + r11 + r22, 1 + r00 - r11 - r22, 1 - r00 + r11 - r22, 1 - r00 - r11 + r22], -1
-    )
+    squares = np.stack([1 + r00 + r11 + r22, 1 + r00 - r11 - r22, 1 - r00 + r11 - r22, 1 - r00 - r11 + r22], -1)
     pick = np.argmax(squares, axis=-1)
     s = 2.0 * np.sqrt(np.maximum(np.take_along_axis(squares, pick[..., None], -1)[..., 0], 1e-300))
     d21, d02, d10 = R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]
@@ -107,6 +105,4 @@ def skew(w: np.ndarray) -> np.ndarray:
     w = np.asarray(w, dtype=np.float64)
     z = np.zeros(w.shape[:-1])
     wx, wy, wz = w[..., 0], w[..., 1], w[..., 2]
-    return np.stack(
-        [np.stack([z, -wz, wy], -1), np.stack([wz, z, -wx], -1), np.stack([-wy, wx, z], -1)], axis=-2
-    )
+    return np.stack([np.stack([z, -wz, wy], -1), np.stack([wz, z, -wx], -1), np.stack([-wy, wx, z], -1)], axis=-2)

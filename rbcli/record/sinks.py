@@ -13,9 +13,7 @@ def output_format(path: str | Path) -> str:
     """'mcap' or 'rerun' from the extension; ValueError for anything else."""
     suffix = Path(path).suffix.lower()
     if suffix not in FORMATS:
-        raise ValueError(
-            f"output {str(path)!r}: unknown format {suffix or '(no extension)'!r}; use .mcap or .rrd"
-        )
+        raise ValueError(f"output {str(path)!r}: unknown format {suffix or '(no extension)'!r}; use .mcap or .rrd")
     return FORMATS[suffix]
 
 

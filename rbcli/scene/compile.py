@@ -77,9 +77,7 @@ def compile_scene(
     state = initial_state(spec, model)
     settings = RunSettings(
         dt=float(dt if dt is not None else sim.dt),
-        steps=step_count(
-            duration if duration is not None else sim.duration, dt if dt is not None else sim.dt
-        ),
+        steps=step_count(duration if duration is not None else sim.duration, dt if dt is not None else sim.dt),
         integrator=integrator or sim.integrator,
         record_every=int(record_every or sim.record.every),
         streams=tuple(sim.record.streams),

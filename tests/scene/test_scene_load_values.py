@@ -177,7 +177,12 @@ def test_adaptive_tolerance():
 
 
 def test_forces_keep_type_and_location():
-    text = SIM + "bodies:\n  - name: b\n    " + PARTICLES + "\nforces:\n  - {type: spring, body: b, anchor: [0, 0, 1], stiffness: 10}\n"
+    text = (
+        SIM
+        + "bodies:\n  - name: b\n    "
+        + PARTICLES
+        + "\nforces:\n  - {type: spring, body: b, anchor: [0, 0, 1], stiffness: 10}\n"
+    )
     spec = load_scene_text(text, "s.yaml")
     assert [f.kind for f in spec.forces] == ["spring"] and spec.forces[0].location.line == 6
 

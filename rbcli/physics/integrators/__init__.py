@@ -1,9 +1,12 @@
-"""Registry of integrators: metadata here (cheap to import), kernels loaded on demand.
+"""Registry of integrators: metadata here (cheap to import: no numba), kernels loaded on demand.
 
 Every integrator module defines
   step(model, forces, t, dt, x, q, P, L, F, tau, scratch)   # numba njit, in place, all bodies
   step_numpy(model, forces, t, dt, x, q, P, L)               # plain numpy reference, in place
-and `SCRATCH_WIDTH`, the float64 scratch columns per body its compiled step needs.
+and `SCRATCH_WIDTH`, the float64 scratch columns per body its compiled step needs. The forces come
+only from `accumulate_wrench`. `kinematics.py` holds the per-body kernels they share (not a method).
+Adaptive time stepping (a tolerance instead of dt) is `rbcli.physics.adaptive`, driven by the
+methods flagged `adaptive`. docs/integrators.md has the measured orders, errors and costs.
 """
 
 from __future__ import annotations
@@ -15,7 +18,16 @@ from types import ModuleType
 
 @dataclass(frozen=True)
 class IntegratorInfo:
-    """What a user needs to choose an integrator: order, structure, conservation, cost."""
+    """What a user needs to choose an integrator: order, structure, conservation, cost.
+
+    order: global order of accuracy (error ~ dt^order), checked against measured slopes in the tests.
+    conserves: what the method keeps exactly (to round-off): "L, P force-free" = world angular
+      momentum without torques and linear momentum without forces; symplectic methods also keep the
+      energy error bounded (no drift), which is not exact conservation and is said so.
+    force_evals: wrench evaluations per step.
+    adaptive: has an embedded error estimate, so `simulation.tolerance` can choose its steps.
+    demonstration: kept only to show a failure mode (documented in `summary`); not for real runs.
+    """
 
     name: str
     module: str
@@ -24,6 +36,8 @@ class IntegratorInfo:
     conserves: str
     force_evals: int
     summary: str
+    adaptive: bool = False
+    demonstration: bool = False
 
     def load(self) -> ModuleType:
         """Import the kernel module (pulls in numba)."""
@@ -40,9 +54,98 @@ INTEGRATORS: dict[str, IntegratorInfo] = {
             f"{_PKG}.euler_matrix",
             order=1,
             symplectic=False,
-            conserves="L (torque-free), P (force-free)",
+            conserves="L, P force-free",
             force_evals=1,
             summary="The tutorial's explicit Euler on x, P, R, L with Gram-Schmidt (baseline).",
+        ),
+        IntegratorInfo(
+            "euler-quat",
+            f"{_PKG}.euler_quat",
+            order=1,
+            symplectic=False,
+            conserves="L, P force-free",
+            force_evals=1,
+            summary="Explicit Euler with a renormalised unit quaternion instead of Gram-Schmidt.",
+        ),
+        IntegratorInfo(
+            "semi-implicit",
+            f"{_PKG}.semi_implicit",
+            order=1,
+            symplectic=False,
+            conserves="L, P force-free",
+            force_evals=1,
+            summary="Game-engine update (Bullet/Box2D): kick, then drift with the new velocity and "
+            "q <- exp(dt omega/2) q; energy drifts, the intermediate-axis flip is lost at game-size dt.",
+        ),
+        IntegratorInfo(
+            "semi-implicit-gyro",
+            f"{_PKG}.semi_implicit_gyro",
+            order=1,
+            symplectic=False,
+            conserves="P force-free (|L| grows)",
+            force_evals=1,
+            summary="Counter-example: omega integrated with the explicit gyroscopic term "
+            "I dw/dt = tau - w x I w; |L| grows every step and fast spin blows up.",
+            demonstration=True,
+        ),
+        IntegratorInfo(
+            "rk4",
+            f"{_PKG}.rk4",
+            order=4,
+            symplectic=False,
+            conserves="L, P force-free",
+            force_evals=4,
+            summary="Classical Runge-Kutta on (x, q, P, L), every stage on a unit quaternion; "
+            "accurate, but energy drifts over long runs.",
+        ),
+        IntegratorInfo(
+            "split2",
+            f"{_PKG}.split2",
+            order=2,
+            symplectic=True,
+            conserves="L, P force-free; energy error bounded, no drift",
+            force_evals=1,
+            summary="Symplectic splitting: leapfrog for the centre of mass, exact turns about the "
+            "principal axes (McLachlan 1993, Reich 1994, Dullweber et al. 1997). The default choice.",
+        ),
+        IntegratorInfo(
+            "split4",
+            f"{_PKG}.split4",
+            order=4,
+            symplectic=True,
+            conserves="L, P force-free; energy error bounded, no drift",
+            force_evals=5,
+            summary="Suzuki's 5-stage fourth-order composition of split2 (Suzuki 1990).",
+        ),
+        IntegratorInfo(
+            "exact",
+            f"{_PKG}.exact",
+            order=2,
+            symplectic=True,
+            conserves="L, P, energy: the whole force-free motion",
+            force_evals=1,
+            summary="Exact free-body rotation (Jacobi elliptic functions) between force kicks "
+            "(Celledoni, Fasso, Safstrom & Zanna 2008); second order only through the forces.",
+        ),
+        IntegratorInfo(
+            "exact4",
+            f"{_PKG}.exact4",
+            order=4,
+            symplectic=True,
+            conserves="L, P, energy: the whole force-free motion",
+            force_evals=5,
+            summary="Suzuki's fourth-order composition of `exact`.",
+        ),
+        IntegratorInfo(
+            "dopri5",
+            f"{_PKG}.dopri5",
+            order=5,
+            symplectic=False,
+            conserves="L, P force-free",
+            force_evals=6,
+            summary="Dormand-Prince 5(4) on (x, q, P, L); with `simulation.tolerance` its embedded "
+            "4th-order estimate chooses the steps (Hairer, Norsett & Wanner).",
+            adaptive=True,
         ),
     ]
 }

@@ -1,0 +1,299 @@
+"""`rbsim study SCENE`: work-precision study of every integrator on a scene (error against cost).
+
+Writes <out>/<scene>-study.csv and .json (every number), and a work-precision plot as .png and .svg;
+prints a table. matplotlib, numba and the study itself are imported inside the functions so that
+`rbsim --help` stays instant.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
+
+import typer
+
+if TYPE_CHECKING:
+    from rich.table import Table
+
+    from rbcli.runner.study import StudyResult
+
+EXIT_INVALID = 1
+# --quick: three steps (dt, dt/2, dt/4), at most this many coarse steps, one timing repeat: the whole
+# command in a few seconds once kernels are cached.
+QUICK_DT_EXPONENTS = (0, -1, -2)
+QUICK_MAX_STEPS = 100
+QUICK_TOLERANCES = (1e-4, 1e-8)  # adaptive methods: two tolerances instead of five
+# The plot's size in pixels is PLOT_SIZE_INCHES * PLOT_DPI (tests check the PNG header against it).
+PLOT_SIZE_INCHES = (12.0, 5.0)
+PLOT_DPI = 100
+# Log axes cannot show 0; errors below this (round-off of exact methods) are drawn at it.
+PLOT_ERROR_FLOOR = 1e-16
+# A second-panel error this small for every run is round-off: the panel shows the energy drift instead.
+NEGLIGIBLE_ERROR = 1e-12
+
+TABLE_COLUMNS = (
+    "integrator",
+    "dt [s]",
+    "steps",
+    "max rot err [rad]",
+    "max pos err [m]",
+    "energy drift",
+    "ns/body-step",
+    "order (nominal)",
+)
+# Width of the table when the output is not a terminal (a file, a pipe, CI logs): wide enough for
+# every column, instead of rich's 80-column default that would truncate them.
+REPORT_WIDTH = 132
+
+
+def study(
+    scene: Annotated[Path, typer.Argument(help="Scene YAML file.")],
+    integrator: Annotated[
+        list[str] | None,
+        typer.Option("--integrator", "-i", help="Integrator to study (repeat for several) \\[default: all]."),
+    ] = None,
+    dt: Annotated[
+        list[float] | None,
+        typer.Option("--dt", help="Step size \\[s] (repeat; ratios powers of 2) \\[default: scene dt x 2^(3..-3)]."),
+    ] = None,
+    duration: Annotated[
+        float | None, typer.Option("--duration", help="Simulated time \\[s] \\[default: the scene's].")
+    ] = None,
+    out: Annotated[Path, typer.Option("--out", help="Folder for the CSV, JSON and plots.")] = Path("outputs"),
+    quick: Annotated[
+        bool, typer.Option("--quick", help="Three steps, a short run, one timing repeat (for CI).")
+    ] = False,
+    rerun: Annotated[bool, typer.Option("--rerun", help="Also log the study to Rerun (not available yet).")] = False,
+) -> None:
+    """Run SCENE with every integrator at several step sizes; report error against cost and fitted orders."""
+    from rich.console import Console
+    from rich.measure import Measurement
+
+    from rbcli.api import load_scene
+    from rbcli.runner.study import default_dts, write_study_files
+    from rbcli.runner.study import study as run_study
+    from rbcli.scene.spec import SceneError
+
+    err = Console(stderr=True, highlight=False)
+    console = Console(highlight=False)
+    if not console.is_terminal:
+        console = Console(highlight=False, width=REPORT_WIDTH)
+    if not scene.is_file():
+        err.print(f"[red]error:[/] scene file not found: {scene}")
+        raise typer.Exit(EXIT_INVALID)
+    try:
+        spec = load_scene(scene)
+    except SceneError as exc:
+        for issue in exc.issues:
+            err.print(str(issue), markup=False)
+        raise typer.Exit(EXIT_INVALID) from None
+    dts = list(dt) if dt else None
+    repeats, tolerances = 3, None
+    if quick:
+        dts = dts or [spec.simulation.dt * 2.0**k for k in QUICK_DT_EXPONENTS]
+        duration = duration or min(spec.simulation.duration, QUICK_MAX_STEPS * max(dts))
+        repeats, tolerances = 1, QUICK_TOLERANCES
+    if rerun:
+        err.print(
+            "[yellow]note:[/] --rerun is not available yet: Rerun may only be imported by "
+            "record/rerun_sink.py, which has no study logger; the CSV, JSON and plots are written as usual"
+        )
+    try:
+        with _progress_bar(err) as progress:
+            result = run_study(
+                spec,
+                integrators=integrator or None,
+                dts=dts or default_dts(spec.simulation.dt),
+                tolerances=tolerances,
+                duration=duration,
+                repeats=repeats,
+                progress=progress,
+            )
+    except (KeyError, ValueError, RuntimeError) as exc:  # unknown integrator, bad steps, failed reference
+        err.print(f"error: {exc.args[0] if exc.args else exc}", markup=False)
+        raise typer.Exit(EXIT_INVALID) from None
+
+    table = render_table(result)
+    wanted = Measurement.get(console, console.options.update_width(REPORT_WIDTH), table).maximum
+    if wanted > console.width:  # never cut numbers: a narrow terminal wraps the lines instead
+        console = Console(highlight=False, width=wanted, force_terminal=console.is_terminal)
+    console.print(table)
+    csv_path, json_path = write_study_files(result, out)
+    png, svg = plot_work_precision(result, out / f"{result.scene_name}-study")
+    for path in (csv_path, json_path, png, svg):
+        err.print(f"wrote {path}", markup=False)
+
+
+@contextmanager
+def _progress_bar(console) -> Iterator[Callable[[float, float, str], None] | None]:  # noqa: ANN001
+    """A transient rich progress bar on stderr, yielding the study's progress callback (None when
+    stderr is not a terminal: no bar in logs and pipes)."""
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    if not console.is_terminal:
+        yield None
+        return
+    columns = (TextColumn("study"), BarColumn(), TextColumn("{task.fields[label]}"), TimeElapsedColumn())
+    with Progress(*columns, console=console, transient=True) as bar:
+        task = bar.add_task("study", total=1.0, label="")
+
+        def progress(done: float, total: float, label: str) -> None:
+            bar.update(task, completed=done, total=total, label=label)
+
+        yield progress
+
+
+# ---------------------------------------------------------------------------------------------------
+# table
+
+
+def format_error(value: float | None, status: str = "completed") -> str:
+    """An error or drift as the table shows it: 3 significant digits, "diverged" or "—"."""
+    if status != "completed":
+        return status
+    if value is None or not math.isfinite(value):
+        return "—"
+    return f"{value:.2e}"
+
+
+def format_order(fitted: float | None, nominal: int) -> str:
+    """Fitted order with the registry's in brackets, e.g. "4.02 (4)"; "— (4)" when not fitted."""
+    return f"{'—' if fitted is None else f'{fitted:.2f}'} ({nominal})"
+
+
+def table_rows(result: StudyResult) -> list[list[str]]:
+    """The table's cells, one row per run (TABLE_COLUMNS); adaptive runs show their tolerance."""
+    from rbcli.physics.integrators import get_integrator
+
+    rows = []
+    for run in result.runs:
+        name, order = (
+            run.integrator,
+            format_order(result.fitted_order(run.integrator), get_integrator(run.integrator).order),
+        )
+        if run.tolerance is not None:
+            name, order = f"{run.integrator} tol={run.tolerance:.0e}", "adaptive"
+        errors = (run.rotation_error_max, run.position_error_max, run.energy_drift)
+        rows.append(
+            [name, f"{run.dt:.4g}", str(run.steps), *(format_error(e, run.status) for e in errors),
+             f"{run.ns_per_body_step:.0f}", order]
+        )  # fmt: skip
+    return rows
+
+
+def render_table(result: StudyResult) -> Table:
+    """A rich table of the runs, grouped by integrator, captioned with the reference used."""
+    from rich import box
+    from rich.table import Table
+    from rich.text import Text
+
+    ref = result.reference
+    caption = f"reference: {ref.description}"
+    if ref.kind == "numerical":
+        caption += (
+            f"; reference error estimate: rotation {format_error(ref.rotation_error_estimate)} rad, "
+            f"position {format_error(ref.position_error_estimate)} m"
+        )
+    caption += (
+        f". Errors: max over bodies and {result.frame_count} recorded times over {result.duration:g} s; "
+        f"order fitted on the {result.primary_error} error."
+    )
+    caption += "".join(f"\nnote: {note}" for note in result.notes)
+    title = Text(f"Work-precision study: {result.scene_name}")
+    # a compact box, units on a second header line: narrow enough for most terminals
+    table = Table(title=title, caption=Text(caption), caption_justify="left", box=box.SIMPLE_HEAD, pad_edge=False)
+    for i, column in enumerate(TABLE_COLUMNS):  # Text: "[s]" would otherwise be read as rich markup
+        header = Text(column.replace("max ", "").replace(" [", "\n[").replace(" (", "\n(").replace(" drift", "\ndrift"))
+        table.add_column(header, justify="left" if i == 0 else "right", no_wrap=True)
+    runs = result.runs
+    for i, cells in enumerate(table_rows(result)):
+        last_of_group = i + 1 == len(runs) or runs[i + 1].integrator != runs[i].integrator
+        table.add_row(*cells, end_section=last_of_group)
+    return table
+
+
+# ---------------------------------------------------------------------------------------------------
+# plot
+
+
+def _finite(value: float | None) -> bool:
+    return value is not None and math.isfinite(value)
+
+
+def integrator_style(name: str, index: int) -> dict:
+    """Line style of an integrator in every figure: `exact` black stars, the `euler-matrix` baseline
+    grey dashed squares, the others tab10 colours by their index in the study."""
+    from rbcli.runner.study import BASELINE_INTEGRATOR, EXACT_INTEGRATOR
+
+    if name == EXACT_INTEGRATOR:
+        return dict(color="black", marker="*", markersize=9, linewidth=2.5, linestyle="-")
+    if name == BASELINE_INTEGRATOR:
+        return dict(color="0.35", marker="s", markersize=4, linewidth=1.5, linestyle="--")
+    return dict(color=f"C{index % 10}", marker="o", markersize=4, linewidth=1.5, linestyle="-")
+
+
+def _panels(result: StudyResult) -> list[tuple[str, str]]:
+    """(StudyRun field, axis label) of the two panels: the primary error first; the second is the
+    other error, or the energy drift when that error is round-off for every run (e.g. position in a
+    torque-free scene, where the centre of mass moves exactly in every method)."""
+    done = [r for r in result.runs if r.status == "completed"]
+    rotation = ("rotation_error_max", "max rotation error [rad]")
+    position = ("position_error_max", "max position error [m]")
+    energy = ("energy_drift", "energy drift max |E(t) - E(0)| / |E(0)|")
+    first, second = (rotation, position) if result.primary_error == "rotation" else (position, rotation)
+    if max((getattr(r, second[0]) for r in done), default=0.0) <= NEGLIGIBLE_ERROR and "energy" in result.conserved:
+        second = energy
+    return [first, second]
+
+
+def plot_work_precision(result: StudyResult, stem: Path) -> tuple[Path, Path]:
+    """Error against cost per simulated second, log-log, one line per integrator; writes stem.png and
+    stem.svg (PLOT_SIZE_INCHES at PLOT_DPI). `exact` and the `euler-matrix` baseline are marked."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from rbcli.runner.study import BASELINE_INTEGRATOR
+
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    fig, axes = plt.subplots(1, 2, figsize=PLOT_SIZE_INCHES, dpi=PLOT_DPI)
+    names = list(dict.fromkeys(r.integrator for r in result.runs))
+    for ax, (key, label) in zip(axes, _panels(result), strict=True):
+        for i, name in enumerate(names):
+            for adaptive in (False, True):
+                runs = [r for r in result.runs if r.integrator == name and (r.tolerance is not None) == adaptive]
+                runs = [r for r in runs if r.status == "completed" and _finite(getattr(r, key))]
+                if not runs:
+                    continue
+                fitted = None if adaptive else result.fitted_order(name)
+                text = name + ("  adaptive (tolerance)" if adaptive else "")
+                text += "" if fitted is None else f"  (p≈{fitted:.2f})"
+                text += "  tutorial baseline" if name == BASELINE_INTEGRATOR else ""
+                style = integrator_style(name, i) | (dict(linestyle=":", marker="D") if adaptive else {})
+                cost = [r.cost_per_sim_second for r in runs]
+                error = [max(getattr(r, key), PLOT_ERROR_FLOOR) for r in runs]
+                ax.loglog(cost, error, label=text, **style)
+        ref = result.reference
+        estimate = {"rotation_error_max": ref.rotation_error_estimate}
+        estimate["position_error_max"] = ref.position_error_estimate
+        if ref.kind == "numerical" and estimate.get(key):
+            ax.axhline(estimate[key], color="0.5", linestyle=":", linewidth=1, label="reference error estimate")
+        ax.set_xlabel("cost: wall seconds per simulated second")
+        ax.set_ylabel(label)
+        ax.grid(True, which="major", alpha=0.3)
+    axes[0].legend(fontsize=8, loc="best")
+    fig.suptitle(
+        f"{result.scene_name}: error against cost ({result.reference.kind} reference, {result.duration:g} s, "
+        f"{result.body_count} {'body' if result.body_count == 1 else 'bodies'})",
+        fontsize=11,
+    )
+    fig.tight_layout()
+    png, svg = stem.with_suffix(".png"), stem.with_suffix(".svg")
+    fig.savefig(png, dpi=PLOT_DPI)
+    fig.savefig(svg)
+    plt.close(fig)
+    return png, svg

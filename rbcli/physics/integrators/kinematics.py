@@ -1,0 +1,135 @@
+"""Per-body rigid-body kinematics shared by the integrator kernels: compiled scalar functions plus
+their numpy twins for the reference steps.
+
+Conventions (state.py): q = (w, x, y, z) unit quaternion, world-from-PRINCIPAL frame, so R(q) maps
+body (principal) components to world ones; L world angular momentum; body_inertia_inv = 1 / I_k.
+  body momentum        m = R^T L                        (principal frame)
+  angular velocity     omega_body = m / I,  omega = R omega_body (world)
+  quaternion rate      dq/dt = 1/2 (0, omega) * q = 1/2 q * (0, omega_body)
+  axis turn            the body turns by theta about its own principal axis k:
+                       q <- q * (cos(theta/2), sin(theta/2) e_k),  m <- Rot_k(-theta) m,  L unchanged.
+The axis turn with theta = h m_k / I_k is the exact flow, over a time h, of T_k = m_k^2 / (2 I_k),
+one of the three pieces of the free body's kinetic energy (McLachlan 1993; Reich 1994; Dullweber,
+Leimkuhler & McLachlan 1997): m_k is constant along it, so the turn is a plane rotation of
+(m_i, m_j), (i, j, k) cyclic. The scalar functions take and return plain floats so numba keeps
+everything in registers (no per-body arrays).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from rbcli.physics.rotation import quat_multiply, quat_rotate, quat_rotate_inverse
+
+
+@numba.njit(cache=True)
+def rotate_inverse(w, x, y, z, vx, vy, vz):  # noqa: ANN001, ANN201 - numba scalars
+    """R(q)^T v for a unit quaternion q = (w, x, y, z): v - w t + u x t with t = 2 u x v, u = (x, y, z)."""
+    tx = 2.0 * (y * vz - z * vy)
+    ty = 2.0 * (z * vx - x * vz)
+    tz = 2.0 * (x * vy - y * vx)
+    return (
+        vx - w * tx + (y * tz - z * ty),
+        vy - w * ty + (z * tx - x * tz),
+        vz - w * tz + (x * ty - y * tx),
+    )
+
+
+@numba.njit(cache=True)
+def rotate(w, x, y, z, vx, vy, vz):  # noqa: ANN001, ANN201
+    """R(q) v for a unit quaternion q = (w, x, y, z): v + w t + u x t with t = 2 u x v (Rodrigues)."""
+    tx = 2.0 * (y * vz - z * vy)
+    ty = 2.0 * (z * vx - x * vz)
+    tz = 2.0 * (x * vy - y * vx)
+    return (
+        vx + w * tx + (y * tz - z * ty),
+        vy + w * ty + (z * tx - x * tz),
+        vz + w * tz + (x * ty - y * tx),
+    )
+
+
+@numba.njit(cache=True)
+def axis_order(i0, i1, i2):  # noqa: ANN001, ANN201
+    """Principal axis indices (a, b, c) sorted by moment: I_a <= I_b <= I_c (ties keep index order)."""
+    if i0 <= i1:
+        if i1 <= i2:
+            return 0, 1, 2
+        if i0 <= i2:
+            return 0, 2, 1
+        return 2, 0, 1
+    if i0 <= i2:
+        return 1, 0, 2
+    if i1 <= i2:
+        return 1, 2, 0
+    return 2, 1, 0
+
+
+@numba.njit(cache=True)
+def half_turn(k, h, m0, m1, m2, inv0, inv1, inv2):  # noqa: ANN001, ANN201
+    """(cos, sin) of half the angle theta = h m_k / I_k that the flow of T_k turns the body in time h."""
+    if k == 0:
+        half = 0.5 * h * m0 * inv0
+    elif k == 1:
+        half = 0.5 * h * m1 * inv1
+    else:
+        half = 0.5 * h * m2 * inv2
+    return math.cos(half), math.sin(half)
+
+
+@numba.njit(cache=True)
+def turn(k, c, s, m0, m1, m2, w, x, y, z):  # noqa: ANN001, ANN201
+    """Turn the body about its principal axis k by theta (c = cos(theta/2), s = sin(theta/2)).
+
+    Returns (m0, m1, m2, w, x, y, z): m <- Rot_k(-theta) m (m_i' = m_i cos + m_j sin,
+    m_j' = m_j cos - m_i sin, (i, j, k) cyclic) and q <- q * (c, s e_k).
+    """
+    ct = c * c - s * s  # cos(theta), sin(theta) from the half angle: no second sin/cos
+    st = 2.0 * s * c
+    if k == 0:
+        return (m0, m1 * ct + m2 * st, m2 * ct - m1 * st,
+                w * c - x * s, x * c + w * s, y * c + z * s, z * c - y * s)  # fmt: skip
+    if k == 1:
+        return (m0 * ct - m2 * st, m1, m2 * ct + m0 * st,
+                w * c - y * s, x * c - z * s, y * c + w * s, z * c + x * s)  # fmt: skip
+    return (m0 * ct + m1 * st, m1 * ct - m0 * st, m2,
+            w * c - z * s, x * c + y * s, y * c - x * s, z * c + w * s)  # fmt: skip
+
+
+# ---- numpy twins (vectorised over bodies) for the reference steps -------------------------------
+
+
+def axis_order_numpy(inertia: np.ndarray) -> np.ndarray:
+    """(body_count, 3) int: per body the axes (a, b, c) with I_a <= I_b <= I_c (stable)."""
+    return np.argsort(inertia, axis=-1, kind="stable")
+
+
+def turn_numpy(
+    axis: np.ndarray, h: float, m: np.ndarray, q: np.ndarray, inertia_inv: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The flow of T_k over time h for each body's axis k = axis[b]; returns new (m, q)."""
+    rows = np.arange(m.shape[0])
+    half = 0.5 * h * m[rows, axis] * inertia_inv[rows, axis]
+    c, s = np.cos(half), np.sin(half)
+    turn_q = np.zeros_like(q)
+    turn_q[:, 0] = c
+    turn_q[rows, 1 + axis] = s
+    i, j = (axis + 1) % 3, (axis + 2) % 3
+    ct, st = c * c - s * s, 2.0 * s * c
+    mi, mj = m[rows, i], m[rows, j]
+    m = m.copy()
+    m[rows, i] = mi * ct + mj * st
+    m[rows, j] = mj * ct - mi * st
+    return m, quat_multiply(q, turn_q)
+
+
+def body_momentum_numpy(q: np.ndarray, L: np.ndarray) -> np.ndarray:
+    """m = R(q)^T L, (body_count, 3)."""
+    return quat_rotate_inverse(q, L)
+
+
+def angular_velocity_numpy(q: np.ndarray, L: np.ndarray, inertia_inv: np.ndarray) -> np.ndarray:
+    """World omega = R diag(1/I) R^T L, (body_count, 3)."""
+    return quat_rotate(q, inertia_inv * quat_rotate_inverse(q, L))
