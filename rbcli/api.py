@@ -39,10 +39,25 @@ def prepare(
     duration: float | None = None,
     integrator: str | None = None,
     record_every: int | None = None,
+    tolerance: float | None = None,
 ) -> CompiledScene:
-    """Load (when given a path) and compile a scene with overrides."""
+    """Load (when given a path) and compile a scene with overrides.
+
+    tolerance: run adaptively (an adaptive integrator such as dopri5) with this error budget; dt is then
+    the spacing of the output times, not the step.
+    """
     spec = scene if isinstance(scene, SceneSpec) else load_scene(scene)
-    return compile_scene(spec, dt=dt, duration=duration, integrator=integrator, record_every=record_every)
+    compiled = compile_scene(
+        spec, dt=dt, duration=duration, integrator=integrator, record_every=record_every, tolerance=tolerance
+    )
+    from rbcli.physics.integrators import get_integrator
+
+    settings = compiled.settings
+    if settings.tolerance is not None and not get_integrator(settings.integrator).adaptive:
+        raise ValueError(
+            f"a tolerance needs an adaptive integrator; {settings.integrator!r} is fixed-step (use dopri5)"
+        )
+    return compiled
 
 
 def simulate(
@@ -52,6 +67,7 @@ def simulate(
     duration: float | None = None,
     integrator: str | None = None,
     record_every: int | None = None,
+    tolerance: float | None = None,
     sinks: Sequence[Sink] = (),
     on_diverge: str = "raise",
 ) -> Trajectory:
@@ -61,7 +77,9 @@ def simulate(
     """
     from rbcli.runner.loop import run
 
-    compiled = prepare(scene, dt=dt, duration=duration, integrator=integrator, record_every=record_every)
+    compiled = prepare(
+        scene, dt=dt, duration=duration, integrator=integrator, record_every=record_every, tolerance=tolerance
+    )
     memory = SinkMemory()
     summary = run(compiled, [memory, *sinks])
     trajectory = memory.trajectory()

@@ -26,6 +26,9 @@ def run(
     duration: float | None = typer.Option(None, "--duration", help="Override the duration [s]."),
     integrator: str | None = typer.Option(None, "--integrator", help="Override the integrator (see docs)."),
     record_every: int | None = typer.Option(None, "--record-every", min=1, help="Record every N-th step."),
+    tolerance: float | None = typer.Option(
+        None, "--tolerance", min=0.0, help="Adaptive stepping with this error budget (dopri5); dt = output spacing."
+    ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar or summary."),
 ) -> None:
     """Integrate SCENE and record it; exits 1 on an invalid scene (writing nothing), 3 on divergence."""
@@ -41,7 +44,9 @@ def run(
         err.print(f"[red]error:[/] scene file not found: {scene}")
         raise typer.Exit(EXIT_INVALID)
     try:
-        compiled = prepare(scene, dt=dt, duration=duration, integrator=integrator, record_every=record_every)
+        compiled = prepare(
+            scene, dt=dt, duration=duration, integrator=integrator, record_every=record_every, tolerance=tolerance
+        )
         get_integrator(compiled.settings.integrator)
         target = output or Path(compiled.spec.simulation.output or Path("outputs") / f"{compiled.spec.name}.rrd")
         output_format(target)
@@ -61,7 +66,12 @@ def run(
         err.print(
             f"{summary.status}: {summary.steps} steps x {compiled.model.body_count} bodies "
             f"({settings.integrator}, dt = {settings.dt:g} s) in {wall:.2f} s "
-            f"({rate:.3g} body-steps/s); {summary.frames} frames -> {target}",
+            f"({rate:.3g} body-steps/s); {summary.frames} frames -> {target}"
+            + (
+                f"; adaptive: {summary.steps_accepted} steps accepted, {summary.steps_rejected} rejected"
+                if summary.steps_accepted is not None
+                else ""
+            ),
             markup=False,
         )
     if summary.status == "diverged":

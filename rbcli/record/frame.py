@@ -75,6 +75,8 @@ class RunSummary:
     frames: int
     t_end: float
     message: str = ""
+    steps_accepted: int | None = None  # adaptive runs: error-controlled steps taken ...
+    steps_rejected: int | None = None  # ... and attempts rejected (None for fixed-step runs)
 
 
 class Sink(Protocol):

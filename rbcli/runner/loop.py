@@ -79,15 +79,48 @@ def warm_up(compiled: CompiledScene) -> None:
     kernel = get_integrator(compiled.settings.integrator).load()
     state = compiled.initial_state.copy()
     n = compiled.model.body_count
-    kernel.run_chunk(
-        compiled.model.kernel(), compiled.forces, compiled.settings.dt, 0, 0, 1,
-        state.x, state.q, state.P, state.L, np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, kernel.SCRATCH_WIDTH)),
-        empty_buffers(1, n), 0,
-    )  # fmt: skip
+    _Stepper(compiled, kernel).advance(state, 0, 0, np.zeros((n, 3)), np.zeros((n, 3)), empty_buffers(1, n), 0)
+
+
+class _Stepper:
+    """Advances the state by chunks of grid steps: the integrator's fixed-step `run_chunk`, or the adaptive
+    chunk when the run has a tolerance (then `counters` holds accepted / rejected step counts)."""
+
+    def __init__(self, compiled: CompiledScene, kernel) -> None:  # noqa: ANN001
+        self.settings = compiled.settings
+        self.kernel = kernel
+        self.kmodel = compiled.model.kernel()
+        self.forces = compiled.forces
+        n = compiled.model.body_count
+        self.counters: np.ndarray | None = None
+        if self.settings.tolerance is None:
+            self.scratch = np.zeros((n, kernel.SCRATCH_WIDTH))
+        else:
+            from rbcli.physics.adaptive import adaptive_work
+
+            self.work = adaptive_work(n)
+            self.counters = self.work["counters"]
+
+    def advance(self, state, step0: int, n_steps: int, F, tau, frames, filled: int) -> tuple[int, int, int]:  # noqa: ANN001
+        """(grid steps done, frames filled, status) after at most n_steps grid steps from step0."""
+        st = self.settings
+        if self.counters is None:
+            return self.kernel.run_chunk(
+                self.kmodel, self.forces, st.dt, step0, n_steps, st.record_every,
+                state.x, state.q, state.P, state.L, F, tau, self.scratch, frames, filled,
+            )  # fmt: skip
+        from rbcli.physics.adaptive import run_adaptive_chunk
+
+        w = self.work
+        return run_adaptive_chunk(
+            self.kmodel, self.forces, st.dt, step0, n_steps, st.record_every, st.tolerance, st.steps * st.dt,
+            state.x, state.q, state.P, state.L, F, tau, w["work"], w["control"], w["counters"], frames, filled,
+        )  # fmt: skip
 
 
 def run(compiled: CompiledScene, sinks: Sequence[Sink], *, progress: ProgressCallback | None = None) -> RunSummary:
     """Integrate the compiled scene, streaming frames to every sink; always closes the sinks."""
+    from rbcli.physics.adaptive import STATUS_STEP_TOO_SMALL
     from rbcli.physics.forces.impulse import apply_impulses, impulse_step_indices
     from rbcli.physics.step import STATUS_DIVERGED, empty_buffers
 
@@ -98,8 +131,8 @@ def run(compiled: CompiledScene, sinks: Sequence[Sink], *, progress: ProgressCal
     capacity = int(np.clip(BLOCK_BYTES // max(1, 13 * 8 * n), 1, MAX_BLOCK_FRAMES))
     buf = empty_buffers(capacity, n)
     F, tau = np.zeros((n, 3)), np.zeros((n, 3))
-    scratch = np.zeros((n, kernel.SCRATCH_WIDTH))
-    kmodel = compiled.model.kernel()
+    stepper = _Stepper(compiled, kernel)
+    kmodel = stepper.kmodel
     every, total = settings.record_every, settings.steps
     # impulses change P and L exactly between steps: chunks end at the steps that carry one
     impulse_at = impulse_step_indices(compiled.forces, settings.dt)
@@ -129,6 +162,9 @@ def run(compiled: CompiledScene, sinks: Sequence[Sink], *, progress: ProgressCal
             while state.step < total:
                 started = time.perf_counter()
                 todo = min(chunk_steps, total - state.step)
+                if stepper.counters is not None and state.step + todo < total:
+                    # adaptive: end chunks on recorded grid points, so the steps do not depend on chunking
+                    todo = min(max(every, todo - todo % every), total - state.step)
                 if impulse_at.size:
                     if state.step in impulse_at:
                         t0 = state.step * settings.dt
@@ -138,11 +174,7 @@ def run(compiled: CompiledScene, sinks: Sequence[Sink], *, progress: ProgressCal
                     later = impulse_at[impulse_at > state.step]
                     if later.size:
                         todo = min(todo, int(later[0]) - state.step)
-                done, frames, code = kernel.run_chunk(
-                    kmodel, compiled.forces, settings.dt, state.step, todo, every,
-                    state.x, state.q, state.P, state.L, F, tau, scratch,
-                    buf, frames,
-                )  # fmt: skip
+                done, frames, code = stepper.advance(state, state.step, todo, F, tau, buf, frames)
                 state.step += int(done)
                 elapsed = time.perf_counter() - started
                 if code == STATUS_DIVERGED:
@@ -151,6 +183,14 @@ def run(compiled: CompiledScene, sinks: Sequence[Sink], *, progress: ProgressCal
                         f"diverged at step {state.step} (t = {state.step * settings.dt:.6g} s): the state became "
                         f"non-finite or exceeded 1e100 with integrator {settings.integrator!r} at dt = "
                         f"{settings.dt:g} s; try a smaller dt or a more stable integrator"
+                    )
+                    break
+                if code == STATUS_STEP_TOO_SMALL:
+                    status = "diverged"
+                    message = (
+                        f"tolerance {settings.tolerance:g} not reachable at step {state.step} "
+                        f"(t = {state.step * settings.dt:.6g} s): the adaptive step fell below 1e-12 t; "
+                        "loosen the tolerance or check the scene for a singularity"
                     )
                     break
                 if frames == capacity:
@@ -184,7 +224,12 @@ def run(compiled: CompiledScene, sinks: Sequence[Sink], *, progress: ProgressCal
             except Exception:  # noqa: BLE001 - the original error is the one to report
                 pass
         raise
-    summary = RunSummary(status, state.step, recorded, state.step * settings.dt, message)
+    counts = stepper.counters
+    summary = RunSummary(
+        status, state.step, recorded, state.step * settings.dt, message,
+        steps_accepted=None if counts is None else int(counts[0]),
+        steps_rejected=None if counts is None else int(counts[1]),
+    )  # fmt: skip
     for sink in sinks:
         sink.close(summary)
     return summary

@@ -27,6 +27,7 @@ class RunSettings:
     record_every: int
     streams: tuple[str, ...]
     seed: int = 0
+    tolerance: float | None = None  # adaptive: error budget of the run; dt is then the grid of output times
 
     @property
     def duration(self) -> float:
@@ -61,6 +62,7 @@ def compile_scene(
     duration: float | None = None,
     integrator: str | None = None,
     record_every: int | None = None,
+    tolerance: float | None = None,
 ) -> CompiledScene:
     """Build model, forces, initial state and settings; keyword arguments override the scene."""
     sim = spec.simulation
@@ -82,6 +84,7 @@ def compile_scene(
         record_every=int(record_every or sim.record.every),
         streams=tuple(sim.record.streams),
         seed=sim.seed,
+        tolerance=tolerance if tolerance is not None else sim.tolerance,
     )
     if settings.dt <= 0 or not math.isfinite(settings.dt):
         raise SceneError([SceneIssue(None, f"dt must be a positive number of seconds, got {settings.dt}")])
