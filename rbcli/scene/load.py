@@ -165,12 +165,14 @@ def _analyse(
     warnings = issues.sorted()
     # the compile step finds what only the assembled scene shows (force terms naming unknown bodies or
     # particles, singular inertia): run it here so `validate` reports it, still without simulating
+    from rbcli.scene.checks import stability_warnings
     from rbcli.scene.compile import compile_scene
 
     try:
-        compile_scene(spec)
+        compiled = compile_scene(spec)
     except SceneError as exc:
         return None, sorted([*warnings, *exc.issues], key=_issue_order)
+    warnings = sorted([*warnings, *stability_warnings(compiled)], key=_issue_order)
     return (replace(spec, warnings=tuple(warnings)) if warnings else spec), warnings
 
 

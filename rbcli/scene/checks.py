@@ -1,0 +1,58 @@
+"""Physics sanity checks on a compiled scene that are warnings, not errors: a dt too large for a spring.
+
+A spring of stiffness k between a body point and the world (or another body) is an oscillator of
+angular frequency omega = sqrt(k / m_eff), with 1/m_eff = sum over its body ends of 1/M + |r|^2 / I_min
+(r: the point's offset from the centre of mass; I_min: the smallest principal moment — the stiffest
+way the point can move, a conservative bound). Explicit and splitting integrators (leapfrog, split2)
+are stable only for omega dt < 2 (Hairer, Lubich & Wanner, Geometric Numerical Integration, I.5.4 for
+Stormer-Verlet), and resolve the motion only well below it (~10 steps per period).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rbcli.scene.compile import CompiledScene
+from rbcli.scene.force_specs import BodyPoint, ForceSpring
+from rbcli.scene.spec import SceneIssue
+
+
+def _inverse_effective_mass(compiled: CompiledScene, end: BodyPoint) -> float:
+    spec, model = compiled.spec, compiled.model
+    b = model.body_names.index(end.body)
+    body = spec.bodies[b]
+    start = int(model.body_particle_start[b])
+    centre = body.particle_position[0] - model.particle_offset_user[start]  # centre of mass, user frame
+    if end.particle is not None:
+        point = body.particle_position[end.particle]
+    elif end.point is not None:
+        point = np.asarray(end.point, dtype=np.float64)
+    else:
+        point = centre
+    r2 = float(np.sum((point - centre) ** 2))
+    return 1.0 / model.body_mass[b] + r2 / float(model.body_inertia[b].min())
+
+
+def stability_warnings(compiled: CompiledScene) -> list[SceneIssue]:
+    """One warning per spring whose oscillation the scene's dt cannot follow stably (omega dt >= 2)."""
+    dt = compiled.settings.dt
+    issues = []
+    for force in compiled.spec.forces:
+        if not isinstance(force, ForceSpring) or force.stiffness <= 0.0:
+            continue
+        inv_mass = _inverse_effective_mass(compiled, force.end_a)
+        if force.end_b is not None:
+            inv_mass += _inverse_effective_mass(compiled, force.end_b)
+        omega = float(np.sqrt(force.stiffness * inv_mass))
+        limit = 2.0 / omega
+        if dt >= limit:
+            issues.append(
+                SceneIssue(
+                    force.location,
+                    f"dt = {dt:g} s is above the stability limit 2/omega = {limit:.3g} s of this spring "
+                    f"(omega = sqrt(k / m_eff) = {omega:.3g} rad/s): explicit and splitting integrators blow up",
+                    f"dt below {limit:.3g} s, and about {2 * np.pi / omega / 10:.3g} s to resolve its period",
+                    severity="warning",
+                )
+            )
+    return issues
