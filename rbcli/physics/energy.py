@@ -1,7 +1,8 @@
 """Invariants of the motion: energies and momenta, vectorised over frames and bodies.
 
 T = sum_b (|P_b|^2 / (2 M_b) + L_b . omega_b / 2);  V from the conservative force terms;
-P_total = sum_b P_b;  L_origin = sum_b (x_b x P_b + L_b) (about the world origin).
+P_total = sum_b P_b;  L_origin = sum_b (x_b x P_b + L_b) (about the world origin);
+quaternion_norm_defect = max_b | |q_b| - 1 | of the state (orthonormality of R = R(q) follows from it).
 For a free body these are exact constants of motion; their drift measures an integrator.
 """
 
@@ -24,6 +25,7 @@ INVARIANT_NAMES = (
     "angular_momentum_y",
     "angular_momentum_z",
     "angular_momentum_norm",
+    "quaternion_norm_defect",
 )
 
 
@@ -67,4 +69,5 @@ def invariants_from_kinetic(
         "angular_momentum_y": ang[:, 1],
         "angular_momentum_z": ang[:, 2],
         "angular_momentum_norm": np.linalg.norm(ang, axis=-1),
+        "quaternion_norm_defect": np.abs(np.linalg.norm(q, axis=-1) - 1.0).max(axis=-1),
     }
