@@ -7,6 +7,7 @@ in), so outputs read exactly as the scene was written. Convert to (x, y, z, w) o
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -38,6 +39,28 @@ class RunHeader:
     invariant_names: tuple[str, ...] = ()
     units: str = "SI (m, kg, s, rad)"
     quaternion_order: str = "wxyz"
+
+    def parameters(self) -> dict[str, str]:
+        """Run parameters as strings for a file's metadata (floats as repr and lists as JSON, so they read
+        back exactly); the sinks add what is specific to their format."""
+        return {
+            "rbsim_version": self.rbsim_version,
+            "scene_name": self.scene_name,
+            "scene_path": self.scene_path or "",
+            "scene_sha256": self.scene_sha256,
+            "integrator": self.integrator,
+            "dt": repr(float(self.dt)),
+            "duration": repr(float(self.duration)),
+            "record_every": str(int(self.record_every)),
+            "seed": str(int(self.seed)),
+            "units": self.units,
+            "quaternion_order": self.quaternion_order,
+            "streams": json.dumps(list(self.streams)),
+            "body_count": str(len(self.body_names)),
+            "body_names": json.dumps(list(self.body_names)),
+            "body_mass": json.dumps([float(m) for m in np.asarray(self.body_mass, dtype=np.float64)]),
+            "invariant_names": json.dumps(list(self.invariant_names)),
+        }
 
 
 @dataclass

@@ -281,26 +281,8 @@ def _point_cloud(points: np.ndarray, frame_id: str, ns: int) -> PointCloud:
 
 
 def run_metadata(header: RunHeader) -> dict[str, str]:
-    """The `rbsim` metadata record: run parameters as strings (floats as repr, so they read back exactly)."""
-    return {
-        "format_version": FORMAT_VERSION,
-        "rbsim_version": header.rbsim_version,
-        "scene_name": header.scene_name,
-        "scene_path": header.scene_path or "",
-        "scene_sha256": header.scene_sha256,
-        "integrator": header.integrator,
-        "dt": repr(float(header.dt)),
-        "duration": repr(float(header.duration)),
-        "record_every": str(int(header.record_every)),
-        "seed": str(int(header.seed)),
-        "units": header.units,
-        "quaternion_order": header.quaternion_order,
-        "streams": json.dumps(list(header.streams)),
-        "body_count": str(len(header.body_names)),
-        "body_names": json.dumps(list(header.body_names)),
-        "body_mass": json.dumps([float(m) for m in np.asarray(header.body_mass, dtype=np.float64)]),
-        "invariant_names": json.dumps(list(header.invariant_names)),
-    }
+    """The `rbsim` metadata record: the run parameters and the MCAP layout's format version."""
+    return {"format_version": FORMAT_VERSION, **header.parameters()}
 
 
 class SinkMcap:

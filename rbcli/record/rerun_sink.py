@@ -23,7 +23,6 @@ This is the only module that imports rerun; the reader for the files it writes i
 
 from __future__ import annotations
 
-import json
 import uuid
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -92,24 +91,8 @@ def _markdown_table(rows: dict[str, str]) -> str:
 
 
 def run_properties(header: RunHeader) -> dict[str, str]:
-    """Run parameters as strings (floats as repr and lists as JSON, so they read back exactly)."""
-    return {
-        "rbsim_version": header.rbsim_version,
-        "scene_name": header.scene_name,
-        "scene_path": header.scene_path or "",
-        "scene_sha256": header.scene_sha256,
-        "integrator": header.integrator,
-        "dt": repr(float(header.dt)),
-        "duration": repr(float(header.duration)),
-        "record_every": str(int(header.record_every)),
-        "seed": str(int(header.seed)),
-        "units": header.units,
-        "quaternion_order": "xyzw in Rerun (rbsim arrays are wxyz)",
-        "body_count": str(len(header.body_names)),
-        "body_names": json.dumps(list(header.body_names)),
-        "invariant_names": json.dumps(list(header.invariant_names)),
-        "streams": json.dumps(list(header.streams)),
-    }
+    """Run parameters as recording properties; Rerun stores quaternions as xyzw."""
+    return {**header.parameters(), "quaternion_order": "xyzw in Rerun (rbsim arrays are wxyz)"}
 
 
 def default_blueprint(invariant_names: Sequence[str]) -> rrb.Blueprint:
