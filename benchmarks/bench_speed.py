@@ -25,7 +25,8 @@ then repeated; runs of one scene size are interleaved across engines so a change
 them alike; the best repeat is reported and the median/best spread printed (a shared machine is noisy).
 MuJoCo's compiler is quadratic in the body count (~40 s for 10,000 bodies), so compiled models of 1,000
 or more bodies are cached as .mjb under ~/.cache/rbsim-bench (keyed by the XML and MuJoCo's version).
-`--write-docs` writes docs/performance.md from this run.
+`--write-docs` replaces the results block of docs/performance.md (between its two markers) with this
+run's report; the prose around it (why the time goes where it does, suggestions) is written by hand.
 """
 
 from __future__ import annotations
@@ -499,132 +500,96 @@ def startup_times(out: Path, repeats: int = 5) -> dict[str, float]:
 # ---- report -----------------------------------------------------------------------------------------------
 
 
-def cell(rate: float, reference: float | None, timing: Timing | None = None) -> str:
-    if timing is not None and timing.note:
+class Report:
+    """Lines printed as they come and kept for docs/performance.md (Markdown)."""
+
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+
+    def say(self, text: str = "") -> None:
+        print(text, flush=True)
+        self.lines.append(text)
+
+    def table(self, title: str, head: list[str], rows: list[list[str]]) -> None:
+        self.say(f"### {title}")
+        self.say()
+        self.say("| " + " | ".join(head) + " |")
+        self.say("|---|" + "---:|" * (len(head) - 1))
+        for row in rows:
+            self.say("| " + " | ".join(row) + " |")
+        self.say()
+
+
+def cell(timing: Timing, bodies: int, reference: float = float("nan")) -> str:
+    """Body-steps/s with the ratio to the reference rate, or why there is no number."""
+    if timing.note:
         return "failed"
-    if not np.isfinite(rate):
-        return "n/a"
-    ratio = f" ({rate / reference:.2g}x)" if reference and np.isfinite(reference) else ""
-    return f"{rate:.2e}{ratio}"
+    rate = timing.rate(bodies)
+    return f"{rate:.2e}" + (f" ({rate / reference:.2g}x)" if np.isfinite(reference) else "")
 
 
 def ok(passed: bool) -> str:
     return "met" if passed else "**missed**"
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="fewer repeats, shorter runs (under ~60 s)")
-    parser.add_argument("--write-docs", action="store_true", help="write docs/performance.md from this run")
-    parser.add_argument("--integrators", default="", help="comma list [default: quick: " + ",".join(MAIN_INTEGRATORS)
-                        + "; full: every registered integrator]")  # fmt: skip
-    parser.add_argument("--no-pybullet", action="store_true")
-    args = parser.parse_args()
+def mujoco_reference(timings: dict[str, Timing], bodies: int) -> tuple[float, str]:
+    """The faster MuJoCo timing: (body-steps/s, its label); nan when MuJoCo was not run."""
+    runs = {k: v for k, v in timings.items() if k.startswith("MuJoCo") and not v.note}
+    if not runs:
+        return float("nan"), "n/a"
+    label = min(runs, key=lambda k: runs[k].best)
+    return runs[label].rate(bodies), label
 
-    repeats, budget = (3, 0.15) if args.quick else (7, 1.0)
-    every = [n for n in INTEGRATORS if hasattr(INTEGRATORS[n].load(), "run_chunk")]
-    names = [n for n in args.integrators.split(",") if n] or (list(MAIN_INTEGRATORS) if args.quick else every)
-    info = machine()
-    lines: list[str] = []
 
-    def say(text: str = "") -> None:
-        print(text, flush=True)
-        lines.append(text)
-
-    say(f"- date: {info['date']}; mode: {'--quick' if args.quick else 'full'}")
-    say(f"- machine: {info['cpu']}; {info['load']} at start")
-    say(f"- {info['versions']}")
-    say(f"- timing: best of {repeats} interleaved repeats, {STEPS} steps (fewer where one run would pass "
-        f"{budget:g} s, listed below), dt = {DT:g} s, after a warm-up run")  # fmt: skip
-    try:
-        import mujoco  # noqa: F401
-
-        have_mujoco = True
-    except ImportError:
-        have_mujoco = False
-        say("- **MuJoCo is not installed** (`pip install -e .[bench]`): its columns and ratios are left out")
-    try:
-        import pybullet  # noqa: F401
-
-        have_pybullet = not args.no_pybullet
-    except ImportError:
-        have_pybullet = False
-        say("- PyBullet is not installed (optional, `pip install pybullet`): its row is left out")
-    say("- contact: the sphere-pile benchmark against MuJoCo waits for the collisions issue (no contact in rbsim yet)")
-    say()
-
-    # ---- free bodies -------------------------------------------------------------------------------------
+def free_body_section(rep: Report, names: list[str], repeats: int, budget: float, engines: set[str]) -> dict:
+    """Free bodies at every size: measure, print the table, the notes and the cost model; returns the
+    timings by size and the facts the reading needs."""
     results: dict[int, dict[str, Timing]] = {}
-    notes: list[str] = []
-    compile_seconds: dict[int, float] = {}
     scenes: dict[int, CompiledScene] = {}
+    notes, compile_ms = [], {}
     for n in SIZES:
-        print(f"free bodies N = {n} ...", flush=True)
-        bodies = free_bodies(n)
+        print(f"free bodies N = {n:,} ...", flush=True)
         started = time.perf_counter()
-        compiled = compile_scene(scene(bodies))
-        compile_seconds[n] = time.perf_counter() - started
-        scenes[n] = compiled
+        scenes[n] = compiled = compile_scene(scene(free_bodies(n)))
+        compile_ms[n] = (time.perf_counter() - started) * 1e3
         runners: dict[str, Runner] = {"numpy tutorial step": numpy_runner(compiled)}
         for name in names:
             runners[f"{name}: chunk"] = chunk_runner(compiled, name)
             runners[f"{name}: runner"] = runner_runner(compiled, name)
-        if have_mujoco:
+        if "mujoco" in engines:
             mj, how = mujoco_runners(compiled)
             runners.update(mj)
-            notes.append(f"MuJoCo model of N = {n:,}: {how}")
-        if have_pybullet:
+            notes.append(f"MuJoCo model of N = {n:,} {how}")
+        if "pybullet" in engines:
             make, how = pybullet_runner(compiled)
             runners["PyBullet stepSimulation loop"] = make
-            notes.append(f"PyBullet N = {n:,}: {how}")
+            notes.append(f"PyBullet N = {n:,} {how}")
         results[n] = measure(runners, repeats, budget)
-
-    def mujoco_best(n: int) -> tuple[float, str]:
-        candidates = {k: v for k, v in results[n].items() if k.startswith("MuJoCo") and not v.note}
-        if not candidates:
-            return float("nan"), ""
-        label = min(candidates, key=lambda k: candidates[k].best)
-        return candidates[label].rate(n), label
-
-    reference = {n: mujoco_best(n)[0] for n in SIZES}
-    say("### Free bodies under gravity, no contact: body-steps/s (ratio to the faster MuJoCo timing)")
-    say()
-    say("| engine / path | " + " | ".join(f"N = {n:,}" for n in SIZES) + " |")
-    say("|---|" + "---:|" * len(SIZES))
-    for label in results[SIZES[0]]:
-        say(f"| {label} | " + " | ".join(cell(results[n][label].rate(n), reference[n], results[n][label])
-                                         for n in SIZES) + " |")  # fmt: skip
-    say()
+    reference = {n: mujoco_reference(results[n], n) for n in SIZES}
+    rows = [[label] + [cell(results[n][label], n, reference[n][0]) for n in SIZES] for label in results[SIZES[0]]]
+    rep.table("Free bodies under gravity, no contact: body-steps/s (ratio to the faster MuJoCo timing)",
+              ["engine / path"] + [f"N = {n:,}" for n in SIZES], rows)  # fmt: skip
     for n in SIZES:
-        say(f"- N = {n:,}: MuJoCo reference = {mujoco_best(n)[1] or 'n/a'}; scene compile (Python) "
-            f"{compile_seconds[n] * 1e3:.0f} ms, which `rbcli.simulate` adds to the runner row")  # fmt: skip
-    short = sorted({f"{label} at N = {n:,}: {t.steps} steps" for n in SIZES for label, t in results[n].items()
-                    if t.steps and t.steps < STEPS})  # fmt: skip
+        rep.say(f"- N = {n:,}: MuJoCo reference = {reference[n][1]}; the scene compile that `rbcli.simulate` adds "
+                f"to the runner row: {compile_ms[n]:.0f} ms")  # fmt: skip
+    everything = [(n, label, t) for n in SIZES for label, t in results[n].items()]
+    short = [f"{label} at N = {n:,}: {t.steps}" for n, label, t in everything if 0 < t.steps < STEPS]
     if short:
-        say("- shorter runs: " + "; ".join(short))
-    failed = [f"{label} at N = {n:,}: {t.note}" for n in SIZES for label, t in results[n].items() if t.note]
-    for note in failed:
-        say(f"- failed: {note}")
-    spread = max(t.median / t.best for n in SIZES for t in results[n].values() if not t.note)
-    say(f"- noise: the largest median/best ratio of any row is {spread:.2f}")
-    warm = {name: results[1][f"{name}: chunk"].warm for name in names if not results[1][f"{name}: chunk"].note}
-    say("- first call (compile, or load from numba's cache): "
-        + ", ".join(f"{k} {v:.2f} s" for k, v in warm.items()))  # fmt: skip
+        rep.say("- steps per run where fewer than 1,000: " + "; ".join(short))
+    for n, label, t in everything:
+        if t.note:
+            rep.say(f"- failed: {label} at N = {n:,}: {t.note}")
+    spread = max((t.median / t.best for _, _, t in everything if not t.note), default=1.0)
+    rep.say(f"- noise: the largest median/best ratio of any row is {spread:.2f}")
+    warm = [f"{name} {results[1][f'{name}: chunk'].warm:.2f} s" for name in names]
+    rep.say("- first call (compile, or load from numba's cache): " + ", ".join(warm))
     if notes:
-        say("- set-up: " + "; ".join(notes))
-    say("- issue anchors (2-core machine, not measured here), N = 1 / 100 / 10,000: "
-        + "; ".join(f"{k} {' / '.join(v)}" for k, v in ISSUE_ANCHORS.items()))  # fmt: skip
-    say()
+        rep.say("- set-up: " + "; ".join(notes))
+    rep.say("- issue anchors (2-core machine, not measured here), N = 1 / 100 / 10,000: "
+            + "; ".join(f"{k} {' / '.join(v)}" for k, v in ISSUE_ANCHORS.items()))  # fmt: skip
+    rep.say()
 
-    # ---- where the time goes: t(N) = fixed + per-body * N from the chunk rows --------------------------
-    say("### Cost model of the compiled chunk: time per step = fixed + per-body x N")
-    say()
-    say(
-        "| integrator | fixed per step (N = 1) | per body-step (N = 10,000) | x split2 (N = 1 / 100 / 10,000) "
-        "| Python call of run_chunk (0 steps) |"
-    )
-    say("|---|---:|---:|---:|---:|")
-    facts: dict[str, float] = {}
+    rows, facts = [], {"compile_us_per_body": compile_ms[10_000] / 10_000 * 1e3}
     split = {n: results[n].get("split2: chunk") for n in SIZES}
     for name in names:
         t = {n: results[n][f"{name}: chunk"] for n in SIZES}
@@ -633,195 +598,165 @@ def main() -> None:
         per_body = (t[10_000].best - t[1].best) / (10_000 - 1)
         rel = " / ".join(f"{t[n].best / split[n].best:.2f}" if split[n] and not split[n].note else "n/a" for n in SIZES)
         dispatch = dispatch_seconds(scenes[1], name)
-        say(f"| {name} | {t[1].best * 1e9:.0f} ns | {per_body * 1e9:.1f} ns | {rel} | {dispatch * 1e6:.1f} us |")
+        rows.append([name, f"{t[1].best * 1e9:.0f} ns", f"{per_body * 1e9:.1f} ns", rel, f"{dispatch * 1e6:.1f} us"])
         if name == "split2":
-            runner_fixed = (results[1]["split2: runner"].best - t[1].best) * results[1]["split2: runner"].steps
+            runner = results[1]["split2: runner"]
             facts.update(fixed_ns=t[1].best * 1e9, per_body_ns=per_body * 1e9, dispatch_us=dispatch * 1e6,
-                         runner_fixed_ms=runner_fixed * 1e3)  # fmt: skip
-    say()
+                         runner_fixed_ms=(runner.best - t[1].best) * runner.steps * 1e3)  # fmt: skip
+    rep.table("Cost of the compiled chunk: time per step = fixed + per-body x N",
+              ["integrator", "fixed per step (N = 1)", "per body-step (N = 10,000)", "x split2 (N = 1 / 100 / 10,000)",
+               "Python call of run_chunk (0 steps)"], rows)  # fmt: skip
+    return {"results": results, "reference": {n: r[0] for n, r in reference.items()}, "facts": facts}
 
-    # ---- spring chain -------------------------------------------------------------------------------------
-    print(f"spring chain of {CHAIN_BODIES} bodies ...", flush=True)
+
+def chain_section(rep: Report, names: list[str], repeats: int, budget: float, engines: set[str]) -> None:
+    print(f"spring chain of {CHAIN_BODIES:,} bodies ...", flush=True)
     chain = compile_scene(spring_chain(CHAIN_BODIES))
     runners = {f"{name}: chunk": chunk_runner(chain, name) for name in names}
-    if have_mujoco:
-        mj, how = mujoco_runners(chain)
-        runners["MuJoCo mj_step(nstep), spatial tendons"] = mj["MuJoCo mj_step(nstep)"]
-    chain_t = measure(runners, repeats, budget)
-    mj_chain = chain_t.get("MuJoCo mj_step(nstep), spatial tendons")
-    mj_rate = mj_chain.rate(CHAIN_BODIES) if mj_chain and not mj_chain.note else float("nan")
-    say(f"### Spring chain: {CHAIN_BODIES:,} bodies, {CHAIN_BODIES - 1:,} springs-dampers + 1 anchor, gravity")
-    say()
-    say("| engine / path | body-steps/s (ratio to MuJoCo) | time per step |")
-    say("|---|---:|---:|")
-    for label, t in chain_t.items():
-        say(f"| {label} | {cell(t.rate(CHAIN_BODIES), mj_rate, t)} | {t.best * 1e6:.0f} us |")
-    say()
+    if "mujoco" in engines:
+        runners["MuJoCo mj_step(nstep), spatial tendons"] = mujoco_runners(chain)[0]["MuJoCo mj_step(nstep)"]
+    timings = measure(runners, repeats, budget)
+    reference = mujoco_reference(timings, CHAIN_BODIES)[0]
+    rows = [[label, cell(t, CHAIN_BODIES, reference), f"{t.best * 1e6:.0f} us"] for label, t in timings.items()]
+    rep.table(f"Spring chain: {CHAIN_BODIES:,} bodies, {CHAIN_BODIES - 1:,} springs-dampers + 1 anchor, gravity",
+              ["engine / path", "body-steps/s (ratio to MuJoCo)", "time per step"], rows)  # fmt: skip
 
-    # ---- recording ----------------------------------------------------------------------------------------
-    print(f"recording {RECORD_BODIES} bodies ...", flush=True)
-    out = Path(tempfile.mkdtemp(prefix="rbsim-bench-speed-"))
-    rec_compiled = compile_scene(scene(free_bodies(RECORD_BODIES, seed=2)))
-    rec_steps = 200 if args.quick else STEPS
-    rec = measure(recording_runs(rec_compiled, out), 1 if args.quick else 3, 1e9, max_steps=rec_steps)
-    off = rec["off (frame 0 and last)"]
-    say(f"### Recording: {RECORD_BODIES:,} bodies x {rec_steps:,} steps, split2, runner path, every step")
-    say()
-    say("| sink | wall time | vs off | cost per frame | file |")
-    say("|---|---:|---:|---:|---:|")
-    sizes = {".mcap (SinkMcap, zstd)": out / "bench.mcap", ".rrd (SinkRerun)": out / "bench.rrd"}
-    overhead = {}
-    for label, t in rec.items():
+
+def recording_section(rep: Report, quick: bool, out: Path) -> dict[str, float]:
+    """Recording every step against none; memory at two run lengths. Returns the overheads and memory."""
+    print(f"recording {RECORD_BODIES:,} bodies ...", flush=True)
+    compiled = compile_scene(scene(free_bodies(RECORD_BODIES, seed=2)))
+    steps = 200 if quick else STEPS
+    timings = measure(recording_runs(compiled, out), 1 if quick else 3, float("inf"), max_steps=steps)
+    off = timings["off (frame 0 and last)"]
+    files = {".mcap (SinkMcap, zstd)": out / "bench.mcap", ".rrd (SinkRerun)": out / "bench.rrd"}
+    rows, overhead = [], {}
+    for label, t in timings.items():
         if t.note:
-            say(f"| {label} | failed: {t.note} | | | |")
+            rows.append([label, f"failed: {t.note}", "", "", ""])
             continue
         overhead[label] = t.best / off.best - 1.0
-        per_frame = (t.best - off.best) * 1e6
-        size = f"{sizes[label].stat().st_size / 1e6:.1f} MB" if label in sizes and sizes[label].exists() else ""
-        say(f"| {label} | {t.best * t.steps * 1e3:.0f} ms | +{overhead[label] * 100:.0f} % | "
-            f"{per_frame:.0f} us | {size} |")  # fmt: skip
-    say()
-    short_steps, long_steps = (100, 400) if args.quick else (500, 2000)
-    mem = {s: peak_memory(rec_compiled, s, out) for s in (short_steps, long_steps)}
-    flat = mem[long_steps] <= 1.1 * mem[short_steps] + 1.0
-    say(f"- memory: peak traced allocations recording {RECORD_BODIES:,} bodies to .mcap every step: "
-        f"{mem[short_steps]:.1f} MB over {short_steps:,} steps, {mem[long_steps]:.1f} MB over {long_steps:,} "
-        f"steps ({'flat' if flat else 'GROWS with steps'})")  # fmt: skip
-    say()
+        size = f"{files[label].stat().st_size / 1e6:.1f} MB" if label in files and files[label].exists() else ""
+        rows.append([label, f"{t.best * t.steps * 1e3:.0f} ms", f"+{overhead[label]:.0%}",
+                     f"{(t.best - off.best) * 1e6:.0f} us", size])  # fmt: skip
+    rep.table(f"Recording: {RECORD_BODIES:,} bodies x {steps:,} steps, split2, runner path, every step",
+              ["sink", "wall time", "vs off", "cost per frame", "file"], rows)  # fmt: skip
+    lengths = (100, 400) if quick else (500, 2000)
+    try:
+        memory = [peak_memory(compiled, s, out) for s in lengths]
+    except Exception as exc:  # noqa: BLE001 - a failing sink is reported, not fatal
+        memory = [float("nan")] * 2
+        rep.say(f"- memory: failed: {type(exc).__name__}: {exc}")
+    rep.say(f"- memory: peak traced allocations recording {RECORD_BODIES:,} bodies to .mcap every step: "
+            f"{memory[0]:.1f} MB over {lengths[0]:,} steps, {memory[1]:.1f} MB over {lengths[1]:,} steps")  # fmt: skip
+    rep.say()
+    return {"overhead": overhead, "memory": memory}
 
-    # ---- start-up -----------------------------------------------------------------------------------------
-    print("start-up ...", flush=True)
-    startup = startup_times(out)
-    say("### Start-up (fresh process, median of 5 after one warm run)")
-    say()
-    say("| command | median | target |")
-    say("|---|---:|---:|")
-    for label, seconds in startup.items():
-        say(f"| `{label}` | {seconds:.2f} s | < {TARGET_STARTUP[label]:g} s ({ok(seconds < TARGET_STARTUP[label])}) |")
-    say()
 
-    # ---- targets ------------------------------------------------------------------------------------------
-    say("### Targets of the issue")
-    say()
-    say("| target | measured | status |")
-    say("|---|---|---|")
+def targets_section(rep: Report, names: list[str], free: dict, recording: dict, startup: dict[str, float]) -> None:
+    results, reference = free["results"], free["reference"]
+    rows = []
     for path in ("chunk", "runner"):
         t = {n: results[n].get(f"split2: {path}") for n in SIZES}
         if any(v is None or v.note for v in t.values()):
             continue
         for n in SIZES:
-            unit = "steps/s" if n == 1 else "body-steps/s"
-            rate = t[n].rate(n)
-            target = TARGET_RATE[n]
-            say(f"| split2 {path}, N = {n:,}: >= {target:.0e} {unit} | {rate:.2e} | {ok(rate >= target)} |")
-        if have_mujoco:
+            unit, rate = ("steps/s" if n == 1 else "body-steps/s"), t[n].rate(n)
+            rows.append([f"split2 {path}, N = {n:,}: >= {TARGET_RATE[n]:.0e} {unit}", f"{rate:.2e}",
+                         ok(rate >= TARGET_RATE[n])])  # fmt: skip
+        if all(np.isfinite(reference[n]) for n in SIZES):
             ratios = [t[n].rate(n) / reference[n] for n in SIZES]
-            say(f"| split2 {path} faster than MuJoCo at every size | "
-                + " / ".join(f"{r:.2f}x" for r in ratios) + f" | {ok(min(ratios) > 1.0)} |")  # fmt: skip
-    if "rk4" in names and "split2" in names and not any(results[n]["rk4: chunk"].note for n in SIZES):
+            rows.append([f"split2 {path} faster than MuJoCo at N = 1 / 100 / 10,000",
+                         " / ".join(f"{r:.2f}x" for r in ratios), ok(min(ratios) > 1.0)])  # fmt: skip
+    if {"rk4", "split2"} <= set(names) and not any(results[n]["rk4: chunk"].note for n in SIZES):
         costs = [results[n]["rk4: chunk"].best / results[n]["split2: chunk"].best for n in SIZES]
-        say(f"| rk4 cost per step <= {TARGET_RK4_COST}x split2 (chunk, N = 1 / 100 / 10,000) | "
-            + " / ".join(f"{c:.2f}x" for c in costs) + f" | {ok(max(costs) <= TARGET_RK4_COST)} |")  # fmt: skip
-    if overhead:
-        worst = max(overhead, key=lambda k: overhead[k])
-        say(f"| recording every step adds <= {TARGET_RECORDING_OVERHEAD:.0%} ({RECORD_BODIES:,} bodies) | worst "
-            f"{worst}: +{overhead[worst]:.0%} | {ok(overhead[worst] <= TARGET_RECORDING_OVERHEAD)} |")  # fmt: skip
-    say(f"| memory flat in the number of steps | {mem[short_steps]:.1f} / {mem[long_steps]:.1f} MB | {ok(flat)} |")
-    say()
-    say(f"- {machine()['load']} at the end")
-    shutil.rmtree(out, ignore_errors=True)
+        rows.append([f"rk4 cost per step <= {TARGET_RK4_COST}x split2 (chunk, N = 1 / 100 / 10,000)",
+                     " / ".join(f"{c:.2f}x" for c in costs), ok(max(costs) <= TARGET_RK4_COST)])  # fmt: skip
+    if recording["overhead"]:
+        worst = max(recording["overhead"], key=recording["overhead"].get)
+        extra = recording["overhead"][worst]
+        rows.append([f"recording every step adds <= {TARGET_RECORDING_OVERHEAD:.0%} ({RECORD_BODIES:,} bodies)",
+                     f"worst {worst}: +{extra:.0%}", ok(extra <= TARGET_RECORDING_OVERHEAD)])  # fmt: skip
+    short, long = recording["memory"]
+    rows.append(["memory flat in the number of steps (peak traced, short / 4x longer run)",
+                 f"{short:.1f} / {long:.1f} MB", ok(long <= 1.1 * short + 1.0)])  # fmt: skip
+    for label, seconds in startup.items():
+        rows.append(
+            [f"`{label}` < {TARGET_STARTUP[label]:g} s", f"{seconds:.2f} s", ok(seconds < TARGET_STARTUP[label])]
+        )
+    rep.table("Targets of the issue", ["target", "measured", "status"], rows)
+    facts = free["facts"]
+    if {"fixed_ns", "per_body_ns"} <= facts.keys():
+        rep.say(f"- reading: split2 costs {facts['fixed_ns']:.0f} ns per step at N = 1 and {facts['per_body_ns']:.0f} "
+                f"ns per body-step at N = 10,000; a Python call of `run_chunk` {facts['dispatch_us']:.0f} us (once "
+                f"per runner chunk of ~0.2 s); the runner adds {facts['runner_fixed_ms']:.1f} ms per run at N = 1; "
+                f"compiling a scene costs {facts['compile_us_per_body']:.0f} us per body. Why, and what to change: "
+                "below.")  # fmt: skip
 
+
+def write_docs(lines: list[str]) -> Path:
+    """Replace the results block of docs/performance.md (between the markers) with this run's report;
+    the prose around it is kept. A missing file or marker gets a minimal file."""
+    path = ROOT / "docs" / "performance.md"
+    block = f"{DOCS_BEGIN}\n" + "\n".join(lines) + f"\n{DOCS_END}"
+    text = path.read_text() if path.exists() else ""
+    if DOCS_BEGIN in text and DOCS_END in text:
+        text = text[: text.index(DOCS_BEGIN)] + block + text[text.index(DOCS_END) + len(DOCS_END) :]
+    else:
+        text = "# Performance\n\nRegenerated by `python benchmarks/bench_speed.py --write-docs`.\n\n" + block + "\n"
+    path.write_text(text)
+    return path
+
+
+DOCS_BEGIN = "<!-- bench_speed results: begin (regenerated by --write-docs; edit around, not inside) -->"
+DOCS_END = "<!-- bench_speed results: end -->"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="fewer repeats, shorter runs (under ~60 s)")
+    parser.add_argument("--write-docs", action="store_true", help="write the results into docs/performance.md")
+    parser.add_argument("--integrators", default="", help="comma list [default: quick: " + ",".join(MAIN_INTEGRATORS)
+                        + "; full: every registered integrator with a run_chunk]")  # fmt: skip
+    parser.add_argument("--no-pybullet", action="store_true")
+    args = parser.parse_args()
+
+    repeats, budget = (3, 0.15) if args.quick else (7, 1.0)
+    every = [n for n in INTEGRATORS if hasattr(INTEGRATORS[n].load(), "run_chunk")]
+    names = [n for n in args.integrators.split(",") if n] or (list(MAIN_INTEGRATORS) if args.quick else every)
+    info, rep = machine(), Report()
+    rep.say(f"- date: {info['date']}; mode: {'--quick' if args.quick else 'full'}")
+    rep.say(f"- machine: {info['cpu']}; {info['load']} at start")
+    rep.say(f"- {info['versions']}")
+    rep.say(f"- timing: best of {repeats} interleaved repeats, {STEPS:,} steps (fewer where one run would pass "
+            f"{budget:g} s, listed below), dt = {DT:g} s, after a warm-up run")  # fmt: skip
+    engines = set()
+    for engine, missing in (("mujoco", "**MuJoCo is not installed** (`pip install -e .[bench]`): no MuJoCo rows "
+                                       "or ratios"),
+                            ("pybullet", "PyBullet is not installed (optional): no PyBullet row")):  # fmt: skip
+        try:
+            __import__(engine)
+            engines.add(engine)
+        except ImportError:
+            rep.say(f"- {missing}")
+    if args.no_pybullet:
+        engines.discard("pybullet")
+    rep.say("- contact: the sphere-pile benchmark against MuJoCo waits for the collisions issue (no contact yet)")
+    rep.say()
+
+    free = free_body_section(rep, names, repeats, budget, engines)
+    chain_section(rep, names, repeats, budget, engines)
+    out = Path(tempfile.mkdtemp(prefix="rbsim-bench-speed-"))
+    try:
+        recording = recording_section(rep, args.quick, out)
+        print("start-up ...", flush=True)
+        startup = startup_times(out)
+    finally:
+        shutil.rmtree(out, ignore_errors=True)
+    targets_section(rep, names, free, recording, startup)
+    rep.say(f"- {machine()['load']} at the end")
     if args.write_docs:
-        path = ROOT / "docs" / "performance.md"
-        facts.setdefault("compile_us_per_body", compile_seconds[10_000] / 10_000 * 1e6)
-        tail = DOCS_TAIL.format(**facts) if {"fixed_ns", "per_body_ns"} <= facts.keys() else ""
-        path.write_text(DOCS_HEAD + "\n".join(lines) + "\n" + tail + DOCS_PROFILE)
-        print(f"wrote {path}")
-
-
-DOCS_HEAD = """# Performance
-
-Regenerated by `python benchmarks/bench_speed.py --write-docs` (add `--quick` for a ~1 minute run); every
-number below comes from that one run on the machine it names, MuJoCo and PyBullet included, so the
-ratios compare like with like. Body-steps/s = bodies x steps / wall second. A shared machine is noisy:
-compare rows of one run, not runs of different days.
-
-## Results
-
-"""
-
-DOCS_TAIL = """
-## Where the time goes (numbers from the run above)
-
-- **Small scenes pay per call, not per body.** split2's fixed cost is {fixed_ns:.0f} ns per step at N = 1
-  against {per_body_ns:.0f} ns of work per body. Most of the fixed cost is numba's reference counting:
-  every call of a compiled function that is not inlined increfs and decrefs each array it receives
-  (an atomic add each, ~10 ns per array per call), and `model` + `forces` hold ~55 arrays, handed down
-  run_chunk -> step -> compose -> accumulate_wrench every step (measured: passing `forces` to a
-  function that only zeroes F and adds gravity costs ~580 ns per call; the same work on 5 plain arrays
-  ~50 ns). A Python call of `run_chunk` costs {dispatch_us:.0f} us (unboxing those arrays), paid once
-  per runner chunk of ~0.2 s.
-- **Large scenes pay per body.** split2 turns every body about its three principal axes: 5 sin/cos pairs
-  per body per step, and glibc's `sincos` is about half of the per-body time (perf, N = 10,000). The
-  state (x, q, P, L and 5 scratch columns: 18 float64 per body) is 1.4 MB at 10,000 bodies and stays
-  in cache: the kernel is compute-bound, not bandwidth-bound.
-- **The runner** adds ~{runner_fixed_ms:.1f} ms per run at N = 1 (header, frame 0 and the last frame
-  through `make_block`, the sink) and one `run_chunk` call per chunk; `rbcli.simulate` also compiles the
-  scene in Python, ~{compile_us_per_body:.0f} us per body (about 1 s for 10,000 bodies).
-- **MuJoCo** runs its general pipeline per step (kinematics, composite inertia, mass matrix and its
-  factorisation, the constraint stage) even for free bodies, ~0.3-0.4 us per body; PyBullet's per-step
-  cost grows faster than linearly with the body count.
-- **The numpy row** is rbsim's numpy reference of euler-matrix (`step_numpy`), not a bare tutorial step:
-  its `wrench_numpy` evaluates the numpy reference of every force type, empty tables included (about
-  two thirds of its ~0.6 ms per step at N = 1, cProfile), which is why it is below the issue's numpy
-  anchor at small N.
-- **Recording** every step costs far more than a step of 1,000 bodies: the table gives each sink's cost per
-  frame, which sets the `record_every` a long run should use.
-"""
-
-DOCS_PROFILE = """
-## Profile and measured suggestions (2026-11-25)
-
-Prototypes are copies of the kernels of that date, so nothing in `rbcli/` changed; they were timed in one
-process against the cached kernels, interleaved, best of 7, on the 2-core machine above while other jobs
-held 1-2 cores. The prototypes are ns per step of `run_chunk`, split2 unless named.
-
-| change | N = 1 | N = 100 | N = 10,000 |
-|---|---:|---:|---:|
-| split2 as it is | 2,310 | 9,590 | 728,700 |
-| 1. `_nrt=False` on the per-step functions | 403 | 7,630 | 726,300 |
-| 2. small-angle polynomial sin/cos | 2,280 | 7,550 | 533,000 |
-| 1 + 2 | 385 | 5,670 | 532,500 |
-| 1 + 2 + 3. call `record_if_due` only on recording steps | **282** | **5,540** | **533,600** |
-| rk4 as it is / with 1 | 3,875 / 710 | 10,920 / 7,790 | 864,900 / 870,300 |
-
-1. **Compile the per-step functions without reference counting**: `@numba.njit(cache=True, _nrt=False)` on
-   `step`, `compose`, `_drift_to_first_kick`, `_kick_and_drift` (split2), `step` and `_stage` (rk4), and
-   `accumulate_wrench` (forces/wrench.py); none of them allocates. Keep `run_chunk` with NRT (it calls
-   `record_if_due`, whose `frames.x[filled] = x` copies need NRT). The final states are bit-identical.
-   `_nrt` is numba's private option (in its jit options for years; caching works with it, checked);
-   pin it with a test that the chunk's result equals the numpy reference (as now) and the benchmark.
-   `inline="always"` on the same functions was tried: it removes the calls, not the increfs (N = 1:
-   2.3 -> 1.4 us).
-2. **sin/cos of split2's half-angles by a Taylor polynomial** (kinematics.half_turn): the half-angles are
-   omega h / 2, tiny at any usable dt, so for |a| <= 1/16 use sin to a^9 and cos to a^10 (truncation
-   below 1e-20 relative) and libm above. Checked against libm on 210,000 points of [-1/16, 1/16]: at
-   most 1 ulp apart, 0.05 % of values differ in the last bit; the benchmark's final states were
-   unchanged. 1.37x at N = 10,000.
-3. **Call `record_if_due` only when a frame is due** (`if (step0 + k + 1) % record_every == 0:` in each
-   `run_chunk`): the call passes 9 arrays every step even when nothing is recorded. 1.4x at N = 1 on top
-   of 1 + 2.
-4. **Not recommended: `numba.prange` over bodies.** With `parallel=True` on split2's two body loops (on top
-   of 1-3) N = 10,000 went from 0.53 to 1.33 ms per step and N = 100,000 from 6.2 to 15.7 ms, because
-   another process held one of the 2 cores and the threads wait for each other at every loop's end; with
-   one thread it equals the serial loop. On an idle 2-core machine it could at best halve the per-body
-   time; offer it only as an opt-in (a thread count setting), never by default on a shared machine.
-5. Start-up (`python -X importtime`, one warm `rbsim run`, ~0.9 s in all): importing numba ~0.20 s,
-   `numba.np.arraymath` ~0.25 s of which ~0.21 s is scipy.linalg (its BLAS bindings, pulled in by
-   numba), typer/rich/pydantic ~0.15 s, the MCAP writer ~0.06 s; the kernels load from numba's cache
-   in ~0.02 s each. The big items are numba's own import, outside rbsim's control short of not
-   importing numba for commands that do not step.
-"""
+        print(f"wrote {write_docs(rep.lines)}")
 
 
 if __name__ == "__main__":

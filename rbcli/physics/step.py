@@ -36,6 +36,13 @@ STATUS_OK = 0
 STATUS_DIVERGED = 1
 STATUS_FULL = 2
 
+# Options for per-step kernels that allocate nothing: numba's reference counting (NRT) otherwise does an
+# atomic increment and decrement on every array passed at every call (~10 ns each; the model and force
+# tables hold ~55 arrays), which was ~75 % of a one-body split2 step. A kernel that allocates fails to
+# compile with these options, loudly, rather than misbehaving. `_nrt` is a numba option without a public
+# spelling; the test suite compiles every kernel, so a numba that drops it is caught at once.
+STEP_KERNEL = {"cache": True, "_nrt": False}
+
 
 class FrameBuffers(NamedTuple):
     """Preallocated recorded frames: step (K,) int64, x (K,N,3), q (K,N,4), P (K,N,3), L (K,N,3)."""
@@ -72,7 +79,7 @@ def state_is_sane(x, q, P, L) -> bool:  # noqa: ANN001
     return True
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")  # inlined: a call per step costs ~10 ns per array argument
 def record_if_due(index, record_every, x, q, P, L, frames, filled):  # noqa: ANN001
     """After step `index`: when it is a recording step, check the state and copy it into the next frame.
 

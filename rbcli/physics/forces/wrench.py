@@ -25,9 +25,10 @@ from rbcli.physics.forces.tables import (
     ForceTables,
 )
 from rbcli.physics.forces.torque import accumulate_torque, torque_numpy
+from rbcli.physics.step import STEP_KERNEL
 
 
-@numba.njit(cache=True)
+@numba.njit(**STEP_KERNEL)
 def accumulate_wrench(model, forces, t, x, q, P, L, F, tau) -> None:  # noqa: ANN001 - numba types
     """Set F [N] and tau [N m] (body_count, 3), world frame, about each centre of mass, to the sum of the
     scene's force terms at time t [s]. tau is left untouched (zero) when forces.has_torque is False."""

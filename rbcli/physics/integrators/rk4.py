@@ -32,7 +32,7 @@ import numpy as np
 from rbcli.physics.forces.wrench import accumulate_wrench, wrench_numpy
 from rbcli.physics.integrators.kinematics import rotate, rotate_inverse
 from rbcli.physics.rotation import quat_multiply, quat_rotate, quat_rotate_inverse
-from rbcli.physics.step import STATUS_OK, chunk_status, record_if_due
+from rbcli.physics.step import STATUS_OK, STEP_KERNEL, chunk_status, record_if_due
 
 # per body: y0 = (x, q, P, L, m) (16), the weighted sum of stage rates (16), the stage's m (3)
 SCRATCH_WIDTH = 35
@@ -90,7 +90,7 @@ _STAGE_TIME = np.array([0.0, 0.5, 0.5, 1.0])
 _STAGE_REACH = np.array([0.5, 0.5, 1.0, 1.0])
 
 
-@numba.njit(cache=True)
+@numba.njit(**STEP_KERNEL)
 def step(model, forces, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One RK4 step of every body, in place: four wrench evaluations (one call site, so the compiled
     wrench is inlined once, not four times)."""
@@ -113,7 +113,7 @@ def _advance(s, j, kind, a, h, y, r):  # noqa: ANN001, ANN202
     return s[j] + h / 6.0 * (s[_SUM + j] + r)
 
 
-@numba.njit(cache=True)
+@numba.njit(**STEP_KERNEL)
 def _stage(model, has_torque, kind, a, h, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001
     """Rates k of the current stage (x, q, P, L, m; F and tau evaluated on it), then per component
 

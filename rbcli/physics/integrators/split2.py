@@ -54,7 +54,7 @@ from rbcli.physics.integrators.kinematics import (
     turn,
     turn_numpy,
 )
-from rbcli.physics.step import STATUS_OK, chunk_status, record_if_due
+from rbcli.physics.step import STATUS_OK, STEP_KERNEL, chunk_status, record_if_due
 
 # per body: body-frame angular momentum m (3), cos and sin of the half angle of the last T_c (2)
 SCRATCH_WIDTH = 5
@@ -63,7 +63,7 @@ SCRATCH_WIDTH = 5
 WEIGHTS = np.array([1.0])
 
 
-@numba.njit(cache=True)
+@numba.njit(**STEP_KERNEL)
 def step(model, forces, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One split2 step of every body, in place (one force evaluation, at t + dt/2)."""
     compose(model, forces, t, dt, WEIGHTS, x, q, P, L, F, tau, scratch)
