@@ -12,7 +12,6 @@ import pytest
 from conftest import make_body, make_scene
 
 from rbcli.api import prepare, simulate
-from rbcli.physics.integrators import get_integrator
 from rbcli.physics.model import mass_properties
 from rbcli.scene.force_specs import BodyPoint, ForceDrag, ForceSpring
 
@@ -127,11 +126,7 @@ def test_springs_conserve_energy_to_first_order_with_euler_matrix():
 
 
 def test_springs_conserve_energy_to_second_order_with_split2():
-    """With the symmetric splitting `split2` (when registered) the energy error is O(dt^2): ratios 4."""
-    try:
-        get_integrator("split2").load()
-    except Exception as exc:  # noqa: BLE001 - another engineer's method may not exist yet
-        pytest.skip(f"split2 not loadable here: {exc}")
+    """With the symmetric splitting `split2` the energy error is O(dt^2): ratios 4."""
     errors = [energy_error(dt, "split2") for dt in (4e-3, 2e-3, 1e-3)]
     ratios = np.array(errors[:-1]) / np.array(errors[1:])
     np.testing.assert_allclose(ratios, 4.0, rtol=0.15)
