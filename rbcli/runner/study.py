@@ -42,7 +42,6 @@ from rbcli.analysis.errors import (
     run_errors,
 )
 from rbcli.physics.integrators import INTEGRATORS, IntegratorInfo, get_integrator
-from rbcli.record.frame import RunSummary
 from rbcli.record.memory_sink import Trajectory
 from rbcli.scene.compile import CompiledScene, compile_scene
 from rbcli.scene.spec import RecordSpec, SceneSpec
@@ -490,44 +489,14 @@ def run_adaptive(
     compiled: CompiledScene, tolerance: float, *, trajectory: bool = True
 ) -> tuple[Trajectory | None, int, int]:
     """One adaptive (dopri5) run with error budget `tolerance` over the compiled scene's output grid
-    (dt = the grid spacing, record_every as compiled), driving `physics.adaptive.run_adaptive_chunk`
-    as the runner will once it takes `simulation.tolerance`. Returns the trajectory (None when not
-    asked for: timing runs skip building it) and the accepted and rejected step counts.
+    (dt = the grid spacing, record_every as compiled), through the runner like `rbsim run --tolerance`.
+    Returns the trajectory (None when not asked for) and the accepted and rejected step counts.
     """
-    from rbcli.physics.adaptive import adaptive_work, run_adaptive_chunk
-    from rbcli.physics.step import STATUS_DIVERGED, STATUS_FULL, STATUS_OK, empty_buffers
-    from rbcli.runner.blocks import make_block
-
-    model, settings = compiled.model, compiled.settings
-    n, total, dt, every = model.body_count, settings.steps, settings.dt, settings.record_every
-    state = compiled.initial_state.copy()
-    work = adaptive_work(n)
-    frames = empty_buffers(total // every + 2, n)
-    frames.step[0], frames.x[0], frames.q[0], frames.P[0], frames.L[0] = 0, state.x, state.q, state.P, state.L
-    filled, index, status = 1, 0, STATUS_OK
-    F, tau = np.zeros((n, 3)), np.zeros((n, 3))
-    while index < total and status in (STATUS_OK, STATUS_FULL):
-        done, filled, status = run_adaptive_chunk(
-            model.kernel(), compiled.forces, dt, index, total - index, every, tolerance, total * dt,
-            state.x, state.q, state.P, state.L, F, tau, work["work"], work["control"], work["counters"],
-            frames, filled,
-        )  # fmt: skip
-        index += int(done)
-    counts = int(work["counters"][0]), int(work["counters"][1])
-    if not trajectory:
-        return None, *counts
-    if index % every and status in (STATUS_OK, STATUS_FULL):  # the final state, as the runner records it
-        frames.step[filled], frames.x[filled], frames.q[filled] = index, state.x, state.q
-        frames.P[filled], frames.L[filled] = state.P, state.L
-        filled += 1
-    block = make_block(compiled, *(a[:filled] for a in frames))
-    traj = Trajectory(
-        body_names=model.body_names, t=block.t, step=block.step, x=block.x, q=block.q, v=block.v,
-        omega=block.omega, P=block.P, L=block.L, invariants=block.invariants,
-    )  # fmt: skip
-    traj_status = {STATUS_OK: "completed", STATUS_FULL: "completed", STATUS_DIVERGED: "diverged"}
-    traj.summary = RunSummary(traj_status.get(int(status), "step too small"), index, filled, index * dt)
-    return traj, *counts
+    adaptive = dataclasses.replace(compiled, settings=dataclasses.replace(compiled.settings, tolerance=tolerance))
+    traj = _simulate(adaptive)
+    summary = traj.summary
+    counts = int(summary.steps_accepted or 0), int(summary.steps_rejected or 0)
+    return (traj if trajectory else None), *counts
 
 
 def _measure_adaptive(
