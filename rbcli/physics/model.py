@@ -44,13 +44,13 @@ def mass_properties(
 
 
 def principal_axes(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Principal moments (3,) ascending and the right-handed rotation E (3, 3) with I0 = E diag E^T.
+    """Principal moments (..., 3) ascending and right-handed rotations E (..., 3, 3), I0 = E diag E^T.
 
-    Columns of E are the principal axes expressed in the user's frame.
+    Columns of E are the principal axes expressed in the user's frame; any leading axes are batched.
     """
-    moments, axes = np.linalg.eigh(0.5 * (inertia + inertia.T))
-    if np.linalg.det(axes) < 0.0:  # eigh may return a reflection; flip one axis to make it a rotation
-        axes[:, 2] = -axes[:, 2]
+    moments, axes = np.linalg.eigh(0.5 * (inertia + np.swapaxes(inertia, -1, -2)))
+    # eigh may return a reflection; flip the third axis to make it a rotation
+    axes[..., :, 2] *= np.where(np.linalg.det(axes) < 0.0, -1.0, 1.0)[..., None]
     return moments, axes
 
 
@@ -130,31 +130,30 @@ def build_model(
     """
     count = len(names)
     body_mass = np.empty(count)
-    body_inertia = np.empty((count, 3))
-    body_frame_q = np.empty((count, 4))
     centres = np.empty((count, 3))
-    offsets_user, offsets_principal, masses, radii = [], [], [], []
-    for b in range(count):  # once per body at compile time, not in a step
+    inertias = np.empty((count, 3, 3))
+    offsets_user, masses, radii = [], [], []
+    for b in range(count):  # once per body at compile time, not in a step; the 3x3 work is batched below
         pos = np.asarray(particle_positions[b], dtype=np.float64).reshape(-1, 3)
         mass = np.broadcast_to(np.asarray(particle_masses[b], dtype=np.float64), (pos.shape[0],))
         rad = None if particle_radii is None or particle_radii[b] is None else particle_radii[b]
         rad = None if rad is None else np.broadcast_to(np.asarray(rad, dtype=np.float64), (pos.shape[0],)).copy()
-        total, centre, inertia = mass_properties(pos, mass, rad)
-        moments, axes = principal_axes(inertia)
-        if inertia_is_degenerate(moments):
-            raise ValueError(
-                f"body {names[b]!r}: its inertia I0 is singular (principal moments {moments.tolist()}); "
-                "its particles are collinear or a single point, so it has no inertia about some axis"
-            )
-        body_mass[b] = total
-        body_inertia[b] = moments
-        body_frame_q[b] = matrix_to_quat(axes)
-        centres[b] = centre
-        r0 = pos - centre
-        offsets_user.append(r0)
-        offsets_principal.append(r0 @ axes)  # components along the principal axes: E^T r0
+        body_mass[b], centres[b], inertias[b] = mass_properties(pos, mass, rad)
+        offsets_user.append(pos - centres[b])
         masses.append(np.array(mass))
         radii.append(np.zeros(pos.shape[0]) if rad is None else rad)
+    body_inertia, axes = principal_axes(inertias)
+    for b in range(count):
+        if inertia_is_degenerate(body_inertia[b]):
+            raise ValueError(
+                f"body {names[b]!r}: its inertia I0 is singular (principal moments {body_inertia[b].tolist()}); "
+                "its particles are collinear or a single point, so it has no inertia about some axis"
+            )
+    body_frame_q = matrix_to_quat(axes) if count else np.zeros((0, 4))
+    # particle offsets along the principal axes: E^T r0 for each particle's body
+    body_of = np.repeat(np.arange(count), [len(m) for m in masses])
+    offset_user = np.concatenate(offsets_user) if count else np.zeros((0, 3))
+    offset_principal = np.einsum("pi,pij->pj", offset_user, axes[body_of]) if count else np.zeros((0, 3))
     counts = np.array([m.shape[0] for m in masses], dtype=np.int64)
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
     model = Model(
@@ -162,8 +161,8 @@ def build_model(
         body_mass=body_mass,
         body_inertia=body_inertia,
         body_frame_q=body_frame_q,
-        particle_offset=np.concatenate(offsets_principal) if count else np.zeros((0, 3)),
-        particle_offset_user=np.concatenate(offsets_user) if count else np.zeros((0, 3)),
+        particle_offset=offset_principal,
+        particle_offset_user=offset_user,
         particle_mass=np.concatenate(masses) if count else np.zeros(0),
         particle_radius=np.concatenate(radii) if count else np.zeros(0),
         body_particle_start=starts,
