@@ -336,16 +336,7 @@ def torque_free(
     if R_p is None:
         R_p = _rotation_about(np.outer(t, R0p @ w0)) @ R0p
         m_p = np.broadcast_to(m0, (t.size, 3))
-    omega_p = m_p / moments
-    R = R_p @ V.T
-    return TorqueFreeSolution(
-        t=t,
-        R=R,
-        q=_continuous_quat(R),
-        omega_body=omega_p @ V.T,
-        omega_world=np.einsum("tij,tj->ti", R_p, omega_p),
-        L_world=L_world,
-    )
+    return _solution(t, R_p, m_p / moments, V, L_world)
 
 
 def torque_free_axisymmetric(
@@ -376,6 +367,14 @@ def torque_free_axisymmetric(
     e_s[i_s] = 1.0
     R_p = _rotation_about(np.outer(t, L_world / i_perp)) @ R0p @ _rotation_about(np.outer(t, beta * e_s))
     omega_p = np.einsum("tji,j->ti", R_p, L_world / i_perp) + beta * e_s
+    return _solution(t, R_p, omega_p, V, L_world)
+
+
+def _solution(
+    t: np.ndarray, R_p: np.ndarray, omega_p: np.ndarray, V: np.ndarray, L_world: np.ndarray
+) -> TorqueFreeSolution:
+    """Package a motion computed in the principal frame (R_p world-from-principal, omega_p principal
+    components) back in the caller's body frame: R = R_p V^T, omega_body = V omega_p."""
     R = R_p @ V.T
     return TorqueFreeSolution(
         t=t,
