@@ -30,7 +30,7 @@ import numba
 import numpy as np
 
 from rbcli.physics.integrators import dopri5
-from rbcli.physics.step import STATUS_OK, chunk_status, record_if_due
+from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, chunk_status, record_if_due
 
 # after STATUS_OK, STATUS_DIVERGED, STATUS_FULL of physics/step.py
 STATUS_STEP_TOO_SMALL = 3
@@ -72,7 +72,7 @@ def _initial_step(x, q, P, L, work, tolerance, limit) -> float:  # noqa: ANN001
     return min(limit, 0.01 * size / rate)
 
 
-@numba.njit(cache=True)
+@numba.njit(**CHUNK_KERNEL)
 def run_adaptive_chunk(
     model, forces, dt, step0, n_steps, record_every, tolerance, duration,  # noqa: ANN001
     x, q, P, L, F, tau, work, control, counters, frames, filled,

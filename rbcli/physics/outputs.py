@@ -10,7 +10,7 @@ from __future__ import annotations
 import numba
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)  # runs in the recording thread
 def derive_outputs(body_mass, body_inertia_inv, body_frame_q, q, P, L, q_user, v, omega, kinetic) -> None:  # noqa: ANN001
     """Fill q_user (K,N,4), v, omega (K,N,3) and kinetic (K,N) [J] from q, P, L (K,N,...)."""
     for f in range(q.shape[0]):

@@ -43,6 +43,10 @@ STATUS_FULL = 2
 # spelling; the test suite compiles every kernel, so a numba that drops it is caught at once.
 STEP_KERNEL = {"cache": True, "_nrt": False}
 
+# Options for the chunk loops the runner calls from Python: they release the GIL, so a recording thread
+# (runner.recorder) encodes and writes the previous block while the next chunk runs on another core.
+CHUNK_KERNEL = {"cache": True, "nogil": True}
+
 
 class FrameBuffers(NamedTuple):
     """Preallocated recorded frames: step (K,) int64, x (K,N,3), q (K,N,4), P (K,N,3), L (K,N,3)."""

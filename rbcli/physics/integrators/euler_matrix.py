@@ -17,7 +17,7 @@ import numpy as np
 from rbcli.physics.forces.wrench import accumulate_wrench, wrench_numpy
 from rbcli.physics.rotation import gram_schmidt, matrix_to_quat, quat_to_matrix, skew
 from rbcli.physics.rotation_kernels import matrix_to_quat_nb, quat_to_matrix_nb
-from rbcli.physics.step import STATUS_OK, chunk_status, record_if_due
+from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, chunk_status, record_if_due
 
 SCRATCH_WIDTH = 0
 
@@ -96,7 +96,7 @@ def step_numpy(model, forces, t, dt, x, q, P, L) -> None:  # noqa: ANN001
     q[:] = matrix_to_quat(gram_schmidt(R_user + dt * skew(omega) @ R_user) @ model.body_frame)
 
 
-@numba.njit(cache=True)
+@numba.njit(**CHUNK_KERNEL)
 def run_chunk(model, forces, dt, step0, n_steps, record_every, x, q, P, L, F, tau, scratch, frames, filled):  # noqa: ANN001
     """n_steps of `step` with recording (the chunk loop of physics/step.py, one per module for caching)."""
     for k in range(n_steps):

@@ -24,7 +24,7 @@ import numpy as np
 
 from rbcli.physics.forces.wrench import accumulate_wrench, wrench_numpy
 from rbcli.physics.free_rotation_exact import free_rotation_exact_batch
-from rbcli.physics.step import STATUS_OK, chunk_status, record_if_due
+from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, chunk_status, record_if_due
 
 # per body: the orientation at the current force evaluation, when torque-free (see `compose`)
 SCRATCH_WIDTH = 4
@@ -110,7 +110,7 @@ def compose_numpy(model, forces, t, h, weights, x, q, P, L) -> None:  # noqa: AN
         elapsed += s
 
 
-@numba.njit(cache=True)
+@numba.njit(**CHUNK_KERNEL)
 def run_chunk(model, forces, dt, step0, n_steps, record_every, x, q, P, L, F, tau, scratch, frames, filled):  # noqa: ANN001
     """n_steps of `step` with recording (the chunk loop of physics/step.py, one per module for caching)."""
     for k in range(n_steps):

@@ -32,7 +32,7 @@ import numpy as np
 from rbcli.physics.forces.wrench import accumulate_wrench, wrench_numpy
 from rbcli.physics.integrators.kinematics import rotate, rotate_inverse
 from rbcli.physics.rotation import quat_multiply, quat_rotate, quat_rotate_inverse
-from rbcli.physics.step import STATUS_OK, STEP_KERNEL, chunk_status, record_if_due
+from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, STEP_KERNEL, chunk_status, record_if_due
 
 # per body: y0 = (x, q, P, L, m) (16), the weighted sum of stage rates (16), the stage's m (3)
 SCRATCH_WIDTH = 35
@@ -201,7 +201,7 @@ def step_numpy(model, forces, t, dt, x, q, P, L) -> None:  # noqa: ANN001
     q[:] = align_numpy(new[1], new[4], L)
 
 
-@numba.njit(cache=True)
+@numba.njit(**CHUNK_KERNEL)
 def run_chunk(model, forces, dt, step0, n_steps, record_every, x, q, P, L, F, tau, scratch, frames, filled):  # noqa: ANN001
     """n_steps of `step` with recording (the chunk loop of physics/step.py, one per module for caching)."""
     for k in range(n_steps):

@@ -22,7 +22,7 @@ import numba
 import numpy as np
 
 from rbcli.physics.integrators import split2
-from rbcli.physics.step import STATUS_OK, chunk_status, record_if_due
+from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, chunk_status, record_if_due
 
 SCRATCH_WIDTH = split2.SCRATCH_WIDTH
 
@@ -41,7 +41,7 @@ def step_numpy(model, forces, t, dt, x, q, P, L) -> None:  # noqa: ANN001
     split2.compose_numpy(model, forces, t, dt, WEIGHTS, x, q, P, L)
 
 
-@numba.njit(cache=True)
+@numba.njit(**CHUNK_KERNEL)
 def run_chunk(model, forces, dt, step0, n_steps, record_every, x, q, P, L, F, tau, scratch, frames, filled):  # noqa: ANN001
     """n_steps of `step` with recording (the chunk loop of physics/step.py, one per module for caching)."""
     for k in range(n_steps):
