@@ -13,6 +13,7 @@ import numpy as np
 from rbcli.physics.forces import ForceTables
 from rbcli.physics.forces.wrench import potential_energy
 from rbcli.physics.model import Model
+from rbcli.physics.outputs import TOTAL_ANGULAR_MOMENTUM, TOTAL_KINETIC, TOTAL_MOMENTUM, TOTAL_QUATERNION_DEFECT
 
 INVARIANT_NAMES = (
     "energy_kinetic",
@@ -42,6 +43,16 @@ def invariants(
     return invariants_from_kinetic(model, forces, x, q, P, L, kinetic_energy(model, P, L, omega))
 
 
+def invariants_from_totals(
+    model: Model, forces: ForceTables, x: np.ndarray, q: np.ndarray, totals: np.ndarray
+) -> dict[str, np.ndarray]:
+    """As `invariants`, from the per-frame sums (K, 8) of the compiled `outputs.derive_outputs`;
+    only the potential energy is computed here."""
+    kinetic, potential = totals[:, TOTAL_KINETIC], potential_energy(model, forces, x, q)
+    momentum, ang = totals[:, TOTAL_MOMENTUM], totals[:, TOTAL_ANGULAR_MOMENTUM]
+    return _named(kinetic, potential, momentum, ang, totals[:, TOTAL_QUATERNION_DEFECT])
+
+
 def invariants_from_kinetic(
     model: Model, forces: ForceTables, x: np.ndarray, q: np.ndarray, P: np.ndarray, L: np.ndarray,
     kinetic: np.ndarray,
@@ -58,7 +69,14 @@ def invariants_from_kinetic(
         ],
         axis=-1,
     ) + L.sum(axis=1)
-    return {
+    return _named(kinetic, potential, momentum, ang, np.abs(np.linalg.norm(q, axis=-1) - 1.0).max(axis=-1))
+
+
+def _named(
+    kinetic: np.ndarray, potential: np.ndarray, momentum: np.ndarray, ang: np.ndarray, defect: np.ndarray
+) -> dict[str, np.ndarray]:
+    """The INVARIANT_NAMES series (each (K,), contiguous) from their parts."""
+    series = {
         "energy_kinetic": kinetic,
         "energy_potential": potential,
         "energy_total": kinetic + potential,
@@ -69,5 +87,6 @@ def invariants_from_kinetic(
         "angular_momentum_y": ang[:, 1],
         "angular_momentum_z": ang[:, 2],
         "angular_momentum_norm": np.linalg.norm(ang, axis=-1),
-        "quaternion_norm_defect": np.abs(np.linalg.norm(q, axis=-1) - 1.0).max(axis=-1),
+        "quaternion_norm_defect": defect,
     }
+    return {name: np.ascontiguousarray(series[name], dtype=np.float64) for name in INVARIANT_NAMES}

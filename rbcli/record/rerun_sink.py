@@ -74,6 +74,32 @@ def particle_display_radius(offsets: np.ndarray, fallback: float) -> float:
     return float(0.5 * np.median(nearest)) if nearest.size else fallback
 
 
+def particle_display_radii(clouds: Sequence[np.ndarray], fallback: float) -> np.ndarray:
+    """`particle_display_radius` of every cloud; clouds of equal size (<= 512 particles) are done together,
+    a few at a time, as one (B, n, n) distance computation instead of B Python-level calls."""
+    clouds = [np.asarray(c, dtype=np.float64).reshape(-1, 3) for c in clouds]
+    radii = np.full(len(clouds), float(fallback))
+    by_size: dict[int, list[int]] = {}
+    for i, pts in enumerate(clouds):
+        if 2 <= len(pts) <= 512:
+            by_size.setdefault(len(pts), []).append(i)
+        elif len(pts) > 512:
+            radii[i] = particle_display_radius(pts, fallback)
+    for size, members in by_size.items():
+        per_batch = max(1, (8 << 20) // (8 * size * size))  # ~8 MB of distances at a time
+        for start in range(0, len(members), per_batch):
+            idx = members[start : start + per_batch]
+            pts = np.stack([clouds[i] for i in idx])  # (B, n, 3)
+            d2 = ((pts[:, :, None, :] - pts[:, None, :, :]) ** 2).sum(axis=-1)
+            d2[d2 == 0.0] = np.inf  # each point itself (and exact duplicates)
+            nearest = np.sqrt(d2.min(axis=2))  # (B, n)
+            finite = np.isfinite(nearest)
+            for row, i in enumerate(idx):
+                values = nearest[row][finite[row]]
+                radii[i] = float(0.5 * np.median(values)) if values.size else fallback
+    return radii
+
+
 class _ArrowBatch:
     """A prebuilt arrow array as a `rr.ComponentBatchLike` (so a column can be a zero-copy slice)."""
 
@@ -82,6 +108,12 @@ class _ArrowBatch:
 
     def as_arrow_array(self) -> Any:
         return self._array
+
+
+def _rgba32(rgb: np.ndarray) -> np.ndarray:
+    """An opaque RGB colour as Rerun's packed 0xRRGGBBAA uint32."""
+    r, g, b = (int(c) for c in rgb)
+    return np.array([(r << 24) | (g << 16) | (b << 8) | 0xFF], dtype=np.uint32)
 
 
 def _markdown_table(rows: dict[str, str]) -> str:
@@ -150,25 +182,48 @@ class SinkRerun:
         rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         # descriptor and arrow type of each Transform3D column, taken from rerun itself, so the per-flush
         # arrays can be built straight from numpy (zero copy) instead of through the archetype helpers
-        ref = rr.Transform3D.columns(translation=np.zeros((1, 3)), quaternion=[[0.0, 0.0, 0.0, 1.0]])
+        ref = [
+            *rr.Transform3D.columns(translation=np.zeros((1, 3)), quaternion=[[0.0, 0.0, 0.0, 1.0]]),
+            *rr.Points3D.columns(positions=np.zeros((1, 3)), radii=[1.0], colors=PALETTE[:1]),
+        ]
         self._columns = {
             c.component_descriptor().component: (c.component_descriptor(), c.component_batch.as_arrow_array().type)
             for c in ref
         }
 
+    def _column(self, component: str, values: np.ndarray, offsets: Any) -> rr.ComponentColumn:
+        """A column of `component` from flat numpy values (an arrow slice) split into rows by offsets."""
+        descriptor, arrow_type = self._columns[component]
+        if isinstance(arrow_type, pa.FixedSizeListType):
+            array = pa.FixedSizeListArray.from_arrays(pa.array(values.reshape(-1)), type=arrow_type)
+        else:
+            array = pa.array(values, type=arrow_type)
+        return rr.ComponentColumn(descriptor, _ArrowBatch(array), offsets=offsets)
+
     def _log_clouds(self, first: FrameBlock | None) -> None:
-        """Static particle clouds in body frames; single-particle bodies get a size from the scene scale."""
+        """Static particle clouds in body frames; single-particle bodies get a size from the scene scale.
+
+        One static send_columns per body with prebuilt arrow arrays (rr.log with the archetype costs
+        ~0.25 ms per body in Python conversions); the radius estimates are batched over equal-size clouds.
+        """
         assert self._rec is not None
         scale = 1.0
         if first is not None and len(first) and first.x.shape[1] > 1:
             span = np.ptp(first.x[0], axis=0).max()
             scale = float(span) if np.isfinite(span) and span > 0 else 1.0
-        for i, (entity, offsets) in enumerate(zip(self._bodies, self._header.body_particle_offset, strict=True)):
+        clouds = self._header.body_particle_offset
+        radii = particle_display_radii(clouds, fallback=0.02 * scale)
+        one = pa.array(np.array([0, 1], dtype=np.int32))
+        for i, (entity, offsets) in enumerate(zip(self._bodies, clouds, strict=True)):
             pts = np.asarray(offsets, dtype=np.float64).reshape(-1, 3)
-            if len(pts):
-                radius = particle_display_radius(pts, fallback=0.02 * scale)
-                color = PALETTE[i % len(PALETTE)]
-                self._rec.log(f"{entity}/particles", rr.Points3D(pts, radii=radius, colors=color), static=True)
+            if not len(pts):
+                continue
+            columns = [
+                self._column("Points3D:positions", pts.astype(np.float32), pa.array(np.array([0, len(pts)], np.int32))),
+                self._column("Points3D:radii", np.array([radii[i]], np.float32), one),
+                self._column("Points3D:colors", _rgba32(PALETTE[i % len(PALETTE)]), one),
+            ]
+            self._rec.send_columns(f"{entity}/particles", indexes=[], columns=columns)
         self._clouds_logged = True
 
     def write(self, block: FrameBlock) -> None:
@@ -255,7 +310,11 @@ class SinkRerun:
             if self._path_points and self._bodies:
                 paths = np.concatenate(self._path_points)  # (k, N, 3)
                 # non-finite points (a diverged run) would break the strip and the view bounds
-                strips = [p[np.isfinite(p).all(axis=1)] for p in paths.transpose(1, 0, 2)]
+                per_body = np.ascontiguousarray(paths.transpose(1, 0, 2))
+                if np.isfinite(paths).all():
+                    strips = list(per_body)
+                else:
+                    strips = [p[np.isfinite(p).all(axis=1)] for p in per_body]
                 colors = PALETTE[np.arange(len(strips)) % len(PALETTE)]
                 rec.log(
                     "trajectories", rr.LineStrips3D(strips, colors=colors, radii=rr.Radius.ui_points(1.0)), static=True

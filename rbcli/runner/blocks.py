@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from rbcli.physics.energy import invariants_from_kinetic
+from rbcli.physics.energy import invariants_from_totals
 from rbcli.physics.frames import particle_world
-from rbcli.physics.outputs import derive_outputs
+from rbcli.physics.outputs import TOTALS_WIDTH, derive_outputs
 from rbcli.record.frame import FrameBlock
 from rbcli.scene.compile import CompiledScene
 
@@ -17,8 +17,8 @@ def make_block(
     """A FrameBlock of K frames from raw (K, N, ...) arrays; copies, so buffers can be reused."""
     model, settings = compiled.model, compiled.settings
     q_user, v, omega = np.empty_like(q), np.empty_like(P), np.empty_like(L)
-    kinetic = np.empty(P.shape[:2])
-    derive_outputs(model.body_mass, 1.0 / model.body_inertia, model.body_frame_q, q, P, L, q_user, v, omega, kinetic)
+    totals = np.empty((q.shape[0], TOTALS_WIDTH))
+    derive_outputs(model.body_mass, 1.0 / model.body_inertia, model.body_frame_q, x, q, P, L, q_user, v, omega, totals)
     block = FrameBlock(
         step=step.astype(np.int64, copy=True),
         t=step * settings.dt,
@@ -30,7 +30,7 @@ def make_block(
         L=L.copy(),
     )
     if "invariants" in settings.streams:
-        block.invariants = invariants_from_kinetic(model, compiled.forces, x, q, P, L, kinetic.sum(axis=1))
+        block.invariants = invariants_from_totals(model, compiled.forces, x, q, totals)
     if "particles" in settings.streams:
         block.particle_position, _ = particle_world(model, x, q, P, L)
     return block

@@ -17,7 +17,7 @@ from rbcli._version import __version__
 from rbcli.physics.energy import INVARIANT_NAMES
 from rbcli.physics.integrators import get_integrator
 from rbcli.record.frame import RunHeader, RunSummary, Sink
-from rbcli.runner.blocks import make_block
+from rbcli.runner.recorder import Recorder
 from rbcli.scene.compile import CompiledScene
 
 # Frame buffers are sized to about this many bytes so memory stays flat however long the run.
@@ -118,18 +118,27 @@ class _Stepper:
         )  # fmt: skip
 
 
-def run(compiled: CompiledScene, sinks: Sequence[Sink], *, progress: ProgressCallback | None = None) -> RunSummary:
-    """Integrate the compiled scene, streaming frames to every sink; always closes the sinks."""
+def run(
+    compiled: CompiledScene,
+    sinks: Sequence[Sink],
+    *,
+    progress: ProgressCallback | None = None,
+    threaded: bool = True,
+) -> RunSummary:
+    """Integrate the compiled scene, streaming frames to every sink; always closes the sinks.
+
+    threaded: write the recorded blocks in a background thread (runner.recorder), overlapping the
+    integration; False writes them in this thread. The files are the same either way.
+    """
     from rbcli.physics.adaptive import STATUS_STEP_TOO_SMALL
     from rbcli.physics.forces.impulse import apply_impulses, impulse_step_indices
-    from rbcli.physics.step import STATUS_DIVERGED, empty_buffers
+    from rbcli.physics.step import STATUS_DIVERGED
 
     model, settings = compiled.model, compiled.settings
     kernel = get_integrator(settings.integrator).load()
     state = compiled.initial_state.copy()
     n = model.body_count
     capacity = int(np.clip(BLOCK_BYTES // max(1, 13 * 8 * n), 1, MAX_BLOCK_FRAMES))
-    buf = empty_buffers(capacity, n)
     F, tau = np.zeros((n, 3)), np.zeros((n, 3))
     stepper = _Stepper(compiled, kernel)
     kmodel = stepper.kmodel
@@ -137,16 +146,9 @@ def run(compiled: CompiledScene, sinks: Sequence[Sink], *, progress: ProgressCal
     # impulses change P and L exactly between steps: chunks end at the steps that carry one
     impulse_at = impulse_step_indices(compiled.forces, settings.dt)
 
-    header = run_header(compiled)
-    for sink in sinks:
-        sink.open(header)
-
-    def flush(frames: int) -> None:
-        if frames:
-            block = make_block(compiled, buf.step[:frames], buf.x[:frames], buf.q[:frames], buf.P[:frames],
-                               buf.L[:frames])  # fmt: skip
-            for sink in sinks:
-                sink.write(block)
+    recorder = Recorder(compiled, sinks, capacity, threaded=threaded)
+    recorder.open(run_header(compiled))
+    buf = recorder.buffer()
 
     def record_current(frames: int) -> int:
         buf.step[frames] = state.step
@@ -154,7 +156,14 @@ def run(compiled: CompiledScene, sinks: Sequence[Sink], *, progress: ProgressCal
             getattr(buf, key)[frames] = getattr(state, key)
         return frames + 1
 
-    status, message, recorded = "completed", "", 0
+    def hand_over(frames: int) -> int:
+        """Submit a full buffer and take a fresh one; returns the frames now in the buffer (0)."""
+        nonlocal buf
+        recorder.submit(buf, frames)
+        buf = recorder.buffer()
+        return 0
+
+    status, message = "completed", ""
     try:
         frames = record_current(0)  # the initial state is frame 0
         chunk_steps = max(1, min(total, 64))
@@ -194,9 +203,7 @@ def run(compiled: CompiledScene, sinks: Sequence[Sink], *, progress: ProgressCal
                     )
                     break
                 if frames == capacity:
-                    flush(frames)
-                    recorded += frames
-                    frames = 0
+                    frames = hand_over(frames)
                 if progress is not None:
                     progress(state.step, total)
                 if interrupted.set:
@@ -210,26 +217,27 @@ def run(compiled: CompiledScene, sinks: Sequence[Sink], *, progress: ProgressCal
                 chunk_steps = int(np.clip(rate * CHUNK_SECONDS, max(1, chunk_steps // 4), chunk_steps * 4))
             if status != "diverged" and state.step % every != 0:
                 if frames == capacity:
-                    flush(frames)
-                    recorded += frames
-                    frames = 0
+                    frames = hand_over(frames)
                 frames = record_current(frames)  # always record the final state
-            flush(frames)
-            recorded += frames
+            recorder.submit(buf, frames)
+            recorder.finish()
     except BaseException as exc:  # a failing sink or an unexpected error: still leave readable files
-        summary = RunSummary("error", state.step, recorded, state.step * settings.dt, f"{type(exc).__name__}: {exc}")
-        for sink in sinks:
-            try:
-                sink.close(summary)
-            except Exception:  # noqa: BLE001 - the original error is the one to report
-                pass
+        try:
+            recorder.finish()  # what was handed over is written (a failed sink's own error is the one raised)
+        except BaseException:  # noqa: BLE001
+            pass
+        message = f"{type(exc).__name__}: {exc}"
+        summary = RunSummary("error", state.step, recorder.frames_written, state.step * settings.dt, message)
+        try:
+            recorder.close(summary)
+        except Exception:  # noqa: BLE001 - the original error is the one to report
+            pass
         raise
     counts = stepper.counters
     summary = RunSummary(
-        status, state.step, recorded, state.step * settings.dt, message,
+        status, state.step, recorder.frames_written, state.step * settings.dt, message,
         steps_accepted=None if counts is None else int(counts[0]),
         steps_rejected=None if counts is None else int(counts[1]),
     )  # fmt: skip
-    for sink in sinks:
-        sink.close(summary)
+    recorder.close(summary)
     return summary

@@ -22,6 +22,7 @@ from rbcli.record.read import read_rrd
 from rbcli.record.rerun_sink import (
     SinkRerun,
     body_entity,
+    particle_display_radii,
     particle_display_radius,
     read_rrd_file,
     verify_rrd_command,
@@ -163,3 +164,12 @@ def test_values_beyond_float32_are_written_quietly(tmp_path):
     write_run(SinkRerun(path), header, blocks)
     assert _verify(path).returncode == 0
     assert np.isinf(read_rrd(path).x[-1, 1]).all()
+
+
+def test_batched_display_radii_equal_the_one_cloud_estimate():
+    rng = np.random.default_rng(5)
+    clouds = [rng.normal(size=(n, 3)) for n in (1, 2, 8, 8, 8, 30, 600, 0)]
+    clouds.append(np.vstack([clouds[3], clouds[3][:2]]))  # exact duplicate points
+    clouds.append(np.zeros((4, 3)))  # all points coincide: no finite spacing
+    expected = [particle_display_radius(c, fallback=0.7) if len(c) else 0.7 for c in clouds]
+    assert particle_display_radii(clouds, fallback=0.7).tolist() == pytest.approx(expected, rel=1e-12)

@@ -1,0 +1,118 @@
+"""The recording side of a run: frame buffers in, FrameBlocks out to the sinks, in a background thread.
+
+The runner fills a frame buffer inside the compiled chunk (which releases the GIL), hands it over with
+`submit`, and takes the next free buffer with `buffer`. A recording thread turns each filled buffer into
+a FrameBlock (compiled output derivation, invariants) and writes it to every sink in order, then returns
+the buffer to the pool. So on a machine with a spare core the encoding, compression and file writes of
+one block overlap the integration of the next, instead of adding to it.
+
+- Memory stays flat: `pool` buffers exist; when the writer falls behind, `buffer` waits for one
+  (back-pressure) rather than queueing without bound.
+- Order and content do not depend on threading: blocks are written one at a time, in step order, so
+  files are byte-identical with `threaded=False` (tested).
+- Nothing is lost: `finish` waits until every submitted block is written; the runner calls it on every
+  path (completed, diverged, interrupted, or an exception) before closing the sinks.
+- A sink that raises stops the writing of later blocks; the error is raised in the runner's thread at
+  its next `buffer`, `submit` or `finish`, and every sink is still closed.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+from collections.abc import Sequence
+
+from rbcli.physics.step import FrameBuffers, empty_buffers
+from rbcli.record.frame import RunHeader, RunSummary, Sink
+from rbcli.runner.blocks import make_block
+from rbcli.scene.compile import CompiledScene
+
+# Buffers in flight: one being filled, one being written, one ready; more only adds memory.
+POOL_BUFFERS = 3
+_WAIT_SECONDS = 0.05  # how often a waiting runner re-checks for a recording error
+
+
+class Recorder:
+    """Owns the sinks of a run and the frame buffers the chunks fill (see the module docstring)."""
+
+    def __init__(self, compiled: CompiledScene, sinks: Sequence[Sink], capacity: int, *, threaded: bool = True) -> None:
+        self._compiled = compiled
+        self._sinks = list(sinks)
+        self._threaded = threaded
+        n = compiled.model.body_count
+        self._free: queue.Queue[FrameBuffers] = queue.Queue()
+        for _ in range(POOL_BUFFERS if threaded else 1):
+            self._free.put(empty_buffers(capacity, n))
+        self._todo: queue.Queue[tuple[FrameBuffers, int] | None] = queue.Queue()
+        self._thread: threading.Thread | None = None
+        self._error: BaseException | None = None
+        self.frames_written = 0
+
+    def open(self, header: RunHeader) -> None:
+        """Open every sink (here, so a sink that cannot open fails the run before it starts)."""
+        for sink in self._sinks:
+            sink.open(header)
+        if self._threaded:
+            self._thread = threading.Thread(target=self._work, name="rbsim-recorder", daemon=True)
+            self._thread.start()
+
+    def buffer(self) -> FrameBuffers:
+        """A free frame buffer to fill; waits while all are being written."""
+        while True:
+            self._raise_if_failed()
+            try:
+                return self._free.get(timeout=_WAIT_SECONDS)
+            except queue.Empty:
+                continue
+
+    def submit(self, buffers: FrameBuffers, frames: int) -> None:
+        """Hand over the first `frames` frames of a buffer; the buffer must not be touched afterwards."""
+        self._raise_if_failed()
+        if frames == 0:
+            self._free.put(buffers)
+        elif self._thread is not None:
+            self._todo.put((buffers, frames))
+        else:
+            self._write(buffers, frames)
+            self._free.put(buffers)
+
+    def finish(self) -> None:
+        """Wait until every submitted block is written; raise the error of a sink that failed."""
+        if self._thread is not None:
+            self._todo.put(None)
+            self._thread.join()
+            self._thread = None
+        self._raise_if_failed()
+
+    def close(self, summary: RunSummary) -> None:
+        """Close every sink (each one, even when another fails); raise the first failure afterwards."""
+        failure: BaseException | None = None
+        for sink in self._sinks:
+            try:
+                sink.close(summary)
+            except Exception as exc:  # noqa: BLE001 - the others must still close
+                failure = failure or exc
+        if failure is not None:
+            raise failure
+
+    def _write(self, buffers: FrameBuffers, frames: int) -> None:
+        b = buffers
+        block = make_block(self._compiled, b.step[:frames], b.x[:frames], b.q[:frames], b.P[:frames], b.L[:frames])
+        for sink in self._sinks:
+            sink.write(block)
+        self.frames_written += frames
+
+    def _work(self) -> None:
+        while (item := self._todo.get()) is not None:
+            buffers, frames = item
+            try:
+                if self._error is None:
+                    self._write(buffers, frames)
+            except BaseException as exc:  # noqa: BLE001 - handed to the runner's thread
+                self._error = exc
+            finally:
+                self._free.put(buffers)
+
+    def _raise_if_failed(self) -> None:
+        if self._error is not None:
+            raise self._error
