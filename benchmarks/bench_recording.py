@@ -2,10 +2,12 @@
 
 Run on demand:  python benchmarks/bench_recording.py [--bodies 1000] [--frames 1000] [--step-us 30]
 
-The blocks come from a cheap analytic stand-in for the runner (bodies on circles, spinning about fixed
-axes: smooth like real trajectories, so compression sees realistic data); the lead will swap in the
-real runner. Each sink is timed from open() to the end of close(), so background work that must
-finish before the file is complete (zstd chunks, Rerun's encoder thread, footers) is included.
+This isolates the sinks: the blocks come from a cheap analytic stand-in for the runner (bodies on
+circles, spinning about fixed axes: smooth like real trajectories, so compression sees realistic data),
+written in the calling thread. The whole path (the runner, its recording thread, each sink) against a
+run without recording is the recording section of `benchmarks/bench_speed.py`. Each sink is timed from
+open() to the end of close(), so background work that must finish before the file is complete (zstd
+chunks, Rerun's encoder thread, footers) is included.
 
 Wall times on a shared machine swing with its load; the `cpu us/fr` column (process CPU time, all
 threads) is the steadier measure of what a sink costs.
