@@ -313,14 +313,14 @@ class SinkMcap:
         self._invariant_names = tuple(header.invariant_names)
         self._ch_state = self._channel(TOPIC_STATE, state_file_proto())
         self._ch_tf = self._channel(TOPIC_TF, FrameTransforms)
-        self._ch_inv = None
+        self._ch_inv: int | None = None
         if self._invariant_names:
             fdp = invariants_file_proto(self._invariant_names)
             self._inv_class = message_class(fdp)
             self._inv_fields = invariant_field_names(self._invariant_names)
             meta = {"invariant_names": json.dumps(list(self._invariant_names))}
             self._ch_inv = self._channel(TOPIC_INVARIANTS, fdp, meta)
-        self._ch_particles = None
+        self._ch_particles: int | None = None
         w.add_metadata(METADATA_RUN, run_metadata(header))
         w.add_attachment(0, 0, SCENE_ATTACHMENT, "application/yaml", header.scene_text.encode())
         for name, offsets in zip(header.body_names, header.body_particle_offset, strict=True):
@@ -366,7 +366,7 @@ class SinkMcap:
             seq = steps[k] & 0xFFFFFFFF
             self._add(self._ch_state, ns[k], states[k], seq)
             self._add(self._ch_tf, ns[k], tfs[k], seq)
-            if inv is not None:
+            if inv is not None and self._ch_inv is not None:
                 self._add(self._ch_inv, ns[k], inv[k], seq)
             if particles is not None and self._ch_particles is not None:
                 cloud = _point_cloud(particles[k], WORLD_FRAME, ns[k]).SerializeToString()
@@ -430,6 +430,8 @@ def read_mcap_contents(path: str | Path) -> McapContents:
             raise ValueError(f"not a complete MCAP file, was it cut short? ({exc})") from exc
         if summary is None:
             raise ValueError("the MCAP file has no summary section (was the recording cut short?)")
+        if summary.statistics is None:
+            raise ValueError("the MCAP file has no statistics record (message counts); was it written without them?")
         topics = {ch.id: ch.topic for ch in summary.channels.values()}
         counts = {topics[cid]: int(n) for cid, n in summary.statistics.channel_message_counts.items()}
         metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}

@@ -176,7 +176,8 @@ class SinkRerun:
         rec.save(self.path, default_blueprint=default_blueprint(header.invariant_names))
         rec.send_recording_name(header.scene_name)
         props = run_properties(header)
-        rec.send_property("rbsim", rr.AnyValues(**props))
+        # drop_untyped_nones given by name (its default), so mypy does not match **props (str values) against it
+        rec.send_property("rbsim", rr.AnyValues(drop_untyped_nones=True, **props))
         rec.log("scene", rr.TextDocument(header.scene_text, media_type=rr.MediaType.TEXT), static=True)
         rec.log("run", rr.TextDocument(_markdown_table(props), media_type=rr.MediaType.MARKDOWN), static=True)
         rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
@@ -292,8 +293,8 @@ class SinkRerun:
             self._rec.send_columns(f"invariants/{name}", indexes=times, columns=rr.Scalars.columns(scalars=values))
         if all(p["particles"] is not None for p in pending):
             pp = np.concatenate([p["particles"] for p in pending], axis=0)
-            cols = rr.Points3D.columns(positions=pp.reshape(-1, 3)).partition(np.full(k_count, pp.shape[1]))
-            self._rec.send_columns("particles", indexes=times, columns=cols)
+            points = rr.Points3D.columns(positions=pp.reshape(-1, 3)).partition(np.full(k_count, pp.shape[1]))
+            self._rec.send_columns("particles", indexes=times, columns=points)
         self.frames_written += k_count
 
     def close(self, summary: RunSummary) -> None:
@@ -327,7 +328,7 @@ class SinkRerun:
                 "t_end": repr(float(summary.t_end)),
                 "message": summary.message,
             }
-            rec.send_property("rbsim.summary", rr.AnyValues(**ending))
+            rec.send_property("rbsim.summary", rr.AnyValues(drop_untyped_nones=True, **ending))
             rec.log("summary", rr.TextDocument(_markdown_table(ending), media_type=rr.MediaType.MARKDOWN), static=True)
         finally:
             rec.flush()

@@ -10,6 +10,8 @@ import signal
 import threading
 import time
 from collections.abc import Callable, Sequence
+from types import FrameType
+from typing import Any
 
 import numpy as np
 
@@ -57,7 +59,7 @@ class _InterruptFlag:
 
     def __init__(self) -> None:
         self.set = False
-        self._previous = None
+        self._previous: Callable[[int, FrameType | None], Any] | int | None = None  # the handler to restore
 
     def __enter__(self) -> _InterruptFlag:
         if threading.current_thread() is threading.main_thread():

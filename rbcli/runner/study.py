@@ -495,6 +495,7 @@ def run_adaptive(
     adaptive = dataclasses.replace(compiled, settings=dataclasses.replace(compiled.settings, tolerance=tolerance))
     traj = _simulate(adaptive)
     summary = traj.summary
+    assert summary is not None, "run() closes every sink with a summary when it returns"
     counts = int(summary.steps_accepted or 0), int(summary.steps_rejected or 0)
     return (traj if trajectory else None), *counts
 

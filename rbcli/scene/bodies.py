@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 
@@ -61,14 +61,24 @@ def _cell_volume(spacing: float) -> float:
         return float(s * s * s)
 
 
+@overload
+def _read_only(a: np.ndarray) -> np.ndarray: ...
+@overload
+def _read_only(a: None) -> None: ...
 def _read_only(a: np.ndarray | None) -> np.ndarray | None:
     if a is not None:
         a.flags.writeable = False
     return a
 
 
-def _vec(value: Any) -> np.ndarray | None:
-    return None if value is None else _read_only(np.asarray(value, dtype=float).reshape(3))
+def _vec(value: Any) -> np.ndarray:
+    """A read-only float (3,) vector from three numbers."""
+    return _read_only(np.asarray(value, dtype=float).reshape(3))
+
+
+def _optional_vec(value: Any) -> np.ndarray | None:
+    """`_vec`, or None for an entry left out."""
+    return None if value is None else _vec(value)
 
 
 class BodyResolver:
@@ -197,7 +207,7 @@ class BodyResolver:
             if isinstance(w, dict):
                 frame = "body" if "body" in w else "world"
                 w = w[frame]
-            angular_velocity = _vec(w)
+            angular_velocity = _optional_vec(w)
         return BodySpec(
             name="",
             particle_position=_read_only(cloud.position),
@@ -205,8 +215,8 @@ class BodyResolver:
             position=_vec([0.0, 0.0, 0.0]),
             orientation_wxyz=q,
             particle_radius=_read_only(cloud.radius),
-            velocity=_vec(entry.get("velocity")),
-            momentum=_vec(entry.get("momentum")),
+            velocity=_optional_vec(entry.get("velocity")),
+            momentum=_optional_vec(entry.get("momentum")),
             angular_momentum=(
                 self._angular_momentum(entry["angular_momentum"], q) if "angular_momentum" in entry else None
             ),
@@ -382,7 +392,9 @@ class BodyResolver:
 
     def _compound(self, entry: dict[str, Any], path: YamlPath, spacing: float) -> ParticleCloud | None:
         """Parts placed by offset and orientation; masses from part mass/density, body density, or body mass."""
-        positions, masses, radii = [], [], []
+        positions: list[np.ndarray] = []
+        masses: list[np.ndarray] = []
+        radii: list[np.ndarray] = []
         unspecified: list[int] = []  # parts whose particle masses come from the body's mass
         has_radius = False
         ok = True
@@ -409,10 +421,11 @@ class BodyResolver:
                 radius = np.zeros(len(points)) if radius is None else radius
             else:
                 kind = "shape" if "shape" in part else "mesh"
-                points = self._sample(part[kind], kind, (*ppath, kind), spacing)
-                if points is None or q is None:
+                sampled = self._sample(part[kind], kind, (*ppath, kind), spacing)
+                if sampled is None or q is None:
                     ok = False
                     continue
+                points = sampled
                 has_radius = True
                 radius = np.full(len(points), 0.5 * spacing)
                 if "mass" in part:
@@ -446,9 +459,9 @@ class BodyResolver:
                     key=True,
                 )
                 return None
-            n_unspecified = sum(len(masses[k]) for k in unspecified)
-            for k in unspecified:
-                masses[k] = np.full(len(masses[k]), float(entry["mass"]) / n_unspecified)
+            n_unspecified = sum(len(masses[j]) for j in unspecified)
+            for j in unspecified:
+                masses[j] = np.full(len(masses[j]), float(entry["mass"]) / n_unspecified)
         return ParticleCloud(
             np.concatenate(positions), np.concatenate(masses), np.concatenate(radii) if has_radius else None
         )

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -148,6 +149,19 @@ def _array(value: object) -> np.ndarray | None:
     return None if value is None else np.asarray(value, dtype=np.float64)
 
 
+def _required(entry: dict, key: str, default: object = None) -> Any:
+    """entry[key] (or `default` when absent), which this force type needs; ValueError when missing or null."""
+    value = entry.get(key, default)
+    if value is None:
+        raise ValueError(f"force {entry.get('type')!r}: missing required key {key!r}")
+    return value
+
+
+def _vector(entry: dict, key: str, default: object = None) -> np.ndarray:
+    """A required array entry (a vector or matrix) as float64."""
+    return np.asarray(_required(entry, key, default), dtype=np.float64)
+
+
 def _bodies(value: object) -> tuple[str, ...] | None:
     if value is None or value == "all":
         return None
@@ -178,16 +192,17 @@ def force_spec_from_mapping(entry: dict, location: SourceLocation | None = None)
     if unknown:
         raise ValueError(f"force {kind!r}: unknown keys {sorted(unknown)}; allowed: {sorted(_KEYS[kind])}")
     get = entry.get
-    schedule = schedule_from_mapping(get("schedule")) if get("schedule") is not None else None
+    schedule_entry = get("schedule")
+    schedule = schedule_from_mapping(schedule_entry) if schedule_entry is not None else None
 
     def at() -> BodyPoint:
-        return BodyPoint(body=get("body"), point=_array(get("point")), particle=get("particle"))
+        return BodyPoint(body=_required(entry, "body"), point=_array(get("point")), particle=get("particle"))
 
     if kind == "spring":
         common = dict(stiffness=get("stiffness", 0.0), rest_length=get("rest_length", 0.0),
                       damping=get("damping", 0.0), location=location)  # fmt: skip
         if "bodies" in entry:
-            names = list(get("bodies"))
+            names = list(_required(entry, "bodies"))
             points = list(get("points") or [None, None])
             particles = list(get("particles") or [None, None])
             if not (len(names) == len(points) == len(particles) == 2):
@@ -197,17 +212,17 @@ def force_spec_from_mapping(entry: dict, location: SourceLocation | None = None)
             return ForceSpring(end_a=ends[0], end_b=ends[1], **common)
         return ForceSpring(end_a=at(), anchor=_array(get("anchor")), **common)
     if kind == "force":
-        return ForceAtPoint(at=at(), vector=_array(get("vector")), frame=get("frame", "world"), schedule=schedule,
+        return ForceAtPoint(at=at(), vector=_vector(entry, "vector"), frame=get("frame", "world"), schedule=schedule,
                             location=location)  # fmt: skip
     if kind == "torque":
-        return ForceTorque(body=get("body"), vector=_array(get("vector")), frame=get("frame", "world"),
-                           schedule=schedule, location=location)  # fmt: skip
+        return ForceTorque(body=_required(entry, "body"), vector=_vector(entry, "vector"),
+                           frame=get("frame", "world"), schedule=schedule, location=location)  # fmt: skip
     if kind == "drag":
         coefficients = {k: float(get(k, 0.0)) for k in ("linear", "quadratic", "angular_linear", "angular_quadratic")}
         return ForceDrag(bodies=_bodies(get("bodies")), location=location, **coefficients)
     if kind == "impulse":
-        return ForceImpulse(at=at(), time=get("time"), vector=_array(get("vector")), frame=get("frame", "world"),
-                            location=location)  # fmt: skip
-    return ForceField(per=get("per", "mass"), bodies=_bodies(get("bodies")), value=_array(get("value", [0, 0, 0])),
+        return ForceImpulse(at=at(), time=_required(entry, "time"), vector=_vector(entry, "vector"),
+                            frame=get("frame", "world"), location=location)  # fmt: skip
+    return ForceField(per=get("per", "mass"), bodies=_bodies(get("bodies")), value=_vector(entry, "value", [0, 0, 0]),
                       gradient=_array(get("gradient")), origin=_array(get("origin")), schedule=schedule,
                       location=location)  # fmt: skip

@@ -11,6 +11,7 @@ of the spacing so a line never passes exactly through a mesh edge or vertex (whi
 from __future__ import annotations
 
 from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 
@@ -25,10 +26,7 @@ def read_mesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
     """Vertices [mesh units], shape (v, 3), and triangles as vertex indices, shape (f, 3)."""
     if not path.is_file():
         raise MeshError(f"mesh file '{path}' does not exist")
-    try:
-        import trimesh
-    except ImportError:
-        trimesh = None
+    trimesh = _trimesh()
     if trimesh is None:
         if path.suffix.lower() != ".obj":
             raise MeshError(f"cannot read '{path.name}': only .obj meshes are supported without trimesh installed")
@@ -42,6 +40,15 @@ def read_mesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
     if len(faces) == 0:
         raise MeshError(f"mesh file '{path.name}' holds no triangles")
     return vertices, faces
+
+
+def _trimesh() -> ModuleType | None:
+    """The trimesh module, or None when it is not installed (it is optional)."""
+    try:
+        import trimesh
+    except ImportError:
+        return None
+    return trimesh
 
 
 def _read_obj(path: Path) -> tuple[np.ndarray, np.ndarray]:

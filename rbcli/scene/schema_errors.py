@@ -10,6 +10,7 @@ dropped.
 from __future__ import annotations
 
 from collections import defaultdict
+from collections.abc import Set as AbstractSet
 from dataclasses import dataclass
 from typing import Any
 
@@ -70,7 +71,7 @@ class SchemaErrorFormatter:
         self.root = root_schema
         self.collector = collector
 
-    def report(self, errors: list[ValidationError], skip_paths: set[YamlPath] = frozenset()) -> set[YamlPath]:
+    def report(self, errors: list[ValidationError], skip_paths: AbstractSet[YamlPath] = frozenset()) -> set[YamlPath]:
         """Add an issue per error (skipping errors at `skip_paths`); returns the paths with issues."""
         found: list[_Found] = []
         for error in errors:
@@ -230,7 +231,7 @@ class SchemaErrorFormatter:
         return found
 
     def _on_type(self, path, value, instance, schema, error) -> list[_Found]:
-        kinds = value if isinstance(value, list) else [value]
+        kinds: list[str] = value if isinstance(value, list) else [value]  # the schema's `type`: one name or a list
         expected = " or ".join(_JSON_TYPE_NAMES.get(k, k) for k in kinds)
         desc = _first_sentence(schema.get("description", ""))
         return [
