@@ -4,7 +4,8 @@
 
 Scenes (all with gravity; bodies of 4 particles, the tutorial's handle):
   gravity        gravity only
-  +1 spring      the same plus one spring on one body (the other bodies must not notice)
+  +1 spring      the same plus one off-centre spring on one body (the other bodies must not notice: only
+                 that body can receive a torque, so only it takes the integrator's torque path)
   +field all     the same plus a per-particle force field on every body (every particle, every step)
   +drag all      the same plus linear + quadratic drag on every body
 Timing: the integrator's compiled `run_chunk` over `--steps` steps (no frame due, so nothing is copied),

@@ -108,7 +108,8 @@ def torque_scene(integrator: str, dt: float, duration: float):  # noqa: ANN201
     compiled = prepare(scene(*GENERIC, integrator, dt, duration, every=max(1, round(0.05 / dt)), gravity=G))
     spring = spring_table(body_a=[0], point_a=[[0.4, 0.3, 0.2]], body_b=[WORLD], point_b=[[0.0, 0.0, 1.0]],
                           stiffness=[40.0], rest_length=[0.5], damping=[0.0])  # fmt: skip
-    return dataclasses.replace(compiled, forces=build_force_tables(G, spring=spring))
+    forces = build_force_tables(G, body_count=compiled.model.body_count, spring=spring)
+    return dataclasses.replace(compiled, forces=forces)
 
 
 def run_compiled(compiled):  # noqa: ANN001, ANN201
@@ -161,7 +162,8 @@ def transient_scene(integrator: str, dt: float, duration: float):  # noqa: ANN20
                           stiffness=[k], rest_length=[0.0], damping=[c])  # fmt: skip
     state = compiled.initial_state
     state.x[0] = [0.5, 0.0, 0.0]
-    return dataclasses.replace(compiled, forces=build_force_tables(None, spring=spring)), omega_n, zeta
+    forces = build_force_tables(None, body_count=compiled.model.body_count, spring=spring)
+    return dataclasses.replace(compiled, forces=forces), omega_n, zeta
 
 
 def transient_error(t, q, x, omega_n, zeta):  # noqa: ANN001, ANN201

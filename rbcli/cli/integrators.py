@@ -71,7 +71,7 @@ def measure_cost(name: str, body_count: int, steps: int, *, repeats: int = 3, se
     q = rng.normal(size=(body_count, 4))
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     x, P, L = (rng.normal(size=(body_count, 3)) for _ in range(3))
-    forces = build_force_tables(np.array([0.0, 0.0, -9.81]))
+    forces = build_force_tables(np.array([0.0, 0.0, -9.81]), body_count=body_count)
     kmodel = model.kernel()
     F, tau = np.zeros((body_count, 3)), np.zeros((body_count, 3))
     scratch = np.zeros((body_count, kernel.SCRATCH_WIDTH))

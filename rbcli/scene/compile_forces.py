@@ -286,6 +286,7 @@ class _TableBuilder:
     def tables(self, gravity: np.ndarray | None) -> ForceTables:
         return build_force_tables(
             gravity,
+            body_count=self.model.body_count,
             schedule=schedule_table(**self.schedule),
             field=field_table(**self.field),
             point_force=point_force_table(**self.point_force),

@@ -87,7 +87,8 @@ def _spring_scene(integrator, dt, duration=5.0):
     compiled = prepare(case_scene(GENERIC, integrator, dt, duration, every=round(duration / dt)))
     spring = spring_table(body_a=[0], point_a=[[0.4, 0.3, 0.2]], body_b=[WORLD], point_b=[[0.0, 0.0, 1.0]],
                           stiffness=[40.0], rest_length=[0.5], damping=[0.0])  # fmt: skip
-    compiled = dataclasses.replace(compiled, forces=build_force_tables(G, spring=spring))
+    forces = build_force_tables(G, body_count=compiled.model.body_count, spring=spring)
+    compiled = dataclasses.replace(compiled, forces=forces)
     memory = SinkMemory()
     run(compiled, [memory])
     return memory.trajectory()

@@ -102,7 +102,8 @@ def _transient(dt, duration=10.0):
     spring = spring_table(body_a=[0], point_a=[[0.0, 0.0, 0.0]], body_b=[WORLD], point_b=[[0.0, 0.0, 0.0]],
                           stiffness=[k], rest_length=[0.0], damping=[c])  # fmt: skip
     compiled.initial_state.x[0] = [0.5, 0.0, 0.0]
-    return dataclasses.replace(compiled, forces=build_force_tables(None, spring=spring)), omega_n, zeta
+    forces = build_force_tables(None, body_count=compiled.model.body_count, spring=spring)
+    return dataclasses.replace(compiled, forces=forces), omega_n, zeta
 
 
 def _transient_error(t, q, x, omega_n, zeta):

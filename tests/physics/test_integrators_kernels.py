@@ -18,11 +18,21 @@ G = np.array([0.0, 0.0, -9.81])
 BODY_COUNT = 5
 
 
-def _forces(with_torque: bool):
-    """Gravity alone (torque-free path), or gravity + springs at off-centre points (one body-to-body) +
-    linear and angular drag: forces that depend on x, q, P and L, with torques."""
-    if not with_torque:
-        return build_force_tables(G)
+def _forces(kind: str):
+    """ "torque-free": gravity alone; "springs-drag": gravity + springs at off-centre points (one
+    body-to-body) + linear and angular drag, forces that depend on x, q, P and L, with torques on every
+    body; "mixed": gravity + one off-centre spring on body 0, a centred spring on body 1 and linear drag
+    on body 3, so only body 0 takes the torque path (the numpy twin applies tau to every body)."""
+    if kind == "torque-free":
+        return build_force_tables(G, body_count=BODY_COUNT)
+    if kind == "mixed":
+        spring = spring_table(
+            body_a=[0, 1], point_a=[[0.3, -0.2, 0.1], [0.0, 0.0, 0.0]], body_b=[WORLD, WORLD],
+            point_b=[[0.0, 0.0, 2.0], [1.0, 0.0, 0.0]], stiffness=[30.0, 20.0], rest_length=[0.5, 0.2],
+            damping=[0.5, 0.1],
+        )  # fmt: skip
+        drag = drag_table(body=[3], linear=[0.3], quadratic=[0.05], angular_linear=[0.0], angular_quadratic=[0.0])
+        return build_force_tables(G, body_count=BODY_COUNT, spring=spring, drag=drag)
     spring = spring_table(
         body_a=[0, 1, 3], point_a=[[0.3, -0.2, 0.1], [0.0, 0.4, 0.0], [0.1, 0.1, -0.2]],
         body_b=[WORLD, 2, WORLD], point_b=[[0.0, 0.0, 2.0], [0.2, 0.0, 0.1], [1.0, 1.0, 0.0]],
@@ -30,18 +40,24 @@ def _forces(with_torque: bool):
     )  # fmt: skip
     drag = drag_table(body=[2, 4], linear=[0.3, 0.1], quadratic=[0.05, 0.0], angular_linear=[0.02, 0.1],
                       angular_quadratic=[0.0, 0.01])  # fmt: skip
-    return build_force_tables(G, spring=spring, drag=drag)
+    return build_force_tables(G, body_count=BODY_COUNT, spring=spring, drag=drag)
 
 
-@pytest.mark.parametrize("with_torque", [False, True], ids=["torque-free", "springs-drag"])
+TORQUE_BODIES = {"torque-free": [], "springs-drag": [0, 1, 2, 3, 4], "mixed": [0]}
+
+
+@pytest.mark.parametrize("kind", list(TORQUE_BODIES))
 @pytest.mark.parametrize("name", list(INTEGRATORS))
-def test_compiled_step_matches_numpy_reference(name, with_torque):
+def test_compiled_step_matches_numpy_reference(name, kind):
     """30 steps of 5 random bodies: the compiled kernel and the vectorised numpy reference agree to
-    1e-12 (the same arithmetic in a different order; the state is O(1))."""
+    1e-12 (the same arithmetic in a different order; the state is O(1)). The compiled kernels take the
+    torque path only for the bodies torque_body flags, the references for all: a body wrongly left
+    unflagged would lose its torque here."""
     kernel = get_integrator(name).load()
     compiled = prepare(make_scene(random_bodies(BODY_COUNT, seed=3)))
-    forces = _forces(with_torque)
-    assert forces.has_torque == with_torque
+    forces = _forces(kind)
+    assert np.flatnonzero(forces.torque_body).tolist() == TORQUE_BODIES[kind]
+    assert forces.has_torque == bool(TORQUE_BODIES[kind])
     kmodel = compiled.model.kernel()
     a, b = compiled.initial_state.copy(), compiled.initial_state.copy()
     F, tau = np.zeros((BODY_COUNT, 3)), np.zeros((BODY_COUNT, 3))
@@ -60,7 +76,7 @@ def test_chunk_loop_equals_repeated_steps(name):
     """`run_chunk` (what the runner calls) is exactly the step repeated, with frames recorded on cadence."""
     kernel = get_integrator(name).load()
     compiled = prepare(make_scene(random_bodies(3, seed=1)))
-    kmodel, forces = compiled.model.kernel(), _forces(False)
+    kmodel, forces = compiled.model.kernel(), _forces("torque-free")
     a, b = compiled.initial_state.copy(), compiled.initial_state.copy()
     F, tau, scratch = np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, kernel.SCRATCH_WIDTH))
     frames = empty_buffers(4, 3)

@@ -4,7 +4,8 @@ Force types are data: `ForceTables` holds one parameter table per type (`tables.
 when the scene does not use it, so the compiled step does no work for terms a scene does not have,
 and a table lists only the bodies its terms touch. Adding a force type = one module here with a
 compiled `accumulate_*` kernel (+ numpy reference and, when conservative, a potential energy), one
-table in `tables.py`, and one line each in `accumulate_wrench`, `wrench_numpy`, `potential_energy`.
+table in `tables.py`, and one line each in `accumulate_wrench`, `wrench_numpy`, `potential_energy`
+(and, when it can produce a torque, in `terms_with_torque` and `bodies_with_torque`).
 
 Modules: gravity (uniform, at the centre of mass), field (per-particle force or acceleration field),
 point_force (force at a body point), torque (pure couple), spring (spring-damper to a world anchor or
@@ -14,6 +15,8 @@ This package's `__init__` and `tables.py` import numpy only; the kernel modules 
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 
@@ -51,6 +54,7 @@ __all__ = [
     "ScheduleTable",
     "SpringTable",
     "TorqueTable",
+    "bodies_with_torque",
     "build_force_tables",
     "force_terms_present",
     "terms_with_torque",
@@ -60,6 +64,7 @@ __all__ = [
 def build_force_tables(
     gravity: np.ndarray | None,
     *,
+    body_count: int,
     schedule: ScheduleTable | None = None,
     field: FieldTable | None = None,
     point_force: PointForceTable | None = None,
@@ -68,10 +73,11 @@ def build_force_tables(
     drag: DragTable | None = None,
     impulse: ImpulseTable | None = None,
 ) -> ForceTables:
-    """Tables for a scene's force terms from plain tables (a missing table = 0 rows).
+    """Tables for a scene of body_count bodies from plain tables (a missing table = 0 rows).
 
     `rbcli.scene.compile_forces` builds the tables from a scene's force specs; this function only
-    assembles them and derives the switches has_gravity and has_torque.
+    assembles them, checks that every row names a body in range, and derives the switches
+    has_gravity, has_torque and the per-body torque_body (`bodies_with_torque`).
     """
     g = np.zeros(3) if gravity is None else np.asarray(gravity, dtype=np.float64).copy()
     g.setflags(write=False)
@@ -84,10 +90,13 @@ def build_force_tables(
         drag=drag if drag is not None else drag_table(),
         impulse=impulse if impulse is not None else impulse_table(),
     )
+    _check_bodies(body_count, **tables)
+    torque_body = bodies_with_torque(body_count, **tables)
     return ForceTables(
         gravity=g,
         has_gravity=gravity is not None and bool(np.any(g != 0.0)),
-        has_torque=bool(terms_with_torque(**tables)),
+        has_torque=bool(torque_body.any()),
+        torque_body=torque_body,
         term_evaluations=np.zeros(len(TERM_NAMES), dtype=np.int64),
         **tables,
     )
@@ -120,6 +129,49 @@ def terms_with_torque(
     if np.any(drag.angular_linear != 0.0) or np.any(drag.angular_quadratic != 0.0):
         names.append("drag")
     return tuple(names)
+
+
+def bodies_with_torque(
+    body_count: int,
+    *,
+    field: FieldTable,
+    point_force: PointForceTable,
+    torque: TorqueTable,
+    spring: SpringTable,
+    drag: DragTable,
+    **_: object,
+) -> np.ndarray:
+    """bool (body_count,), read-only: True for each body that some row can give a torque; the
+    per-body form of `terms_with_torque` (same rules), so has_torque == torque_body.any().
+
+    Conservative: a row flags its body whatever its schedule, strength or the state (a scheduled
+    torque that is off for now, a zero vector, a field that happens to be uniform). A field row always
+    flags (tau = sum r_i x F_i; even a uniform per-mass field gives round-off torques); a point force
+    or spring end flags only when its point is off the centre of mass (r = 0 gives tau = 0 x f = 0
+    exactly); drag only with an angular coefficient. A body that no row flags gets tau = 0 exactly,
+    so an integrator may skip its torque path with bitwise the same result. Impulses flag nothing:
+    they change L between steps, never through tau.
+    """
+    flag = np.zeros(body_count, dtype=np.bool_)
+    flag[field.body] = True
+    flag[point_force.body[np.any(point_force.point != 0.0, axis=1)]] = True
+    flag[torque.body] = True
+    flag[spring.body_a[np.any(spring.point_a != 0.0, axis=1)]] = True
+    flag[spring.body_b[(spring.body_b >= 0) & np.any(spring.point_b != 0.0, axis=1)]] = True
+    flag[drag.body[(drag.angular_linear != 0.0) | (drag.angular_quadratic != 0.0)]] = True
+    flag.setflags(write=False)
+    return flag
+
+
+def _check_bodies(body_count: int, **tables: NamedTuple) -> None:
+    """ValueError unless every row's body index is in [0, body_count) (a spring's body_b may be WORLD):
+    the kernels index per-body arrays with them unchecked."""
+    columns = {name: table.body for name, table in tables.items() if hasattr(table, "body")}
+    columns["spring body_a"] = tables["spring"].body_a
+    columns["spring body_b"] = tables["spring"].body_b[tables["spring"].body_b != WORLD]
+    for name, body in columns.items():
+        if body.size and (body.min() < 0 or body.max() >= body_count):
+            raise ValueError(f"{name} table names body {body.min()}..{body.max()}, outside 0..{body_count - 1}")
 
 
 def force_terms_present(forces: ForceTables) -> tuple[str, ...]:

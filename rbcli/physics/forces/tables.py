@@ -132,7 +132,12 @@ class ForceTables(NamedTuple):
     gravity: uniform field [m/s^2], (3,), world; acts at the centre of mass, so no torque.
     has_gravity: False when the scene has no gravity (the term is skipped).
     has_torque: False when no term can produce a torque: integrators may skip the torque kick, and
-      the wrench leaves tau untouched (all zeros).
+      the wrench leaves tau untouched (all zeros). Equal to torque_body.any().
+    torque_body: bool (body_count,): True for a body that some term can give a torque (a field row,
+      a point force or spring end off its centre of mass, a pure torque, angular drag). Integrators
+      run their torque path (L += h tau, the body-frame torque in Euler's equations) only for these
+      bodies; every other body's tau is exactly zero, so skipping it changes nothing. Impulses act
+      on L between steps, not through tau, so they flag nothing.
     term_evaluations: int64 (len(TERM_NAMES),), a diagnostic counter (Rapier's stage counters): each
       evaluation of a term adds the rows (field: particles; impulse: impulses applied) it processed.
       It accumulates over runs of the same tables; reset with `term_evaluations[:] = 0`.
@@ -141,6 +146,7 @@ class ForceTables(NamedTuple):
     gravity: np.ndarray
     has_gravity: bool
     has_torque: bool
+    torque_body: np.ndarray
     schedule: ScheduleTable
     field: FieldTable
     point_force: PointForceTable

@@ -31,7 +31,8 @@ from rbcli.physics.step import STEP_KERNEL
 @numba.njit(**STEP_KERNEL)
 def accumulate_wrench(model, forces, t, x, q, P, L, F, tau) -> None:  # noqa: ANN001 - numba types
     """Set F [N] and tau [N m] (body_count, 3), world frame, about each centre of mass, to the sum of the
-    scene's force terms at time t [s]. tau is left untouched (zero) when forces.has_torque is False."""
+    scene's force terms at time t [s]. tau is left untouched (zero) when forces.has_torque is False;
+    otherwise it is exactly zero for every body that forces.torque_body does not flag."""
     F[:, :] = 0.0
     if forces.has_torque:
         tau[:, :] = 0.0

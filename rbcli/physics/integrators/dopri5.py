@@ -58,7 +58,7 @@ def step(model, forces, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: AN
 def begin(model, forces, t, x, q, P, L, F, tau, work) -> None:  # noqa: ANN001
     """Save y0 = the current state and its rates k_1 = f(t, y0) into work (one wrench evaluation)."""
     accumulate_wrench(model, forces, t, x, q, P, L, F, tau)
-    _stage_pass(model, forces.has_torque, 0, True, True, 0.0, x, q, P, L, F, tau, work)
+    _stage_pass(model, forces.has_torque, forces.torque_body, 0, True, True, 0.0, x, q, P, L, F, tau, work)
 
 
 @numba.njit(cache=True)
@@ -67,7 +67,7 @@ def advance(model, forces, t, h, x, q, P, L, F, tau, work) -> None:  # noqa: ANN
     _combine(model, 1, h, x, q, P, L, work)
     for i in range(1, 6):
         accumulate_wrench(model, forces, t + C[i] * h, x, q, P, L, F, tau)
-        _stage_pass(model, forces.has_torque, i, False, False, h, x, q, P, L, F, tau, work)
+        _stage_pass(model, forces.has_torque, forces.torque_body, i, False, False, h, x, q, P, L, F, tau, work)
 
 
 @numba.njit(cache=True)
@@ -78,7 +78,7 @@ def error_norm(model, forces, t, h, tolerance, x, q, P, L, F, tau, work) -> floa
     (Hairer-Norsett-Wanner's mixed absolute/relative scale with atol = rtol = tolerance). Accept <= 1.
     """
     accumulate_wrench(model, forces, t + h, x, q, P, L, F, tau)
-    _stage_pass(model, forces.has_torque, 6, True, False, h, x, q, P, L, F, tau, work)
+    _stage_pass(model, forces.has_torque, forces.torque_body, 6, True, False, h, x, q, P, L, F, tau, work)
     worst = 0.0
     for b in range(x.shape[0]):
         s = work[b]
@@ -130,9 +130,10 @@ def restore(x, q, P, L, work) -> None:  # noqa: ANN001
 
 
 @numba.njit(cache=True)
-def _stage_pass(model, has_torque, i, from_state, save, h, x, q, P, L, F, tau, work) -> None:  # noqa: ANN001
+def _stage_pass(model, has_torque, torque_body, i, from_state, save, h, x, q, P, L, F, tau, work) -> None:  # noqa: ANN001
     """k_i = f at the state in the arrays (m = R^T L when from_state, else the stage m in work);
-    save: also store the state as y0. Then, for i < 6 and not from_state, build stage i + 1."""
+    save: also store the state as y0. Then, for i < 6 and not from_state, build stage i + 1.
+    tau is read only for the bodies torque_body flags (the others' tau is 0: their rates get 0)."""
     for b in range(x.shape[0]):
         s = work[b]
         w, qx, qy, qz = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
@@ -144,13 +145,14 @@ def _stage_pass(model, has_torque, i, from_state, save, h, x, q, P, L, F, tau, w
         dw, dx, dy, dz, dm0, dm1, dm2 = body_rates(w, qx, qy, qz, m0, m1, m2, inv[b, 0], inv[b, 1], inv[b, 2])
         k = s[_RATES + 16 * i : _RATES + 16 * i + 16]
         inv_mass = 1.0 / model.body_mass[b]
+        torque = has_torque and torque_body[b]
         for j in range(3):
             k[j] = P[b, j] * inv_mass
             k[7 + j] = F[b, j]
-            k[10 + j] = tau[b, j] if has_torque else 0.0
+            k[10 + j] = tau[b, j] if torque else 0.0
         k[3], k[4], k[5], k[6] = dw, dx, dy, dz
         k[13], k[14], k[15] = dm0, dm1, dm2
-        if has_torque:
+        if torque:
             tb0, tb1, tb2 = rotate_inverse(w, qx, qy, qz, tau[b, 0], tau[b, 1], tau[b, 2])
             k[13], k[14], k[15] = dm0 + tb0, dm1 + tb1, dm2 + tb2
         if save:

@@ -45,7 +45,9 @@ def step(model, forces, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: AN
         for k in range(3):
             x[b, k] += dt * P[b, k] * inv_mass
             P[b, k] += dt * F[b, k]
-            L[b, k] += dt * tau[b, k]
+        if forces.has_torque and forces.torque_body[b]:  # tau = 0 for the other bodies
+            for k in range(3):
+                L[b, k] += dt * tau[b, k]
         E = model.body_frame[b]
         for i in range(3):  # R_user = R E^T
             for j in range(3):

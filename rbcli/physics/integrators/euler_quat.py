@@ -34,7 +34,7 @@ def step(model, forces, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: AN
         for k in range(3):
             x[b, k] += dt * P[b, k] * inv_mass
             P[b, k] += dt * F[b, k]
-        if forces.has_torque:
+        if forces.has_torque and forces.torque_body[b]:  # tau = 0 for the other bodies
             for k in range(3):
                 L[b, k] += dt * tau[b, k]
         # (0, omega) * q = (-omega . u, w omega + omega x u), u = (qx, qy, qz)

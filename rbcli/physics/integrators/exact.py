@@ -46,6 +46,8 @@ def compose(model, forces, t, h, weights, x, q, P, L, F, tau, q_mid) -> None:  #
     put and the orientation at every force evaluation is exact(q0, elapsed) written to q_mid (N, 4),
     and the step ends with q = exact(q0, h): every orientation is ONE call away from the step's
     start, so round-off does not pile up through s + 1 chained calls (it halves the flip-case error).
+    Which of the two is a scene-wide choice (has_torque; both cost s + 1 flows); the kick adds tau only
+    for the bodies torque_body flags (tau = 0 for the others).
     """
     count = weights.shape[0]
     torque = forces.has_torque
@@ -60,7 +62,7 @@ def compose(model, forces, t, h, weights, x, q, P, L, F, tau, q_mid) -> None:  #
         accumulate_wrench(model, forces, t + elapsed, x, q_now, P, L, F, tau)
         h_prev = weights[i] * h
         h_next = weights[i + 1] * h if i + 1 < count else 0.0
-        _kick(model, torque, h_prev, P, L, F, tau)
+        _kick(model, torque, forces.torque_body, h_prev, P, L, F, tau)
         _drift_centre(model, 0.5 * (h_prev + h_next), x, P)
         if torque:
             free_rotation_exact_batch(model.body_inertia, q, L, 0.5 * (h_prev + h_next), q)
@@ -79,12 +81,12 @@ def _drift_centre(model, s, x, P) -> None:  # noqa: ANN001
 
 
 @numba.njit(cache=True)
-def _kick(model, has_torque, s, P, L, F, tau) -> None:  # noqa: ANN001
-    """K(s): P += s F, L += s tau."""
+def _kick(model, has_torque, torque_body, s, P, L, F, tau) -> None:  # noqa: ANN001
+    """K(s): P += s F, L += s tau (tau only for the bodies torque_body flags; it is 0 for the others)."""
     for b in range(P.shape[0]):
         for k in range(3):
             P[b, k] += s * F[b, k]
-        if has_torque:
+        if has_torque and torque_body[b]:
             for k in range(3):
                 L[b, k] += s * tau[b, k]
 

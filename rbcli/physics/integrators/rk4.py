@@ -97,7 +97,8 @@ def step(model, forces, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: AN
     for stage in range(4):
         accumulate_wrench(model, forces, t + _STAGE_TIME[stage] * dt, x, q, P, L, F, tau)
         kind = STAGE_FIRST if stage == 0 else (STAGE_LAST if stage == 3 else STAGE_MIDDLE)
-        _stage(model, forces.has_torque, kind, _STAGE_REACH[stage] * dt, dt, x, q, P, L, F, tau, scratch)
+        reach = _STAGE_REACH[stage] * dt
+        _stage(model, forces.has_torque, forces.torque_body, kind, reach, dt, x, q, P, L, F, tau, scratch)
 
 
 @numba.njit(cache=True)
@@ -114,13 +115,15 @@ def _advance(s, j, kind, a, h, y, r):  # noqa: ANN001, ANN202
 
 
 @numba.njit(**STEP_KERNEL)
-def _stage(model, has_torque, kind, a, h, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001
+def _stage(model, has_torque, torque_body, kind, a, h, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001
     """Rates k of the current stage (x, q, P, L, m; F and tau evaluated on it), then per component
 
     first:  y0 = y, sum = k,   y = y0 + a k          (m = R^T L computed from the state)
     middle: sum += 2 k,        y = y0 + a k
     last:   y = y0 + h/6 (sum + k), then q aligned with L
     with q normalised after each update. Scratch columns: y0 0..15, sum 16..31, stage m 32..34.
+    tau enters (L and Euler's equations) only for the bodies torque_body flags: the others have tau = 0,
+    whose RK4 update of L is the identity, so L and its scratch columns are left alone.
     """
     for b in range(x.shape[0]):
         s = scratch[b]
@@ -132,7 +135,7 @@ def _stage(model, has_torque, kind, a, h, x, q, P, L, F, tau, scratch) -> None: 
             m0, m1, m2 = s[_M_STAGE], s[_M_STAGE + 1], s[_M_STAGE + 2]
         inv = model.body_inertia_inv
         dw, dx, dy, dz, dm0, dm1, dm2 = body_rates(w, qx, qy, qz, m0, m1, m2, inv[b, 0], inv[b, 1], inv[b, 2])
-        if has_torque:
+        if has_torque and torque_body[b]:
             tb0, tb1, tb2 = rotate_inverse(w, qx, qy, qz, tau[b, 0], tau[b, 1], tau[b, 2])
             dm0, dm1, dm2 = dm0 + tb0, dm1 + tb1, dm2 + tb2
             for k in range(3):

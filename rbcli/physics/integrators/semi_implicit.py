@@ -50,7 +50,7 @@ def step(model, forces, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: AN
         for k in range(3):
             P[b, k] += dt * F[b, k]
             x[b, k] += dt * P[b, k] * inv_mass
-        if forces.has_torque:
+        if forces.has_torque and forces.torque_body[b]:  # tau = 0 for the other bodies
             for k in range(3):
                 L[b, k] += dt * tau[b, k]
         w, qx, qy, qz = q[b, 0], q[b, 1], q[b, 2], q[b, 3]

@@ -42,7 +42,7 @@ def step(model, forces, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: AN
         m0, m1, m2 = rotate_inverse(w, qx, qy, qz, L[b, 0], L[b, 1], L[b, 2])
         o0, o1, o2 = m0 / i0, m1 / i1, m2 / i2
         t0, t1, t2 = 0.0, 0.0, 0.0
-        if forces.has_torque:
+        if forces.has_torque and forces.torque_body[b]:  # tau = 0 for the other bodies
             t0, t1, t2 = rotate_inverse(w, qx, qy, qz, tau[b, 0], tau[b, 1], tau[b, 2])
         # omega += dt I^-1 (tau - omega x I omega), all body frame, all at the old state
         n0 = o0 + dt * (t0 - (o1 * m2 - o2 * m1)) / i0

@@ -13,7 +13,10 @@ composed symmetrically with the kick in the middle:
 
 with I_a <= I_b <= I_c. Torque-free, T_c(h/2) K T_c(h/2) = T_c(h) (m_c is unchanged by the kick), so
 the rotation is the classical R_a(h/2) R_b(h/2) R_c(h) R_b(h/2) R_a(h/2) and costs 5 sin/cos pairs;
-for the centre of mass D_x(h/2) K(h) D_x(h/2) is the leapfrog (position Verlet, the same trajectory
+this is decided per body (`ForceTables.torque_body`): in a scene with torques only the bodies that
+some term can give a torque pay the kick of m and a sixth sin/cos pair (the others' tau is 0, and
+their two T_c(h/2) turns reuse one (cos, sin): bitwise what the torque path gives with tau = 0). For
+the centre of mass D_x(h/2) K(h) D_x(h/2) is the leapfrog (position Verlet, the same trajectory
 family as velocity Verlet), exact for a uniform force such as gravity.
 
 Why the kick sits in the middle: every step then needs exactly ONE force evaluation, at the symmetric
@@ -86,7 +89,7 @@ def compose(model, forces, t, h, weights, x, q, P, L, F, tau, scratch) -> None: 
         accumulate_wrench(model, forces, t + elapsed, x, q, P, L, F, tau)
         h_prev = weights[i] * h
         h_next = weights[i + 1] * h if i + 1 < count else 0.0
-        _kick_and_drift(model, forces.has_torque, h_prev, h_next, x, q, P, L, F, tau, scratch)
+        _kick_and_drift(model, forces.has_torque, forces.torque_body, h_prev, h_next, x, q, P, L, F, tau, scratch)
         elapsed += 0.5 * (h_prev + h_next)
 
 
@@ -114,10 +117,12 @@ def _drift_to_first_kick(model, h, x, q, P, L, scratch) -> None:  # noqa: ANN001
 
 
 @numba.njit(cache=True, inline="always")
-def _kick_and_drift(model, has_torque, h_prev, h_next, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001
+def _kick_and_drift(model, has_torque, torque_body, h_prev, h_next, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001
     """K(h_prev) T_c(h_prev/2) T_b(h_prev/2) [T_a D_x]((h_prev + h_next)/2) T_b(h_next/2) T_c(h_next/2).
 
-    h_next = 0 ends the step (the last two turns are skipped).
+    h_next = 0 ends the step (the last two turns are skipped). The torque kick runs only for the bodies
+    torque_body flags; the others have tau = 0, so their m_c is unchanged and T_c reuses the turn
+    of the previous pass (the very same (cos, sin): bitwise the result of the torque path with tau = 0).
     """
     for b in range(x.shape[0]):
         inv0, inv1, inv2 = model.body_inertia_inv[b, 0], model.body_inertia_inv[b, 1], model.body_inertia_inv[b, 2]
@@ -127,7 +132,7 @@ def _kick_and_drift(model, has_torque, h_prev, h_next, x, q, P, L, F, tau, scrat
         P[b, 0] += h_prev * F[b, 0]
         P[b, 1] += h_prev * F[b, 1]
         P[b, 2] += h_prev * F[b, 2]
-        if has_torque:
+        if has_torque and torque_body[b]:
             t0, t1, t2 = tau[b, 0], tau[b, 1], tau[b, 2]
             L[b, 0] += h_prev * t0
             L[b, 1] += h_prev * t1
