@@ -40,15 +40,24 @@ def prepare(
     integrator: str | None = None,
     record_every: int | None = None,
     tolerance: float | None = None,
+    compression: str | None = None,
 ) -> CompiledScene:
     """Load (when given a path) and compile a scene with overrides.
+
+    compression: MCAP chunk compression for `run_to_file` ("zstd", "lz4" or "none").
 
     tolerance: run adaptively (an adaptive integrator such as dopri5) with this error budget; dt is then
     the spacing of the output times, not the step.
     """
     spec = scene if isinstance(scene, SceneSpec) else load_scene(scene)
     compiled = compile_scene(
-        spec, dt=dt, duration=duration, integrator=integrator, record_every=record_every, tolerance=tolerance
+        spec,
+        dt=dt,
+        duration=duration,
+        integrator=integrator,
+        record_every=record_every,
+        tolerance=tolerance,
+        compression=compression,
     )
     from rbcli.physics.integrators import get_integrator
 
@@ -95,4 +104,4 @@ def run_to_file(compiled: CompiledScene, output: str | Path, *, progress=None) -
 
     output = Path(output)
     output.parent.mkdir(parents=True, exist_ok=True)
-    return run(compiled, [open_file_sink(output)], progress=progress)
+    return run(compiled, [open_file_sink(output, compression=compiled.settings.compression)], progress=progress)

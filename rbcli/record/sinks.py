@@ -17,12 +17,12 @@ def output_format(path: str | Path) -> str:
     return FORMATS[suffix]
 
 
-def open_file_sink(path: str | Path) -> Sink:
-    """SinkMcap or SinkRerun for the path."""
+def open_file_sink(path: str | Path, *, compression: str = "zstd") -> Sink:
+    """SinkMcap (with this chunk compression: zstd, lz4 or none) or SinkRerun for the path."""
     if output_format(path) == "mcap":
         from rbcli.record.mcap_sink import SinkMcap
 
-        return SinkMcap(Path(path))
+        return SinkMcap(Path(path), compression=compression)
     from rbcli.record.rerun_sink import SinkRerun
 
     return SinkRerun(Path(path))

@@ -27,6 +27,7 @@ class RunSettings:
     record_every: int
     streams: tuple[str, ...]
     seed: int = 0
+    compression: str = "zstd"  # MCAP chunk compression ("zstd", "lz4", "none")
     tolerance: float | None = None  # adaptive: error budget of the run; dt is then the grid of output times
 
     @property
@@ -63,6 +64,7 @@ def compile_scene(
     integrator: str | None = None,
     record_every: int | None = None,
     tolerance: float | None = None,
+    compression: str | None = None,
 ) -> CompiledScene:
     """Build model, forces, initial state and settings; keyword arguments override the scene."""
     sim = spec.simulation
@@ -84,6 +86,7 @@ def compile_scene(
         record_every=int(record_every or sim.record.every),
         streams=tuple(sim.record.streams),
         seed=sim.seed,
+        compression=compression or sim.record.compression,
         tolerance=tolerance if tolerance is not None else sim.tolerance,
     )
     if settings.dt <= 0 or not math.isfinite(settings.dt):

@@ -352,7 +352,7 @@ def _record(record: dict[str, Any], dt: float, issues: IssueCollector) -> Record
                 "a rate that divides 1/dt",
             )
     streams = tuple(record.get("streams", RecordSpec().streams))
-    return RecordSpec(every=every, streams=streams)
+    return RecordSpec(every=every, streams=streams, compression=record.get("compression", RecordSpec().compression))
 
 
 def _check_unique_names(entries: list[Any], issues: IssueCollector) -> None:

@@ -48,10 +48,11 @@ class SceneError(Exception):
 
 @dataclass(frozen=True)
 class RecordSpec:
-    """What the recorder writes: every `every`-th step, and which streams."""
+    """What the recorder writes: every `every`-th step, which streams, and the MCAP chunk compression."""
 
     every: int = 1
     streams: tuple[str, ...] = ("bodies", "invariants")  # also "particles"
+    compression: str = "zstd"  # MCAP chunks: "zstd", "lz4" or "none"
 
 
 @dataclass(frozen=True)

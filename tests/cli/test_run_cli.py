@@ -76,3 +76,49 @@ def test_overrides_reach_the_run(tmp_path):
     recorded = read_mcap(out)
     assert recorded.step.tolist() == [0, 10, 20, 30, 40, 50]
     np.testing.assert_allclose(recorded.t[-1], 0.5)
+
+
+def _chunk_compressions(path):
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as f:
+        return {index.compression for index in make_reader(f).get_summary().chunk_indexes}
+
+
+@pytest.mark.parametrize("compression, stored", [("lz4", "lz4"), ("none", ""), ("zstd", "zstd")])
+def test_compression_option_picks_the_mcap_chunk_compression(tmp_path, reference, compression, stored):
+    out = tmp_path / f"c-{compression}.mcap"
+    args = ["run", str(TUTORIAL), "-o", str(out), "--duration", "0.2", "--compression", compression, "-q"]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    assert _chunk_compressions(out) == {stored}
+    np.testing.assert_array_equal(read_mcap(out).x, reference.x)  # the content does not depend on it
+
+
+def test_scene_record_compression_is_used_and_the_flag_overrides_it(tmp_path):
+    scene = tmp_path / "lz4.yaml"
+    text = TUTORIAL.read_text()
+    flow = "simulation: {dt: 0.001, duration: 5.0, integrator: euler-matrix}"
+    assert flow in text  # the test adds a record section to it
+    scene.write_text(text.replace(flow, flow[:-1] + ", record: {compression: lz4}}"))
+    out = tmp_path / "s.mcap"
+    assert runner.invoke(app, ["run", str(scene), "-o", str(out), "--duration", "0.05", "-q"]).exit_code == 0
+    assert _chunk_compressions(out) == {"lz4"}
+    args = ["run", str(scene), "-o", str(out), "--duration", "0.05", "--compression", "none", "-q"]
+    assert runner.invoke(app, args).exit_code == 0
+    assert _chunk_compressions(out) == {""}
+
+
+def test_an_unknown_compression_exits_1_and_writes_nothing(tmp_path):
+    out = tmp_path / "x.mcap"
+    result = runner.invoke(app, ["run", str(TUTORIAL), "-o", str(out), "--compression", "gzip", "-q"])
+    assert result.exit_code == 1 and "gzip" in result.output and not out.exists()
+
+
+def test_the_cli_compressions_are_the_schema_enum():
+    import json
+
+    from rbcli.cli.run import COMPRESSIONS
+
+    schema = json.loads((ROOT / "schemas" / "scene.schema.json").read_text())
+    assert tuple(schema["$defs"]["record"]["properties"]["compression"]["enum"]) == COMPRESSIONS
