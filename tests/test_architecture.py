@@ -49,3 +49,9 @@ def test_code_is_lint_clean():
     fmt = subprocess.run([*ruff, "format", "--check", "rbcli", "tests", "benchmarks"], capture_output=True,
                          text=True, cwd=ROOT)  # fmt: skip
     assert fmt.returncode == 0, fmt.stdout
+
+
+def test_package_type_checks():
+    """mypy on rbcli/ (settings in pyproject.toml), as STYLE.md asks."""
+    out = subprocess.run([sys.executable, "-m", "mypy"], capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 0, out.stdout[-4000:]

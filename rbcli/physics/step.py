@@ -23,7 +23,7 @@ which was not recorded). Time is t = step * dt, never accumulated.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numba
 import numpy as np
@@ -41,11 +41,11 @@ STATUS_FULL = 2
 # tables hold ~55 arrays), which was ~75 % of a one-body split2 step. A kernel that allocates fails to
 # compile with these options, loudly, rather than misbehaving. `_nrt` is a numba option without a public
 # spelling; the test suite compiles every kernel, so a numba that drops it is caught at once.
-STEP_KERNEL = {"cache": True, "_nrt": False}
+STEP_KERNEL: dict[str, Any] = {"cache": True, "_nrt": False}
 
 # Options for the chunk loops the runner calls from Python: they release the GIL, so a recording thread
 # (runner.recorder) encodes and writes the previous block while the next chunk runs on another core.
-CHUNK_KERNEL = {"cache": True, "nogil": True}
+CHUNK_KERNEL: dict[str, Any] = {"cache": True, "nogil": True}
 
 
 class FrameBuffers(NamedTuple):

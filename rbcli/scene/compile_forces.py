@@ -9,7 +9,8 @@ row per (term, body it touches), so untouched bodies cost nothing.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -168,7 +169,8 @@ class _TableBuilder:
         start, stop = float(schedule.start), float(schedule.stop)
         if math.isnan(start) or math.isnan(stop) or not start < stop:
             raise _Invalid(f"schedule window needs start < stop, got start={start}, stop={stop}", "start < stop")
-        times, values = (), ()
+        times: tuple[float, ...] = ()
+        values: tuple[float, ...] = ()
         if schedule.kind == "piecewise_linear":
             times = tuple(_scalar(t, "schedule time", minimum=None) for t in schedule.times)
             values = tuple(_scalar(v, "schedule value", minimum=None) for v in schedule.values)
@@ -192,7 +194,7 @@ class _TableBuilder:
     # ---- one method per spec type --------------------------------------------------------------------
 
     def add(self, spec: ForceSpec) -> None:
-        adders = {
+        adders: dict[type, Callable[[Any], None]] = {
             ForceSpring: self.add_spring,
             ForceAtPoint: self.add_point_force,
             ForceTorque: self.add_torque,

@@ -16,7 +16,7 @@ This package's `__init__` and `tables.py` import numpy only; the kernel modules 
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any
 
 import numpy as np
 
@@ -81,7 +81,7 @@ def build_force_tables(
     """
     g = np.zeros(3) if gravity is None else np.asarray(gravity, dtype=np.float64).copy()
     g.setflags(write=False)
-    tables = dict(
+    tables: dict[str, Any] = dict(
         schedule=schedule if schedule is not None else schedule_table(),
         field=field if field is not None else field_table(),
         point_force=point_force if point_force is not None else point_force_table(),
@@ -163,7 +163,7 @@ def bodies_with_torque(
     return flag
 
 
-def _check_bodies(body_count: int, **tables: NamedTuple) -> None:
+def _check_bodies(body_count: int, **tables: Any) -> None:
     """ValueError unless every row's body index is in [0, body_count) (a spring's body_b may be WORLD):
     the kernels index per-body arrays with them unchecked."""
     columns = {name: table.body for name, table in tables.items() if hasattr(table, "body")}

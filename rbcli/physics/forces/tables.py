@@ -13,7 +13,7 @@ This module imports numpy only (no numba), so `scene/compile.py` can build table
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -183,9 +183,9 @@ def schedule_table(
 ) -> ScheduleTable:  # noqa: ANN001
     """A ScheduleTable from per-schedule sequences; knots: per schedule a (times, values) pair."""
     counts = [len(t) for t, _ in knots]
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]]) if counts else []
-    times = np.concatenate([np.asarray(t, dtype=np.float64) for t, _ in knots]) if counts else []
-    values = np.concatenate([np.asarray(v, dtype=np.float64) for _, v in knots]) if counts else []
+    starts: Any = np.concatenate([[0], np.cumsum(counts)[:-1]]) if counts else []
+    times: Any = np.concatenate([np.asarray(t, dtype=np.float64) for t, _ in knots]) if counts else []
+    values: Any = np.concatenate([np.asarray(v, dtype=np.float64) for _, v in knots]) if counts else []
     return ScheduleTable(
         _i(kind), _f(start), _f(stop), _f(amplitude), _f(frequency), _f(phase), _f(offset),
         _i(starts), _i(counts), _f(times), _f(values),
