@@ -34,11 +34,11 @@ from foxglove_schemas_protobuf.PackedElementField_pb2 import PackedElementField
 from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from mcap.reader import make_reader
-from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 from mcap_protobuf.decoder import DecoderFactory
 from mcap_protobuf.schema import build_file_descriptor_set
 
 from rbcli.record.frame import FrameBlock, RunHeader, RunSummary
+from rbcli.record.mcap_writer import COMPRESSIONS, ZSTD_LEVEL, McapChunkWriter
 
 TOPIC_STATE = "/rbsim/state"
 TOPIC_TF = "/tf"
@@ -288,17 +288,18 @@ def run_metadata(header: RunHeader) -> dict[str, str]:
 class SinkMcap:
     """Records a run to an MCAP file (see the module docstring for the layout).
 
-    compression: "zstd" (default), "lz4" or "none"; chunk_size: uncompressed bytes per chunk.
+    compression: "zstd" (default, at mcap_writer.ZSTD_LEVEL), "lz4" or "none"; chunk_size: uncompressed
+    bytes per chunk. The file is written by `mcap_writer.McapChunkWriter` (why: its docstring).
     """
 
     def __init__(self, path: str | Path, *, compression: str = "zstd", chunk_size: int = 4 * 1024 * 1024) -> None:
+        if compression not in COMPRESSIONS:
+            raise ValueError(f"compression {compression!r}: expected one of {', '.join(COMPRESSIONS)}")
         self.path = Path(path)
-        self._compression = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}[
-            compression
-        ]
+        self._compression = compression
         self._chunk_size = chunk_size
         self._file: IO[bytes] | None = None
-        self._writer: Writer | None = None
+        self._writer: McapChunkWriter | None = None
         self._closed = False
         self._schemas: dict[str, int] = {}
         self.frames_written = 0
@@ -306,8 +307,10 @@ class SinkMcap:
     def open(self, header: RunHeader) -> None:
         self._header = header
         self._file = open(self.path, "wb")  # closed in close()
-        w = self._writer = Writer(self._file, chunk_size=self._chunk_size, compression=self._compression)
-        w.start(profile="", library=f"rbsim/{header.rbsim_version} {LIBRARY_IDENTIFIER}")
+        w = self._writer = McapChunkWriter(self._file, compression=self._compression, chunk_size=self._chunk_size)
+        level = f" level {ZSTD_LEVEL}" if self._compression == "zstd" else ""
+        library = f"rbsim/{header.rbsim_version} (rbcli.record.mcap_writer, {self._compression}{level})"
+        w.start(profile="", library=library)
         self._state = StateEncoder(len(header.body_names))
         self._tf = TransformsEncoder(header.body_names)
         self._invariant_names = tuple(header.invariant_names)
