@@ -307,7 +307,9 @@ class SinkMcap:
     def open(self, header: RunHeader) -> None:
         self._header = header
         self._file = open(self.path, "wb")  # closed in close()
-        w = self._writer = McapChunkWriter(self._file, compression=self._compression, chunk_size=self._chunk_size)
+        w = self._writer = McapChunkWriter(
+            self._file, compression=self._compression, chunk_size=self._chunk_size, background=True
+        )
         level = f" level {ZSTD_LEVEL}" if self._compression == "zstd" else ""
         library = f"rbsim/{header.rbsim_version} (rbcli.record.mcap_writer, {self._compression}{level})"
         w.start(profile="", library=library)

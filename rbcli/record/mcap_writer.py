@@ -16,6 +16,13 @@ the layout follows the MCAP specification (https://mcap.dev/spec) as the library
     DataEnd, summary section [Schema, Channel, Statistics, ChunkIndex, AttachmentIndex, MetadataIndex
     groups], SummaryOffset records (one per group), Footer (with the summary CRC), magic.
 
+With `background=True` (what SinkMcap uses) the file work — joining a chunk, its CRC, compression and
+every write — runs in one worker thread, in submission order, while the caller encodes the next
+messages: zstd, zlib's CRC and file writes release the GIL, so on a second core they overlap the
+encoding. The bytes are the same either way (each chunk is still compressed alone, in order); at most
+MAX_PENDING chunks wait, so memory stays bounded, and a worker's error is raised in the caller at its
+next call.
+
 Chunks carry the CRC-32 of their uncompressed records; the data-section CRC is 0 ("not computed"), as
 the library writes it by default. The tests read every file back with the `mcap` library's readers
 (indexed and linear, CRCs validated) and compare it with the library Writer's file of the same messages.
@@ -25,8 +32,10 @@ from __future__ import annotations
 
 import struct
 import zlib
-from collections import defaultdict
-from typing import IO
+from collections import defaultdict, deque
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
+from typing import IO, Any
 
 import lz4.frame
 import numpy as np
@@ -55,6 +64,7 @@ MAGIC = b"\x89MCAP0\r\n"
 # than it is archived, and `zstd -19` can recompress an archive later.
 ZSTD_LEVEL = 1
 COMPRESSIONS = ("zstd", "lz4", "none")
+MAX_PENDING = 2  # file tasks queued for the background worker before the caller waits
 
 # Message record: opcode, content length | channel_id u16, sequence u32, log_time u64, publish_time u64
 _MESSAGE_HEAD = struct.Struct("<BQHIQQ")
@@ -74,10 +84,18 @@ def _record(record: McapRecord) -> bytes:
 class McapChunkWriter:
     """Writes an MCAP file to a binary stream; the calls mirror `mcap.writer.Writer`'s.
 
-    compression: "zstd" (at ZSTD_LEVEL), "lz4" or "none"; chunk_size: uncompressed bytes per chunk.
+    compression: "zstd" (at ZSTD_LEVEL), "lz4" or "none"; chunk_size: uncompressed bytes per chunk;
+    background: do the file work in a worker thread (see the module docstring).
     """
 
-    def __init__(self, stream: IO[bytes], *, compression: str = "zstd", chunk_size: int = 4 * 1024 * 1024) -> None:
+    def __init__(
+        self,
+        stream: IO[bytes],
+        *,
+        compression: str = "zstd",
+        chunk_size: int = 4 * 1024 * 1024,
+        background: bool = False,
+    ) -> None:
         if compression not in COMPRESSIONS:
             raise ValueError(f"compression {compression!r}: expected one of {', '.join(COMPRESSIONS)}")
         self._stream = stream
@@ -99,16 +117,37 @@ class McapChunkWriter:
         self._chunk_bytes = 0
         self._chunk_index: dict[int, list[tuple[int, int]]] = defaultdict(list)
         self._chunk_times: tuple[int, int] | None = None
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="rbsim-mcap") if background else None
+        self._pending: deque[Future[None]] = deque()
 
     # --- the file ------------------------------------------------------------------------------------
 
     def _write(self, data: bytes | memoryview) -> None:
+        """Append to the file (in the worker when there is one: only file tasks call this)."""
         self._stream.write(data)
         self._offset += len(data)
 
+    def _task(self, fn: Callable[..., None], *args: Any) -> None:
+        """Run a file task now, or queue it for the worker (waiting while MAX_PENDING are queued)."""
+        if self._pool is None:
+            fn(*args)
+            return
+        while self._pending and (self._pending[0].done() or len(self._pending) >= MAX_PENDING):
+            self._pending.popleft().result()  # raises a failed task's error here
+        self._pending.append(self._pool.submit(fn, *args))
+
+    def _drain(self) -> None:
+        """Wait for every queued file task; raise the first failure."""
+        try:
+            while self._pending:
+                self._pending.popleft().result()
+        finally:
+            for future in self._pending:
+                future.cancel()
+            self._pending.clear()
+
     def start(self, profile: str = "", library: str = "") -> None:
-        self._write(MAGIC)
-        self._write(_record(Header(profile=profile, library=library)))
+        self._task(self._write, MAGIC + _record(Header(profile=profile, library=library)))
 
     def register_schema(self, name: str, encoding: str, data: bytes) -> int:
         schema = Schema(id=len(self._schemas) + 1, name=name, encoding=encoding, data=data)
@@ -148,28 +187,42 @@ class McapChunkWriter:
         record = _record(
             Attachment(create_time=create_time, log_time=log_time, name=name, media_type=media_type, data=data)
         )
-        index = AttachmentIndex(
-            offset=self._offset,
-            length=len(record),
-            log_time=log_time,
-            create_time=create_time,
-            data_size=len(data),
-            name=name,
-            media_type=media_type,
-        )
-        self._write(record)
-        self._attachment_indexes.append(index)
         self._attachment_count += 1
+
+        def write() -> None:
+            index = AttachmentIndex(
+                offset=self._offset,
+                length=len(record),
+                log_time=log_time,
+                create_time=create_time,
+                data_size=len(data),
+                name=name,
+                media_type=media_type,
+            )
+            self._write(record)
+            self._attachment_indexes.append(index)
+
+        self._task(write)
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         record = _record(Metadata(name=name, metadata=dict(data)))
-        self._metadata_indexes.append(MetadataIndex(offset=self._offset, length=len(record), name=name))
-        self._write(record)
         self._metadata_count += 1
 
+        def write() -> None:
+            self._metadata_indexes.append(MetadataIndex(offset=self._offset, length=len(record), name=name))
+            self._write(record)
+
+        self._task(write)
+
     def finish(self) -> None:
-        """Write the open chunk, the summary and the footer (the stream is left open)."""
-        self._finish_chunk()
+        """Write the open chunk, the summary and the footer (the stream is left open); after a file task
+        failed, raise its error (the file is then incomplete)."""
+        try:
+            self._finish_chunk()
+            self._drain()
+        finally:
+            if self._pool is not None:
+                self._pool.shutdown(wait=True)
         self._write(_record(DataEnd(data_section_crc=0)))
         summary_start = self._offset
         groups: list[tuple[Opcode, list[bytes]]] = [
@@ -210,16 +263,24 @@ class McapChunkWriter:
         self._chunk_bytes += len(record)
 
     def _finish_chunk(self) -> None:
+        """Hand the open chunk to a file task and start a new one."""
         if not self._chunk_bytes:
             return
-        records = b"".join(self._chunk_parts)
+        self._task(self._write_chunk, self._chunk_parts, self._chunk_index, self._chunk_times)
+        self._new_chunk()
+
+    def _write_chunk(
+        self, parts: list[bytes], message_index: dict[int, list[tuple[int, int]]], times: tuple[int, int] | None
+    ) -> None:
+        """A file task: the Chunk record, its MessageIndex records, and its ChunkIndex for the summary."""
+        records = b"".join(parts)
         if self._zstd is not None:
             name, data = "zstd", self._zstd.compress(records)
         elif self._compression == "lz4":
             name, data = "lz4", lz4.frame.compress(records)
         else:
             name, data = "", records
-        start, end = self._chunk_times or (0, 0)
+        start, end = times or (0, 0)
         tail = struct.pack("<I", len(name)) + name.encode() + struct.pack("<Q", len(data))
         content = _CHUNK_HEAD.size - 9 + len(tail) + len(data)
         head = _CHUNK_HEAD.pack(Opcode.CHUNK, content, start, end, len(records), zlib.crc32(records))
@@ -228,8 +289,8 @@ class McapChunkWriter:
         self._write(data)
         chunk_length = self._offset - chunk_start
         index_offsets, index_start = {}, self._offset
-        for channel_id in sorted(self._chunk_index):
-            entries = np.asarray(self._chunk_index[channel_id], dtype="<u8").tobytes()
+        for channel_id in sorted(message_index):
+            entries = np.asarray(message_index[channel_id], dtype="<u8").tobytes()
             record = struct.pack("<BQHI", Opcode.MESSAGE_INDEX, 2 + 4 + len(entries), channel_id, len(entries))
             index_offsets[channel_id] = self._offset
             self._write(record + entries)
@@ -246,7 +307,6 @@ class McapChunkWriter:
                 uncompressed_size=len(records),
             )
         )
-        self._new_chunk()
 
     def _statistics(self) -> Statistics:
         start, end = self._time_range or (0, 0)

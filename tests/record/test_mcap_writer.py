@@ -43,9 +43,9 @@ def _script(writer, seed=0):
     writer.finish()
 
 
-def _ours(compression, chunk_size=64 * 1024):
+def _ours(compression, chunk_size=64 * 1024, background=False):
     buf = io.BytesIO()
-    _script(McapChunkWriter(buf, compression=compression, chunk_size=chunk_size))
+    _script(McapChunkWriter(buf, compression=compression, chunk_size=chunk_size, background=background))
     return buf.getvalue()
 
 
@@ -65,6 +65,7 @@ def _content(data, reader_class):
 @pytest.mark.parametrize("compression", ["zstd", "lz4", "none"])
 def test_readers_see_what_the_library_writer_would_have_written(compression):
     ours, theirs = _ours(compression), _library(compression)
+    assert _ours(compression, background=True) == ours  # the worker thread changes no byte
     assert ours[:8] == MAGIC and ours[-8:] == MAGIC
     for reader_class in (SeekingReader, NonSeekingReader):
         got, reader = _content(ours, reader_class)
@@ -140,3 +141,16 @@ def test_a_corrupted_chunk_is_caught_by_its_crc():
 def test_unknown_compression_is_refused():
     with pytest.raises(ValueError, match="gzip"):
         McapChunkWriter(io.BytesIO(), compression="gzip")
+
+
+class _FailingStream(io.BytesIO):
+    def write(self, data):
+        if self.tell() > 100_000:
+            raise OSError("disk full")
+        return super().write(data)
+
+
+@pytest.mark.parametrize("background", [False, True])
+def test_a_failing_write_reaches_the_caller(background):
+    with pytest.raises(OSError, match="disk full"):
+        _script(McapChunkWriter(_FailingStream(), compression="none", chunk_size=16 * 1024, background=background))
