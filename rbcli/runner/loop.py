@@ -221,7 +221,7 @@ def run(
                 if frames == capacity:
                     frames = hand_over(frames)
                 frames = record_current(frames)  # always record the final state
-            recorder.submit(buf, frames)
+            recorder.submit(buf, frames, last=True)
             recorder.finish()
     except BaseException as exc:  # a failing sink or an unexpected error: still leave readable files
         try:

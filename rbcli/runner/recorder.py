@@ -14,6 +14,9 @@ one block overlap the integration of the next, instead of adding to it.
   path (completed, diverged, interrupted, or an exception) before closing the sinks.
 - A sink that raises stops the writing of later blocks; the error is raised in the runner's thread at
   its next `buffer`, `submit` or `finish`, and every sink is still closed.
+- The thread starts with the first full buffer handed over mid-run: a run whose frames fit in one
+  buffer (most short runs, and every run that records only its first and last states) writes its one
+  block inline and pays no thread start (~0.2 ms, a fifth of a 1,000-step one-body run).
 """
 
 from __future__ import annotations
@@ -52,9 +55,6 @@ class Recorder:
         """Open every sink (here, so a sink that cannot open fails the run before it starts)."""
         for sink in self._sinks:
             sink.open(header)
-        if self._threaded:
-            self._thread = threading.Thread(target=self._work, name="rbsim-recorder", daemon=True)
-            self._thread.start()
 
     def buffer(self) -> FrameBuffers:
         """A free frame buffer to fill; waits while all are being written."""
@@ -65,9 +65,13 @@ class Recorder:
             except queue.Empty:
                 continue
 
-    def submit(self, buffers: FrameBuffers, frames: int) -> None:
-        """Hand over the first `frames` frames of a buffer; the buffer must not be touched afterwards."""
+    def submit(self, buffers: FrameBuffers, frames: int, *, last: bool = False) -> None:
+        """Hand over the first `frames` frames of a buffer; the buffer must not be touched afterwards.
+        last: no buffer follows (a run's final block is written inline when no thread was needed)."""
         self._raise_if_failed()
+        if self._threaded and self._thread is None and not last and frames:
+            self._thread = threading.Thread(target=self._work, name="rbsim-recorder", daemon=True)
+            self._thread.start()
         if frames == 0:
             self._free.put(buffers)
         elif self._thread is not None:

@@ -95,3 +95,10 @@ def test_every_chunk_kernel_releases_the_gil():
     kernels = {name: info.load().run_chunk for name, info in INTEGRATORS.items()}
     kernels["adaptive"] = run_adaptive_chunk
     assert {name: k.targetoptions.get("nogil") for name, k in kernels.items()} == dict.fromkeys(kernels, True)
+
+
+def test_a_run_that_fits_one_buffer_starts_no_thread():
+    sink = _SlowSink()
+    before = threading.active_count()
+    loop.run(prepare(_scene(duration=0.1)), [sink])  # 11 frames: one buffer
+    assert sink.threads == {threading.current_thread().name} and threading.active_count() == before
