@@ -22,7 +22,6 @@ from __future__ import annotations
 import json
 import math
 import re
-import struct
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -152,10 +151,34 @@ def _time_ns(t: np.ndarray) -> np.ndarray:
     return np.rint(np.asarray(t, dtype=np.float64) * 1e9).astype(np.int64)
 
 
-def _step_time_head(step: int, t: float) -> bytes:
-    """Fields 1 (uint64 step) and 2 (double time), omitted when zero as proto3 serializers do."""
-    tb = struct.pack("<d", t)
-    return (b"\x08" + _varint(step) if step else b"") + (b"\x11" + tb if tb != bytes(8) else b"")
+def _varints(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Protobuf varints of non-negative integers, vectorised: (bytes (K, 10) uint8, lengths (K,))."""
+    v = np.asarray(values, dtype=np.uint64)
+    groups = ((v[:, None] >> (np.arange(10, dtype=np.uint64) * np.uint64(7))) & np.uint64(0x7F)).astype(np.uint8)
+    lengths = np.maximum(1, (np.ceil(np.log2(v.astype(np.float64) + 1.0) / 7.0)).astype(np.int64))
+    # float log2 can be off by one right at 2**(7m): fix with the exact test "value >> 7 * length == 0"
+    lengths += (v >> (lengths.astype(np.uint64) * np.uint64(7))) != 0
+    lengths -= (lengths > 1) & ((v >> ((lengths - 1).astype(np.uint64) * np.uint64(7))) == 0)
+    more = np.arange(10)[None, :] < (lengths[:, None] - 1)
+    groups[more] |= 0x80
+    return groups, lengths
+
+
+def _step_time_heads(step: np.ndarray, t: np.ndarray) -> list[bytes]:
+    """Per frame, fields 1 (uint64 step) and 2 (double time), each omitted when zero as proto3
+    serializers do (+0.0 only: -0.0 has bits set and is written)."""
+    k_count = len(step)
+    digits, lengths = _varints(step)
+    buf = np.zeros((k_count, 20), dtype=np.uint8)
+    buf[:, 0] = 0x08
+    buf[:, 1:11] = digits
+    rows = np.arange(k_count)[:, None]
+    time_at = 1 + lengths[:, None] + np.arange(9)[None, :]  # key byte then 8 bytes, after the varint
+    tb = np.asarray(t, dtype="<f8").reshape(k_count, 1).view(np.uint8)
+    buf[rows, time_at] = np.concatenate([np.full((k_count, 1), 0x11, np.uint8), tb], axis=1)
+    start = np.where(np.asarray(step) == 0, 1 + lengths, 0)  # step 0: skip its "08 00"
+    end = 1 + lengths + np.where(tb.any(axis=1), 9, 0)  # time +0.0: nothing after the varint
+    return [buf[k, start[k] : end[k]].tobytes() for k in range(k_count)]
 
 
 class StateEncoder:
@@ -177,14 +200,47 @@ class StateEncoder:
         for attr, key in self._keys.items():
             rec[f"k_{attr}"] = key
             rec[attr] = np.asarray(getattr(block, attr), dtype=np.float64).reshape(k_count, -1)
-        step, t = block.step.tolist(), np.asarray(block.t, dtype=np.float64).tolist()
-        return [_step_time_head(step[k], t[k]) + rec[k].tobytes() for k in range(k_count)]
+        heads = _step_time_heads(block.step, block.t)
+        return [heads[k] + rec[k].tobytes() for k in range(k_count)]
 
 
-def _timestamp_payload(ns: int) -> bytes:
-    """google.protobuf.Timestamp payload (seconds = 1, nanos = 2; zero fields omitted)."""
-    sec, nanos = divmod(int(ns), 1_000_000_000)
-    return (b"\x08" + _varint(sec) if sec else b"") + (b"\x10" + _varint(nanos) if nanos else b"")
+class InvariantsEncoder:
+    """rbsim.Invariants bytes for every frame of a block: step and time as canonical proto3 (omitted
+    when zero), then every invariant as a double field, zeros included (valid proto3 that decodes to
+    the same values; a fixed layout, so numpy writes all frames at once)."""
+
+    def __init__(self, invariant_names: Sequence[str]) -> None:
+        self.names = tuple(invariant_names)
+        spec = []
+        for i, _ in enumerate(self.names):
+            spec += [(f"k{i}", np.uint8, (len(_key(3 + i, 1)),)), (f"v{i}", "<f8")]
+        self.dtype = np.dtype(spec)
+        self._keys = [_u1(_key(3 + i, 1)) for i in range(len(self.names))]
+
+    def encode(self, block: FrameBlock) -> list[bytes]:
+        k_count = len(block)
+        rec = np.empty(k_count, dtype=self.dtype)
+        for i, name in enumerate(self.names):
+            rec[f"k{i}"] = self._keys[i]
+            rec[f"v{i}"] = np.asarray(block.invariants[name], dtype=np.float64)
+        heads = _step_time_heads(block.step, block.t)
+        return [heads[k] + rec[k].tobytes() for k in range(k_count)]
+
+
+def _timestamp_payloads(ns: np.ndarray) -> list[bytes]:
+    """google.protobuf.Timestamp payloads (seconds = 1, nanos = 2; zero fields omitted), vectorised."""
+    sec, nanos = np.divmod(np.asarray(ns, dtype=np.int64), 1_000_000_000)
+    (sd, sl), (nd, nl) = _varints(sec), _varints(nanos)
+    k_count = len(sec)
+    buf = np.zeros((k_count, 22), dtype=np.uint8)
+    rows = np.arange(k_count)[:, None]
+    buf[:, 0] = 0x08
+    buf[:, 1:11] = sd
+    has_sec = sec != 0
+    at = np.where(has_sec, 1 + sl, 0)[:, None] + np.arange(11)[None, :]
+    buf[rows, at] = np.concatenate([np.full((k_count, 1), 0x10, np.uint8), nd], axis=1)
+    end = at[:, 0] + np.where(nanos != 0, 1 + nl, 0)
+    return [buf[k, : end[k]].tobytes() for k in range(k_count)]
 
 
 class TransformsEncoder:
@@ -236,7 +292,7 @@ class TransformsEncoder:
 
     def encode(self, block: FrameBlock) -> list[bytes]:
         k_count = len(block)
-        ts = [_timestamp_payload(ns) for ns in _time_ns(block.t).tolist()]
+        ts = _timestamp_payloads(_time_ns(block.t))
         x, q = np.asarray(block.x, dtype=np.float64), np.asarray(block.q, dtype=np.float64)
         out: list[bytes] = [b""] * k_count
         ts_lens = np.array([len(s) for s in ts])
@@ -321,8 +377,7 @@ class SinkMcap:
         self._ch_inv: int | None = None
         if self._invariant_names:
             fdp = invariants_file_proto(self._invariant_names)
-            self._inv_class = message_class(fdp)
-            self._inv_fields = invariant_field_names(self._invariant_names)
+            self._inv = InvariantsEncoder(self._invariant_names)
             meta = {"invariant_names": json.dumps(list(self._invariant_names))}
             self._ch_inv = self._channel(TOPIC_INVARIANTS, fdp, meta)
         self._ch_particles: int | None = None
@@ -353,17 +408,7 @@ class SinkMcap:
         k_count = len(block)
         states, tfs = self._state.encode(block), self._tf.encode(block)
         ns, steps = _time_ns(block.t).tolist(), block.step.tolist()
-        inv = None
-        if self._ch_inv is not None:
-            columns = [np.asarray(block.invariants[n], dtype=np.float64).tolist() for n in self._invariant_names]
-            inv = [
-                self._inv_class(
-                    step=steps[k],
-                    time=float(block.t[k]),
-                    **{f: c[k] for f, c in zip(self._inv_fields, columns, strict=True)},
-                ).SerializeToString()
-                for k in range(k_count)
-            ]
+        inv = self._inv.encode(block) if self._ch_inv is not None else None
         particles = block.particle_position
         if particles is not None and self._ch_particles is None:
             self._ch_particles = self._channel(TOPIC_PARTICLES, PointCloud)

@@ -69,6 +69,8 @@ MAX_PENDING = 2  # file tasks queued for the background worker before the caller
 # Message record: opcode, content length | channel_id u16, sequence u32, log_time u64, publish_time u64
 _MESSAGE_HEAD = struct.Struct("<BQHIQQ")
 _MESSAGE_FIXED = _MESSAGE_HEAD.size - 9  # content bytes before the payload
+_OP_MESSAGE = int(Opcode.MESSAGE)
+_NO_TIME = 2**64  # a chunk's start time before its first message
 # Chunk record up to its compression string: opcode, length | start u64, end u64, uncompressed size u64,
 # uncompressed crc u32
 _CHUNK_HEAD = struct.Struct("<BQQQQI")
@@ -109,14 +111,14 @@ class McapChunkWriter:
         self._attachment_indexes: list[AttachmentIndex] = []
         self._metadata_indexes: list[MetadataIndex] = []
         self._counts: dict[int, int] = defaultdict(int)
-        self._message_count, self._attachment_count, self._metadata_count = 0, 0, 0
-        self._time_range: tuple[int, int] | None = None
+        self._attachment_count, self._metadata_count = 0, 0
+        self._time_range: tuple[int, int] | None = None  # of the written chunks
         # the open chunk: its records (message heads and payloads by reference), size, per-channel
         # (log_time, offset) index and time range
         self._chunk_parts: list[bytes] = []
         self._chunk_bytes = 0
         self._chunk_index: dict[int, list[tuple[int, int]]] = defaultdict(list)
-        self._chunk_times: tuple[int, int] | None = None
+        self._chunk_start, self._chunk_end = _NO_TIME, -1
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="rbsim-mcap") if background else None
         self._pending: deque[Future[None]] = deque()
 
@@ -168,18 +170,21 @@ class McapChunkWriter:
         return channel.id
 
     def add_message(self, channel_id: int, log_time: int, data: bytes, publish_time: int, sequence: int = 0) -> None:
-        head = _MESSAGE_HEAD.pack(
-            Opcode.MESSAGE, _MESSAGE_FIXED + len(data), channel_id, sequence, log_time, publish_time
+        # the hot path of a recording (three calls per frame): plain comparisons, no tuples
+        size = len(data)
+        offset = self._chunk_bytes
+        self._chunk_index[channel_id].append((log_time, offset))
+        parts = self._chunk_parts
+        parts.append(
+            _MESSAGE_HEAD.pack(_OP_MESSAGE, _MESSAGE_FIXED + size, channel_id, sequence, log_time, publish_time)
         )
-        self._chunk_index[channel_id].append((log_time, self._chunk_bytes))
-        self._chunk_parts += (head, data)
-        self._chunk_bytes += len(head) + len(data)
+        parts.append(data)
+        self._chunk_bytes = offset + _MESSAGE_HEAD.size + size
         self._counts[channel_id] += 1
-        self._message_count += 1
-        start, end = self._time_range or (log_time, log_time)
-        self._time_range = (min(start, log_time), max(end, log_time))
-        c_start, c_end = self._chunk_times or (log_time, log_time)
-        self._chunk_times = (min(c_start, log_time), max(c_end, log_time))
+        if log_time < self._chunk_start:
+            self._chunk_start = log_time
+        if log_time > self._chunk_end:
+            self._chunk_end = log_time
         if self._chunk_bytes >= self._chunk_size:
             self._finish_chunk()
 
@@ -256,7 +261,7 @@ class McapChunkWriter:
         self._chunk_parts = []
         self._chunk_bytes = 0
         self._chunk_index = defaultdict(list)
-        self._chunk_times = None
+        self._chunk_start, self._chunk_end = _NO_TIME, -1
 
     def _add_to_chunk(self, record: bytes) -> None:
         self._chunk_parts.append(record)
@@ -266,7 +271,11 @@ class McapChunkWriter:
         """Hand the open chunk to a file task and start a new one."""
         if not self._chunk_bytes:
             return
-        self._task(self._write_chunk, self._chunk_parts, self._chunk_index, self._chunk_times)
+        times = (self._chunk_start, self._chunk_end) if self._chunk_end >= 0 else None
+        if times is not None:
+            start, end = self._time_range or times
+            self._time_range = (min(start, times[0]), max(end, times[1]))
+        self._task(self._write_chunk, self._chunk_parts, self._chunk_index, times)
         self._new_chunk()
 
     def _write_chunk(
@@ -311,7 +320,7 @@ class McapChunkWriter:
     def _statistics(self) -> Statistics:
         start, end = self._time_range or (0, 0)
         return Statistics(
-            message_count=self._message_count,
+            message_count=sum(self._counts.values()),
             schema_count=len(self._schemas),
             channel_count=len(self._channels),
             attachment_count=self._attachment_count,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import math
 import re
 import subprocess
 import sys
@@ -23,6 +24,7 @@ from record_synthetic import (  # noqa: F401 - pytest fixtures
 )
 
 from rbcli.record import mcap_sink
+from rbcli.record.frame import FrameBlock
 from rbcli.record.mcap_sink import SinkMcap
 from rbcli.record.read import read_mcap
 
@@ -236,3 +238,44 @@ def test_particles_stream_is_a_world_point_cloud_per_frame(tmp_path):
     assert len(clouds) == 5 and {c.frame_id for c in clouds} == {"world"}
     got = np.stack([mcap_sink._cloud_points(c) for c in clouds])
     np.testing.assert_array_equal(got, concat(blocks, "particle_position"))
+
+
+# edge values of the vectorised varint and head encoders, against the protobuf classes themselves
+EDGE_STEPS = [0, 1, 127, 128, 300, 16383, 16384, 2**21 - 1, 2**21, 2**28, 2**35 + 5, 2**56, 2**63 - 1]
+EDGE_TIMES = [0.0, -0.0, 5e-324, 1e-9, 0.3, 2.5, -7.0, 1e300, math.inf, math.nan]
+
+
+def test_vectorised_varints_equal_the_scalar_encoder():
+    digits, lengths = mcap_sink._varints(np.array(EDGE_STEPS, dtype=np.uint64))
+    for value, row, length in zip(EDGE_STEPS, digits, lengths, strict=True):
+        assert row[:length].tobytes() == mcap_sink._varint(value), value
+
+
+def test_invariants_encoder_decodes_to_the_values_including_zeros_and_non_finite():
+    names = ("energy_total", "momentum_x", "quaternion_norm_defect")
+    cls = mcap_sink.message_class(mcap_sink.invariants_file_proto(names))
+    k = len(EDGE_TIMES)
+    steps = np.array(EDGE_STEPS[:k], dtype=np.int64)
+    values = {n: np.roll(np.array(EDGE_TIMES), i) for i, n in enumerate(names)}
+    block = FrameBlock(step=steps, t=np.array(EDGE_TIMES), x=np.zeros((k, 0, 3)), q=np.zeros((k, 0, 4)),
+                       v=np.zeros((k, 0, 3)), omega=np.zeros((k, 0, 3)), P=np.zeros((k, 0, 3)),
+                       L=np.zeros((k, 0, 3)), invariants=values)  # fmt: skip
+    for i, data in enumerate(mcap_sink.InvariantsEncoder(names).encode(block)):
+        msg = cls.FromString(data)
+        assert msg.step == steps[i]
+        got = [msg.time] + [getattr(msg, f) for f in mcap_sink.invariant_field_names(names)]
+        want = [EDGE_TIMES[i]] + [values[n][i] for n in names]
+        assert np.array_equal(np.array(got), np.array(want), equal_nan=True), i
+        assert [math.copysign(1, g) for g in got] == [math.copysign(1, w) for w in want], i  # -0.0 kept
+        # the step/time head is canonical: the same bytes as the class serialises for those two fields
+        head = cls(step=int(steps[i]), time=EDGE_TIMES[i]).SerializeToString()
+        assert data.startswith(head) and len(data) == len(head) + 9 * len(names), i
+
+
+def test_timestamp_payloads_equal_protobuf_timestamps():
+    from google.protobuf.timestamp_pb2 import Timestamp
+
+    ns = np.array([0, 1, 999_999_999, 1_000_000_000, 1_000_000_001, 59 * 10**9 + 7, 2**40, 10**18 + 3])
+    for value, data in zip(ns.tolist(), mcap_sink._timestamp_payloads(ns), strict=True):
+        seconds, nanos = divmod(value, 10**9)
+        assert data == Timestamp(seconds=seconds, nanos=nanos).SerializeToString(), value
