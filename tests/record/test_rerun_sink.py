@@ -173,3 +173,13 @@ def test_batched_display_radii_equal_the_one_cloud_estimate():
     clouds.append(np.zeros((4, 3)))  # all points coincide: no finite spacing
     expected = [particle_display_radius(c, fallback=0.7) if len(c) else 0.7 for c in clouds]
     assert particle_display_radii(clouds, fallback=0.7).tolist() == pytest.approx(expected, rel=1e-12)
+
+
+def test_packed_colours_are_rerun_own_encoding():
+    import rerun as rr
+
+    from rbcli.record.rerun_sink import PALETTE, _rgba32
+
+    columns = rr.Points3D.columns(positions=np.zeros((len(PALETTE), 3)), colors=PALETTE)
+    colors = next(c for c in columns if "colors" in c.component_descriptor().component)
+    assert np.asarray(colors.component_batch.as_arrow_array()).tolist() == _rgba32(PALETTE).tolist()
