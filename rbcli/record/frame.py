@@ -101,6 +101,18 @@ class RunSummary:
     steps_accepted: int | None = None  # adaptive runs: error-controlled steps taken ...
     steps_rejected: int | None = None  # ... and attempts rejected (None for fixed-step runs)
 
+    def fields(self, frames_written: int) -> dict[str, str]:
+        """How the run ended, as strings for a file's summary record (t_end as repr, so it reads back
+        exactly); frames_written: the frames this sink actually wrote."""
+        return {
+            "status": self.status,
+            "steps": str(int(self.steps)),
+            "frames": str(int(self.frames)),
+            "frames_written": str(int(frames_written)),
+            "t_end": repr(float(self.t_end)),
+            "message": self.message,
+        }
+
 
 class Sink(Protocol):
     """A recorder: open with the header, write blocks in order, close with the summary.

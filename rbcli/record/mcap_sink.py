@@ -430,17 +430,7 @@ class SinkMcap:
             return
         self._closed = True
         try:
-            self._writer.add_metadata(
-                METADATA_SUMMARY,
-                {
-                    "status": summary.status,
-                    "steps": str(int(summary.steps)),
-                    "frames": str(int(summary.frames)),
-                    "frames_written": str(self.frames_written),
-                    "t_end": repr(float(summary.t_end)),
-                    "message": summary.message,
-                },
-            )
+            self._writer.add_metadata(METADATA_SUMMARY, summary.fields(self.frames_written))
             self._writer.finish()
         finally:
             assert self._file is not None

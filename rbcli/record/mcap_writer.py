@@ -111,7 +111,6 @@ class McapChunkWriter:
         self._attachment_indexes: list[AttachmentIndex] = []
         self._metadata_indexes: list[MetadataIndex] = []
         self._counts: dict[int, int] = defaultdict(int)
-        self._attachment_count, self._metadata_count = 0, 0
         self._time_range: tuple[int, int] | None = None  # of the written chunks
         # the open chunk: its records (message heads and payloads by reference), size, per-channel
         # (log_time, offset) index and time range
@@ -192,7 +191,6 @@ class McapChunkWriter:
         record = _record(
             Attachment(create_time=create_time, log_time=log_time, name=name, media_type=media_type, data=data)
         )
-        self._attachment_count += 1
 
         def write() -> None:
             index = AttachmentIndex(
@@ -211,7 +209,6 @@ class McapChunkWriter:
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         record = _record(Metadata(name=name, metadata=dict(data)))
-        self._metadata_count += 1
 
         def write() -> None:
             self._metadata_indexes.append(MetadataIndex(offset=self._offset, length=len(record), name=name))
@@ -323,8 +320,8 @@ class McapChunkWriter:
             message_count=sum(self._counts.values()),
             schema_count=len(self._schemas),
             channel_count=len(self._channels),
-            attachment_count=self._attachment_count,
-            metadata_count=self._metadata_count,
+            attachment_count=len(self._attachment_indexes),
+            metadata_count=len(self._metadata_indexes),
             chunk_count=len(self._chunk_indexes),
             message_start_time=start,
             message_end_time=end,

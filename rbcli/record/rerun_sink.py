@@ -334,14 +334,7 @@ class SinkRerun:
                 rec.log(
                     "trajectories", rr.LineStrips3D(strips, colors=colors, radii=rr.Radius.ui_points(1.0)), static=True
                 )
-            ending = {
-                "status": summary.status,
-                "steps": str(int(summary.steps)),
-                "frames": str(int(summary.frames)),
-                "frames_written": str(self.frames_written),
-                "t_end": repr(float(summary.t_end)),
-                "message": summary.message,
-            }
+            ending = summary.fields(self.frames_written)
             rec.send_property("rbsim.summary", rr.AnyValues(drop_untyped_nones=True, **ending))
             rec.log("summary", rr.TextDocument(_markdown_table(ending), media_type=rr.MediaType.MARKDOWN), static=True)
         finally:
