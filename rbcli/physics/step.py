@@ -35,6 +35,10 @@ BLOWUP_LIMIT = 1e100
 STATUS_OK = 0
 STATUS_DIVERGED = 1
 STATUS_FULL = 2
+# (3 is the adaptive chunk's STATUS_STEP_TOO_SMALL)
+# A chunk was called with no room left in its frame buffers: a runner bug, reported instead of writing
+# past the end of the buffer (numba does not check indices).
+STATUS_NO_ROOM = 4
 
 # Options for per-step kernels that allocate nothing: numba's reference counting (NRT) otherwise does an
 # atomic increment and decrement on every array passed at every call (~10 ns each; the model and force
@@ -87,13 +91,16 @@ def state_is_sane(x, q, P, L) -> bool:  # noqa: ANN001
 def record_if_due(index, record_every, x, q, P, L, frames, filled):  # noqa: ANN001
     """After step `index`: when it is a recording step, check the state and copy it into the next frame.
 
-    Returns (filled, status); status is STATUS_DIVERGED for a bad state (not recorded) and STATUS_FULL
-    when this frame filled the buffers.
+    Returns (filled, status); status is STATUS_DIVERGED for a bad state (not recorded), STATUS_FULL
+    when this frame filled the buffers, and STATUS_NO_ROOM (nothing written) when the buffers were
+    already full: the caller must hand over a full buffer before it steps again.
     """
     if index % record_every != 0:
         return filled, STATUS_OK
     if not state_is_sane(x, q, P, L):
         return filled, STATUS_DIVERGED
+    if filled >= frames.step.shape[0]:  # never write past the buffer, whatever the caller did
+        return filled, STATUS_NO_ROOM
     frames.step[filled] = index
     frames.x[filled] = x
     frames.q[filled] = q

@@ -30,6 +30,14 @@ CHUNK_SECONDS = 0.2
 ProgressCallback = Callable[[int, int], None]
 
 
+def frame_capacity(body_count: int) -> int:
+    """Frames per buffer: about BLOCK_BYTES of recorded state (13 float64 per body), at least 1 frame.
+
+    The one place buffer sizes come from. At 40,330 bodies and more this is 1 frame: the runner must
+    then hand over the buffer after every recorded frame (it does so before each chunk it starts)."""
+    return int(np.clip(BLOCK_BYTES // max(1, 13 * 8 * body_count), 1, MAX_BLOCK_FRAMES))
+
+
 def run_header(compiled: CompiledScene) -> RunHeader:
     """The header every sink receives before the first frame."""
     spec, model, settings = compiled.spec, compiled.model, compiled.settings
@@ -134,13 +142,13 @@ def run(
     """
     from rbcli.physics.adaptive import STATUS_STEP_TOO_SMALL
     from rbcli.physics.forces.impulse import apply_impulses, impulse_step_indices
-    from rbcli.physics.step import STATUS_DIVERGED
+    from rbcli.physics.step import STATUS_DIVERGED, STATUS_NO_ROOM
 
     model, settings = compiled.model, compiled.settings
     kernel = get_integrator(settings.integrator).load()
     state = compiled.initial_state.copy()
     n = model.body_count
-    capacity = int(np.clip(BLOCK_BYTES // max(1, 13 * 8 * n), 1, MAX_BLOCK_FRAMES))
+    capacity = frame_capacity(n)
     F, tau = np.zeros((n, 3)), np.zeros((n, 3))
     stepper = _Stepper(compiled, kernel)
     kmodel = stepper.kmodel
@@ -185,8 +193,12 @@ def run(
                     later = impulse_at[impulse_at > state.step]
                     if later.size:
                         todo = min(todo, int(later[0]) - state.step)
+                if frames == capacity:  # a chunk needs room for at least one frame
+                    frames = hand_over(frames)
                 done, frames, code = stepper.advance(state, state.step, todo, F, tau, buf, frames)
                 state.step += int(done)
+                if code == STATUS_NO_ROOM:
+                    raise RuntimeError(f"internal error: frame buffer full at step {state.step} (please report)")
                 elapsed = time.perf_counter() - started
                 if code == STATUS_DIVERGED:
                     status = "diverged"

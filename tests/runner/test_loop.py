@@ -103,3 +103,35 @@ def test_quaternion_norm_defect_is_recorded_and_at_round_off():
     defect = traj.invariants["quaternion_norm_defect"]
     assert defect.shape == traj.t.shape
     assert defect.max() < 1e-15 * 10  # every integrator renormalises q each step
+
+
+@pytest.mark.parametrize("integrator", ["split2", "dopri5"])
+@pytest.mark.parametrize("every", [1, 3])
+def test_one_frame_buffers_record_every_frame(monkeypatch, integrator, every):
+    """A buffer of one frame (what 40,330+ bodies get from BLOCK_BYTES) must be handed over before each
+    chunk: the initial state fills it, so a chunk started on it would write frame 1 past its end."""
+    scene = make_scene(random_bodies(2), dt=0.01, duration=0.5, every=every, gravity=G)
+    kwargs = {"tolerance": 1e-6} if integrator == "dopri5" else {}
+    reference = simulate(scene, integrator=integrator, **kwargs)
+    assert loop.frame_capacity(40_329) == 2 and loop.frame_capacity(40_330) == 1  # the reported edge
+    monkeypatch.setattr(loop, "frame_capacity", lambda body_count: 1)
+    single = simulate(scene, integrator=integrator, **kwargs)
+    assert single.step.tolist() == reference.step.tolist()
+    for name in ("x", "q", "P", "L"):
+        assert np.array_equal(getattr(reference, name), getattr(single, name)), name
+
+
+def test_a_chunk_given_a_full_buffer_writes_nothing():
+    """The kernel's own guard: called with no room left, it reports STATUS_NO_ROOM and leaves memory alone."""
+    from rbcli.physics.integrators import split2
+    from rbcli.physics.step import STATUS_NO_ROOM, empty_buffers
+
+    compiled = prepare(make_scene(random_bodies(2), dt=0.01, duration=1.0, every=1))
+    s = compiled.initial_state.copy()
+    n = compiled.model.body_count
+    frames = empty_buffers(2, n)
+    F, tau, scratch = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, split2.SCRATCH_WIDTH))
+    done, filled, status = split2.run_chunk(
+        compiled.model.kernel(), compiled.forces, 0.01, 0, 5, 1, s.x, s.q, s.P, s.L, F, tau, scratch, frames, 2
+    )
+    assert (done, filled, status) == (1, 2, STATUS_NO_ROOM)
