@@ -1,0 +1,115 @@
+"""Determinism guard: every integrator on every verification and force scene gives bitwise the
+trajectories stored in trajectory_hashes.json (Box2D's determinism hash, one per scene and integrator).
+
+Why: a refactor of the step (stages, Model/Data, chunk loops) must not change a single bit of any
+result. A later change to an integrator's numerics regenerates the file in its own commit, saying why:
+
+    python tests/physics/test_trajectory_hashes.py --regenerate
+
+Bitwise equality only holds for the same machine code, so hashes are keyed by platform and by numpy /
+numba versions. On a key with no stored hashes the test still runs: it compares the final states
+stored beside the hashes to 1e-9 relative (far above the ~1e-13 that another libm or SIMD order
+gives over a few hundred steps, far below any real change of the numerics).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import platform
+import sys
+from pathlib import Path
+
+import numba
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+STORE = Path(__file__).with_name("trajectory_hashes.json")
+
+SCENES = (
+    "verification/intermediate_axis.yaml",
+    "verification/fast_spin.yaml",
+    "verification/thin_rod.yaml",
+    "verification/spring_tether.yaml",
+    "forces/impulse_kick.yaml",  # impulse at t = 0.5 s
+    "forces/pushed_box.yaml",  # scheduled force and torque
+    "forces/spinning_top.yaml",  # gravity torque about a pivot
+    "forces/spring_chain.yaml",  # damped springs
+    "forces/projectile_drag.yaml",  # velocity-dependent drag
+)
+FIXED = ("euler-matrix", "euler-quat", "semi-implicit", "semi-implicit-gyro", "rk4", "split2", "split4", "exact",
+         "exact4", "dopri5")  # fmt: skip
+STEPS = 600  # enough to pass the impulse (t = 0.5 s at dt = 1 ms); short enough for the suite
+RECORD_EVERY = 20
+
+CASES = [(scene, name, None) for scene in SCENES for name in FIXED] + [
+    (scene, "dopri5", 1e-8) for scene in ("verification/intermediate_axis.yaml", "forces/pushed_box.yaml")
+]
+
+
+def platform_key() -> str:
+    return f"{platform.machine()}-{sys.platform}-numpy{np.__version__}-numba{numba.__version__}"
+
+
+def case_id(scene: str, integrator: str, tolerance: float | None) -> str:
+    return f"{scene}:{integrator}" + (f":tol={tolerance:g}" if tolerance is not None else "")
+
+
+def run_case(scene: str, integrator: str, tolerance: float | None):  # noqa: ANN201
+    from rbcli.api import load_scene, simulate
+
+    spec = load_scene(ROOT / "scenes" / scene)
+    dt = spec.simulation.dt
+    return simulate(
+        spec, integrator=integrator, duration=STEPS * dt, record_every=RECORD_EVERY, tolerance=tolerance,
+        on_diverge="return",
+    )  # fmt: skip
+
+
+def trajectory_hash(traj) -> str:  # noqa: ANN001
+    digest = hashlib.sha256()
+    for name in ("step", "x", "q", "P", "L"):
+        digest.update(np.ascontiguousarray(getattr(traj, name)).tobytes())
+    return digest.hexdigest()
+
+
+def final_state(traj) -> list[float]:  # noqa: ANN001
+    return np.concatenate([traj.x[-1].ravel(), traj.q[-1].ravel(), traj.P[-1].ravel(), traj.L[-1].ravel()]).tolist()
+
+
+@pytest.fixture(scope="module")
+def store() -> dict:
+    return json.loads(STORE.read_text())
+
+
+@pytest.mark.parametrize(("scene", "integrator", "tolerance"), CASES, ids=[case_id(*c) for c in CASES])
+def test_trajectory_is_bitwise_unchanged(store, scene, integrator, tolerance):
+    key = case_id(scene, integrator, tolerance)
+    traj = run_case(scene, integrator, tolerance)
+    hashes = store["hashes"].get(platform_key())
+    if hashes is not None:
+        assert trajectory_hash(traj) == hashes[key], f"{key}: the trajectory changed (see the module docstring)"
+    else:  # another platform or library version: the stored final state, to 1e-9 relative
+        expected = np.array(store["final_state"][key])
+        np.testing.assert_allclose(final_state(traj), expected, rtol=1e-9, atol=1e-9 * np.abs(expected).max())
+
+
+def regenerate() -> None:
+    """Rewrite this platform's hashes (and the final states when none are stored yet)."""
+    store = json.loads(STORE.read_text()) if STORE.exists() else {"hashes": {}, "final_state": {}}
+    hashes, finals = {}, store["final_state"]
+    for case in CASES:
+        traj = run_case(*case)
+        hashes[case_id(*case)] = trajectory_hash(traj)
+        finals[case_id(*case)] = final_state(traj)
+        print(case_id(*case), hashes[case_id(*case)][:16], traj.status)
+    store["hashes"][platform_key()] = hashes
+    STORE.write_text(json.dumps(store, indent=1, sort_keys=True) + "\n")
+
+
+if __name__ == "__main__":
+    if "--regenerate" in sys.argv:
+        regenerate()
+    else:
+        print(__doc__)
