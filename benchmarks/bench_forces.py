@@ -55,16 +55,17 @@ def chunk_runner(scene: SceneSpec, steps: int) -> Callable[[], float]:
     """Compile the scene and warm its kernels; returns a function timing one `run_chunk` of `steps`
     steps [s per step] (no frame is due, so nothing is copied; each call starts from the initial state)."""
     compiled = compile_scene(scene)
-    kernel = get_integrator(scene.simulation.integrator).load()
+    from rbcli.physics.data import make_data
+
+    chunk = get_integrator(scene.simulation.integrator).chunk()
     km, forces, dt = compiled.model.kernel(), compiled.forces, compiled.settings.dt
     n = compiled.model.body_count
-    F, tau, scratch = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, kernel.SCRATCH_WIDTH))
     frames = empty_buffers(1, n)
 
     def run(count: int = steps) -> float:
-        s = compiled.initial_state.copy()
+        data = make_data(compiled.initial_state, chunk.SCRATCH_WIDTH).kernel()
         started = time.perf_counter()
-        kernel.run_chunk(km, forces, dt, 0, count, 10**9, s.x, s.q, s.P, s.L, F, tau, scratch, frames, 0)
+        chunk.run_chunk(km, forces, data, dt, 0, count, 10**9, frames, 0)
         return (time.perf_counter() - started) / count
 
     run(1)  # compiles, or loads from the cache

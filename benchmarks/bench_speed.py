@@ -53,6 +53,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from rbcli.physics.data import make_data  # noqa: E402
 from rbcli.physics.integrators import INTEGRATORS, get_integrator  # noqa: E402
 from rbcli.physics.integrators.euler_matrix import step_numpy  # noqa: E402
 from rbcli.physics.rotation import quat_rotate, quat_rotate_inverse  # noqa: E402
@@ -209,19 +210,17 @@ def measure(runners: dict[str, Runner], repeats: int, budget: float, max_steps: 
 
 
 def chunk_runner(compiled: CompiledScene, integrator: str) -> Runner:
-    """`kernel.run_chunk` alone, from the initial state, record_every = steps (one frame copied at the end)."""
-    kernel = get_integrator(integrator).load()
+    """The generated `run_chunk` alone, from the initial state, record_every = steps (one frame copied at the end)."""
+    chunk = get_integrator(integrator).chunk()
     km, forces = compiled.model.kernel(), compiled.forces
     n = compiled.model.body_count
-    F, tau, scratch = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, kernel.SCRATCH_WIDTH))
     frames = empty_buffers(2, n)
 
     def make(steps: int) -> Callable[[], float]:
         def run() -> float:
-            s = compiled.initial_state.copy()
+            data = make_data(compiled.initial_state, chunk.SCRATCH_WIDTH).kernel()
             started = time.perf_counter()
-            done, _, status = kernel.run_chunk(km, forces, DT, 0, steps, steps, s.x, s.q, s.P, s.L, F, tau, scratch,
-                                               frames, 0)  # fmt: skip
+            done, _, status = chunk.run_chunk(km, forces, data, DT, 0, steps, steps, frames, 0)
             elapsed = time.perf_counter() - started
             if done != steps or status != STATUS_OK:
                 raise RuntimeError(f"{integrator} stopped at step {done} with status {status} (diverged)")
@@ -234,15 +233,15 @@ def chunk_runner(compiled: CompiledScene, integrator: str) -> Runner:
 
 def dispatch_seconds(compiled: CompiledScene, integrator: str, calls: int = 200) -> float:
     """Seconds of one Python call of `run_chunk` for 0 steps: unboxing the arguments, the chunk's fixed cost."""
-    kernel = get_integrator(integrator).load()
+    chunk = get_integrator(integrator).chunk()
     km, n = compiled.model.kernel(), compiled.model.body_count
-    s = compiled.initial_state.copy()
-    args = (np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, kernel.SCRATCH_WIDTH)), empty_buffers(2, n), 0)
+    data = make_data(compiled.initial_state, chunk.SCRATCH_WIDTH).kernel()
+    frames = empty_buffers(2, n)
     best = float("inf")
     for _ in range(5):
         started = time.perf_counter()
         for _ in range(calls):
-            kernel.run_chunk(km, compiled.forces, DT, 0, 0, 1, s.x, s.q, s.P, s.L, *args)
+            chunk.run_chunk(km, compiled.forces, data, DT, 0, 0, 1, frames, 0)
         best = min(best, (time.perf_counter() - started) / calls)
     return best
 
@@ -763,7 +762,7 @@ def main() -> None:
         parser.error("--write-docs needs every section")
 
     repeats, budget = (3, 0.15) if args.quick else (7, 1.0)
-    every = [n for n in INTEGRATORS if hasattr(INTEGRATORS[n].load(), "run_chunk")]
+    every = list(INTEGRATORS)
     names = [n for n in args.integrators.split(",") if n] or (list(MAIN_INTEGRATORS) if args.quick else every)
     info, rep = machine(), Report()
     rep.say(f"- date: {info['date']}; mode: {'--quick' if args.quick else 'full'}")

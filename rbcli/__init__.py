@@ -1,6 +1,7 @@
 """rbsim: rigid-body dynamics from YAML scenes (package `rbcli`).
 
-Public API: `load_scene`, `simulate`, `prepare`, `run_to_file`, `Trajectory`, `SimulationDiverged`,
+Public API: `load_scene`, `simulate`, `Simulation` (step, read and write the state, reset, run),
+`BodyState`, `prepare`, `run_to_file`, `Trajectory`, `SimulationDiverged`,
 `__version__`. Units are SI throughout (m, kg, s, rad); quaternions are (w, x, y, z), world-from-body.
 Attributes are imported lazily so that `rbsim --help` and `rbsim validate` stay light.
 """
@@ -15,6 +16,8 @@ __all__ = [
     "__version__",
     "load_scene",
     "simulate",
+    "Simulation",
+    "BodyState",
     "prepare",
     "run_to_file",
     "Trajectory",
@@ -22,7 +25,7 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:
-    from rbcli.api import SimulationDiverged, load_scene, prepare, run_to_file, simulate
+    from rbcli.api import BodyState, Simulation, SimulationDiverged, load_scene, prepare, run_to_file, simulate
     from rbcli.record.memory_sink import Trajectory
 
 

@@ -4,6 +4,9 @@ import rbcli
 scene = rbcli.load_scene("scenes/t_handle.yaml")
 traj = rbcli.simulate(scene, dt=1e-3, duration=2.0, integrator="euler-matrix")
 traj.x  # (T, N, 3) centre-of-mass positions [m]
+
+sim = rbcli.Simulation(scene, integrator="split2")   # compiled once
+sim.step(1000); sim.state.omega; sim.set_state(v=...); sim.reset(); sim.run(2.0, sinks=[...])
 """
 
 from __future__ import annotations
@@ -13,16 +16,11 @@ from pathlib import Path
 
 from rbcli.record.frame import RunSummary, Sink
 from rbcli.record.memory_sink import SinkMemory, Trajectory
+from rbcli.runner.simulation import BodyState, Simulation, SimulationDiverged
 from rbcli.scene.compile import CompiledScene, compile_scene
 from rbcli.scene.spec import SceneSpec
 
-
-class SimulationDiverged(RuntimeError):
-    """The state became non-finite or blew up; `trajectory` holds every frame up to that point."""
-
-    def __init__(self, message: str, trajectory: Trajectory):
-        super().__init__(message)
-        self.trajectory = trajectory
+__all__ = ["BodyState", "Simulation", "SimulationDiverged", "load_scene", "prepare", "run_to_file", "simulate"]
 
 
 def load_scene(path: str | Path) -> SceneSpec:
@@ -80,17 +78,17 @@ def simulate(
     sinks: Sequence[Sink] = (),
     on_diverge: str = "raise",
 ) -> Trajectory:
-    """Run a scene and return its recorded Trajectory (also streaming to any extra sinks).
+    """Run a scene once and return its recorded Trajectory (also streaming to any extra sinks): the same
+    as `Simulation(scene, ...).run(sinks=[memory, *sinks])`. For repeated runs of one scene, make a
+    Simulation once and call its `run` or `step`: compiling is then paid once.
 
     on_diverge: "raise" (SimulationDiverged, carrying the partial trajectory) or "return".
     """
-    from rbcli.runner.loop import run
-
-    compiled = prepare(
+    sim = Simulation(
         scene, dt=dt, duration=duration, integrator=integrator, record_every=record_every, tolerance=tolerance
     )
     memory = SinkMemory()
-    summary = run(compiled, [memory, *sinks])
+    summary = sim.run(sinks=[memory, *sinks])
     trajectory = memory.trajectory()
     if summary.status == "diverged" and on_diverge == "raise":
         raise SimulationDiverged(summary.message, trajectory)

@@ -72,7 +72,7 @@ def run(
         err.print(f"[red]error:[/] {exc.args[0] if exc.args else exc}", markup=False)
         raise typer.Exit(EXIT_INVALID) from None
 
-    for warning in compiled.spec.warnings:
+    for warning in compiled.warnings:
         err.print(str(warning), markup=False)
     _warm_up_kernels(compiled, err, quiet)
     summary, wall = _run_with_progress(compiled, target, err, quiet)

@@ -359,9 +359,11 @@ def _free_rotation_exact_work(
 
 
 @numba.njit(cache=True)
-def free_rotation_exact_batch(inertia: np.ndarray, q: np.ndarray, L: np.ndarray, h: float, q_out: np.ndarray) -> None:
+def free_rotation_exact_batch(
+    inertia: np.ndarray, q: np.ndarray, L: np.ndarray, h: float, q_out: np.ndarray, work: np.ndarray
+) -> None:
     """``free_rotation_exact`` for every body: inertia (N, 3) principal [kg m^2], q (N, 4) wxyz
-    world-from-principal, L (N, 3) world [kg m^2/s], time step h [s]; writes q_out (N, 4)."""
-    work = np.empty(JACOBI_WORK_SIZE)
+    world-from-principal, L (N, 3) world [kg m^2/s], time step h [s]; writes q_out (N, >= 4).
+    work: (JACOBI_WORK_SIZE,) scratch, passed in so a step allocates nothing."""
     for i in range(q.shape[0]):
         _free_rotation_exact_work(inertia[i], q[i], L[i], h, q_out[i], work)

@@ -1,24 +1,10 @@
-"""Chunks of steps in compiled code: the runner calls an integrator's `run_chunk` and gets control back
-only to record a block of frames, check for divergence or report progress.
+"""Shared pieces of the chunk loops (physics/pipeline.py generates the loops themselves): the frame
+buffers, the recording stage `record_if_due`, the divergence check and the chunk status codes.
 
-Why every integrator module has its own 8-line `run_chunk` instead of one loop taking `step` as an
-argument: numba cannot cache a function whose signature holds a dispatcher type (the cache index then
-refers to dispatcher objects that no longer exist in the next process, and saving a new overload fails
-with "underlying object has vanished"). A loop that calls its module's `step` as a global caches
-cleanly. The shared parts — recording, the divergence check — live here:
-
-    @numba.njit(cache=True)
-    def run_chunk(model, forces, dt, step0, n_steps, record_every, x, q, P, L, F, tau, scratch, frames, filled):
-        for k in range(n_steps):
-            step(model, forces, (step0 + k) * dt, dt, x, q, P, L, F, tau, scratch)
-            filled, stop = record_if_due(step0 + k + 1, record_every, x, q, P, L, frames, filled)
-            if stop != STATUS_OK:
-                return k + 1, filled, stop
-        return n_steps, filled, chunk_status(x, q, P, L)
-
-Returns (steps_done, frames_filled, status): STATUS_OK (ran n_steps), STATUS_FULL (the frame buffers
-are full: flush them and call again), STATUS_DIVERGED (the last step left a non-finite or blown-up state,
-which was not recorded). Time is t = step * dt, never accumulated.
+A chunk returns (steps_done, frames_filled, status): STATUS_OK (ran n_steps), STATUS_FULL (the frame
+buffers are full: flush them and call again), STATUS_DIVERGED (the last step left a non-finite or
+blown-up state, which was not recorded), STATUS_NO_ROOM (called with full buffers: a runner bug; nothing
+written). Time is t = step * dt, never accumulated.
 """
 
 from __future__ import annotations

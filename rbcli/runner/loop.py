@@ -11,16 +11,18 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from types import FrameType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from rbcli._version import __version__
 from rbcli.physics.energy import INVARIANT_NAMES
-from rbcli.physics.integrators import get_integrator
 from rbcli.record.frame import RunHeader, RunSummary, Sink
 from rbcli.runner.recorder import Recorder
 from rbcli.scene.compile import CompiledScene
+
+if TYPE_CHECKING:
+    from rbcli.runner.simulation import Simulation
 
 # Frame buffers are sized to about this many bytes so memory stays flat however long the run.
 BLOCK_BYTES = 8 * 1024 * 1024
@@ -38,8 +40,9 @@ def frame_capacity(body_count: int) -> int:
     return int(np.clip(BLOCK_BYTES // max(1, 13 * 8 * body_count), 1, MAX_BLOCK_FRAMES))
 
 
-def run_header(compiled: CompiledScene) -> RunHeader:
-    """The header every sink receives before the first frame."""
+def run_header(compiled: CompiledScene, *, steps: int | None = None, record_every: int | None = None) -> RunHeader:
+    """The header every sink receives before the first frame (steps and record_every: what this run
+    uses when it is not the scene's own)."""
     spec, model, settings = compiled.spec, compiled.model, compiled.settings
     return RunHeader(
         scene_name=spec.name,
@@ -53,8 +56,8 @@ def run_header(compiled: CompiledScene) -> RunHeader:
         ),
         integrator=settings.integrator,
         dt=settings.dt,
-        duration=settings.duration,
-        record_every=settings.record_every,
+        duration=(settings.steps if steps is None else steps) * settings.dt,
+        record_every=settings.record_every if record_every is None else record_every,
         streams=settings.streams,
         rbsim_version=__version__,
         seed=settings.seed,
@@ -84,48 +87,9 @@ class _InterruptFlag:
 
 def warm_up(compiled: CompiledScene) -> None:
     """Compile or load from cache the chunk kernel for this scene's integrator and force types."""
-    from rbcli.physics.step import empty_buffers
+    from rbcli.runner.simulation import Simulation
 
-    kernel = get_integrator(compiled.settings.integrator).load()
-    state = compiled.initial_state.copy()
-    n = compiled.model.body_count
-    _Stepper(compiled, kernel).advance(state, 0, 0, np.zeros((n, 3)), np.zeros((n, 3)), empty_buffers(1, n), 0)
-
-
-class _Stepper:
-    """Advances the state by chunks of grid steps: the integrator's fixed-step `run_chunk`, or the adaptive
-    chunk when the run has a tolerance (then `counters` holds accepted / rejected step counts)."""
-
-    def __init__(self, compiled: CompiledScene, kernel) -> None:  # noqa: ANN001
-        self.settings = compiled.settings
-        self.kernel = kernel
-        self.kmodel = compiled.model.kernel()
-        self.forces = compiled.forces
-        n = compiled.model.body_count
-        self.counters: np.ndarray | None = None
-        if self.settings.tolerance is None:
-            self.scratch = np.zeros((n, kernel.SCRATCH_WIDTH))
-        else:
-            from rbcli.physics.adaptive import adaptive_work
-
-            self.work = adaptive_work(n)
-            self.counters = self.work["counters"]
-
-    def advance(self, state, step0: int, n_steps: int, F, tau, frames, filled: int) -> tuple[int, int, int]:  # noqa: ANN001
-        """(grid steps done, frames filled, status) after at most n_steps grid steps from step0."""
-        st = self.settings
-        if self.counters is None:
-            return self.kernel.run_chunk(
-                self.kmodel, self.forces, st.dt, step0, n_steps, st.record_every,
-                state.x, state.q, state.P, state.L, F, tau, self.scratch, frames, filled,
-            )  # fmt: skip
-        from rbcli.physics.adaptive import run_adaptive_chunk
-
-        w = self.work
-        return run_adaptive_chunk(
-            self.kmodel, self.forces, st.dt, step0, n_steps, st.record_every, st.tolerance, st.steps * st.dt,
-            state.x, state.q, state.P, state.L, F, tau, w["work"], w["control"], w["counters"], frames, filled,
-        )  # fmt: skip
+    Simulation(compiled).step(0)
 
 
 def run(
@@ -135,29 +99,34 @@ def run(
     progress: ProgressCallback | None = None,
     threaded: bool = True,
 ) -> RunSummary:
-    """Integrate the compiled scene, streaming frames to every sink; always closes the sinks.
+    """Integrate the compiled scene from its initial state, streaming frames to every sink; always
+    closes the sinks. threaded: write the recorded blocks in a background thread (runner.recorder),
+    overlapping the integration; False writes them in this thread. The files are the same either way."""
+    from rbcli.runner.simulation import Simulation
 
-    threaded: write the recorded blocks in a background thread (runner.recorder), overlapping the
-    integration; False writes them in this thread. The files are the same either way.
-    """
+    return Simulation(compiled).run(sinks=sinks, progress=progress, threaded=threaded)
+
+
+def run_simulation(
+    sim: Simulation,
+    sinks: Sequence[Sink],
+    *,
+    steps: int,
+    record_every: int,
+    progress: ProgressCallback | None = None,
+    threaded: bool = True,
+) -> RunSummary:
+    """Advance `sim` by `steps` grid steps from its current state, recording its current state, every
+    `record_every`-th grid step and the last state; always closes the sinks."""
     from rbcli.physics.adaptive import STATUS_STEP_TOO_SMALL
-    from rbcli.physics.forces.impulse import apply_impulses, impulse_step_indices
     from rbcli.physics.step import STATUS_DIVERGED, STATUS_NO_ROOM
 
-    model, settings = compiled.model, compiled.settings
-    kernel = get_integrator(settings.integrator).load()
-    state = compiled.initial_state.copy()
-    n = model.body_count
-    capacity = frame_capacity(n)
-    F, tau = np.zeros((n, 3)), np.zeros((n, 3))
-    stepper = _Stepper(compiled, kernel)
-    kmodel = stepper.kmodel
-    every, total = settings.record_every, settings.steps
-    # impulses change P and L exactly between steps: chunks end at the steps that carry one
-    impulse_at = impulse_step_indices(compiled.forces, settings.dt)
-
+    compiled, settings, state = sim.compiled, sim.settings, sim.data.state
+    capacity = frame_capacity(sim.model.body_count)
+    every = record_every
+    start, total = state.step, state.step + steps
     recorder = Recorder(compiled, sinks, capacity, threaded=threaded)
-    recorder.open(run_header(compiled))
+    recorder.open(run_header(compiled, steps=steps, record_every=every))
     buf = recorder.buffer()
 
     def record_current(frames: int) -> int:
@@ -175,31 +144,22 @@ def run(
 
     status, message = "completed", ""
     try:
-        frames = record_current(0)  # the initial state is frame 0
-        chunk_steps = max(1, min(total, 64))
+        frames = record_current(0)  # the current state is the first frame
+        chunk_steps = max(1, min(steps, 64))
         with _InterruptFlag() as interrupted:
             while state.step < total:
                 started = time.perf_counter()
                 todo = min(chunk_steps, total - state.step)
-                if stepper.counters is not None and state.step + todo < total:
+                if sim.adaptive and state.step + todo < total:
                     # adaptive: end chunks on recorded grid points, so the steps do not depend on chunking
                     todo = min(max(every, todo - todo % every), total - state.step)
-                if impulse_at.size:
-                    if state.step in impulse_at:
-                        t0 = state.step * settings.dt
-                        apply_impulses(
-                            kmodel, compiled.forces, t0, t0 + settings.dt, state.x, state.q, state.P, state.L
-                        )
-                    later = impulse_at[impulse_at > state.step]
-                    if later.size:
-                        todo = min(todo, int(later[0]) - state.step)
                 if frames == capacity:  # a chunk needs room for at least one frame
                     frames = hand_over(frames)
-                done, frames, code = stepper.advance(state, state.step, todo, F, tau, buf, frames)
+                done, frames, code = sim.advance(todo, every, buf, frames)
                 state.step += int(done)
+                elapsed = time.perf_counter() - started
                 if code == STATUS_NO_ROOM:
                     raise RuntimeError(f"internal error: frame buffer full at step {state.step} (please report)")
-                elapsed = time.perf_counter() - started
                 if code == STATUS_DIVERGED:
                     status = "diverged"
                     message = (
@@ -219,7 +179,7 @@ def run(
                 if frames == capacity:
                     frames = hand_over(frames)
                 if progress is not None:
-                    progress(state.step, total)
+                    progress(state.step - start, steps)
                 if interrupted.set:
                     status, message = (
                         "interrupted",
@@ -247,7 +207,7 @@ def run(
         except Exception:  # noqa: BLE001 - the original error is the one to report
             pass
         raise
-    counts = stepper.counters
+    counts = sim.data.adaptive_counters
     summary = RunSummary(
         status, state.step, recorder.frames_written, state.step * settings.dt, message,
         steps_accepted=None if counts is None else int(counts[0]),

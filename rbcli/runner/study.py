@@ -302,20 +302,16 @@ def seconds_per_step(compiled: CompiledScene, repeats: int) -> float:
     one run is shorter than MIN_TIMED_SECONDS; the call overhead (a 0-step call: argument unboxing)
     is measured the same way and taken off, so short runs are not billed for it.
     """
-    from rbcli.physics.step import empty_buffers
+    from rbcli.runner.simulation import Simulation
 
-    kernel = get_integrator(compiled.settings.integrator).load()
-    kmodel, forces, dt = compiled.model.kernel(), compiled.forces, compiled.settings.dt
-    n, steps = compiled.model.body_count, compiled.settings.steps
-    buf = empty_buffers(1, n)
-    F, tau, scratch = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, kernel.SCRATCH_WIDTH))
+    sim = Simulation(compiled)
+    steps = compiled.settings.steps
 
     def timed(count: int, times: int) -> float:
         started = time.perf_counter()
         for _ in range(times):
-            s = compiled.initial_state.copy()
-            # record_every > steps: never records, so the loop is the steps alone
-            kernel.run_chunk(kmodel, forces, dt, 0, count, steps + 1, s.x, s.q, s.P, s.L, F, tau, scratch, buf, 0)
+            sim.reset()
+            sim.advance(count)  # records nothing: the loop is the steps alone
         return (time.perf_counter() - started) / times
 
     def median(count: int) -> float:
@@ -326,6 +322,42 @@ def seconds_per_step(compiled: CompiledScene, repeats: int) -> float:
     overhead = median(0)
     # on a busy machine the difference of two medians can come out <= 0 for very short runs
     return (whole - overhead) / steps if whole > overhead else whole / steps
+
+
+def measure_cost(name: str, body_count: int, steps: int, *, repeats: int = 3, seed: int = 0) -> float:
+    """Wall-clock nanoseconds per body-step of integrator `name`'s compiled chunk loop, best of `repeats`.
+
+    Random particle-cloud bodies under uniform gravity, nothing recorded; one warm-up call first so
+    compilation is not timed.
+    """
+    from rbcli.runner.simulation import Simulation
+    from rbcli.scene.spec import BodySpec, SimulationSpec
+
+    rng = np.random.default_rng(seed)
+    bodies = []
+    for i in range(body_count):
+        q = rng.normal(size=4)
+        bodies.append(
+            BodySpec(
+                name=f"b{i}",
+                particle_position=rng.normal(size=(5, 3)),
+                particle_mass=rng.uniform(0.5, 2.0, size=5),
+                position=rng.normal(size=3),
+                orientation_wxyz=q / np.linalg.norm(q),
+                velocity=rng.normal(size=3),
+                angular_momentum=rng.normal(size=3),
+            )  # fmt: skip
+        )
+    simulation = SimulationSpec(dt=1e-3, duration=1.0, integrator=name, record=RecordSpec(1, ("bodies",)))
+    spec = SceneSpec(name="cost", simulation=simulation, bodies=tuple(bodies), gravity=np.array([0.0, 0.0, -9.81]))
+    sim = Simulation(spec)
+    sim.advance(2)
+    best = float("inf")
+    for _ in range(repeats):  # advance, not step: a demonstration method may blow up here, harmlessly
+        started = time.perf_counter()
+        sim.advance(steps)
+        best = min(best, time.perf_counter() - started)
+    return best / (steps * body_count) * 1e9
 
 
 # ---------------------------------------------------------------------------------------------------

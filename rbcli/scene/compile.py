@@ -36,6 +36,16 @@ class RunSettings:
 
 
 @dataclass(frozen=True)
+class CompiledModel:
+    """What compiling a scene builds that no run setting changes: the model, the force tables and the
+    initial state. Built once per scene (while loading it); runs differ only in their RunSettings."""
+
+    model: Model
+    forces: ForceTables
+    initial_state: State
+
+
+@dataclass(frozen=True)
 class CompiledScene:
     """Everything a run needs, built once: constant model, force tables, initial state, settings."""
 
@@ -48,6 +58,15 @@ class CompiledScene:
     @property
     def scene_sha256(self) -> str:
         return hashlib.sha256(self.spec.source_text.encode()).hexdigest()
+
+    @property
+    def warnings(self) -> list[SceneIssue]:
+        """The scene's load-time warnings and those of the settings that actually run (a spring's
+        stability limit against the effective dt, whatever the scene's own dt was)."""
+        from rbcli.scene.checks import stability_warnings
+
+        issues = [*self.spec.warnings, *stability_warnings(self)]
+        return sorted(issues, key=lambda i: (i.location.line, i.location.column) if i.location else (0, 0))
 
 
 def step_count(duration: float, dt: float) -> int:
@@ -66,8 +85,21 @@ def compile_scene(
     tolerance: float | None = None,
     compression: str | None = None,
 ) -> CompiledScene:
-    """Build model, forces, initial state and settings; keyword arguments override the scene."""
-    sim = spec.simulation
+    """Model, forces and initial state (compiled once per spec: reused from loading when there) with the
+    run settings; keyword arguments override the scene's settings."""
+    base = spec.compiled_model if isinstance(spec.compiled_model, CompiledModel) else compile_model(spec)
+    settings = run_settings(
+        spec, dt=dt, duration=duration, integrator=integrator, record_every=record_every, tolerance=tolerance,
+        compression=compression,
+    )  # fmt: skip
+    # each compiled scene counts its own term evaluations (the one mutable array of the tables)
+    forces = base.forces._replace(term_evaluations=np.zeros_like(base.forces.term_evaluations))
+    return CompiledScene(spec, base.model, forces, base.initial_state.copy(), settings)
+
+
+def compile_model(spec: SceneSpec) -> CompiledModel:
+    """The model, force tables and initial state of a validated scene; SceneError for what only the
+    assembled scene shows (singular inertia, a force naming an unknown body or particle)."""
     try:
         model, centres = build_model(
             [b.name for b in spec.bodies],
@@ -79,6 +111,23 @@ def compile_scene(
         body = next((b for b in spec.bodies if repr(b.name) in str(exc)), None)
         raise SceneError([SceneIssue(body.location if body else None, str(exc))]) from None
     state = initial_state(spec, model)
+    body_index = {name: i for i, name in enumerate(model.body_names)}
+    forces = compile_force_tables(spec.gravity, spec.forces, model, body_index, centres)
+    return CompiledModel(model, forces, state)
+
+
+def run_settings(
+    spec: SceneSpec,
+    *,
+    dt: float | None = None,
+    duration: float | None = None,
+    integrator: str | None = None,
+    record_every: int | None = None,
+    tolerance: float | None = None,
+    compression: str | None = None,
+) -> RunSettings:
+    """The scene's run settings with the given overrides applied: the one place overrides meet the scene."""
+    sim = spec.simulation
     settings = RunSettings(
         dt=float(dt if dt is not None else sim.dt),
         steps=step_count(duration if duration is not None else sim.duration, dt if dt is not None else sim.dt),
@@ -91,9 +140,7 @@ def compile_scene(
     )
     if settings.dt <= 0 or not math.isfinite(settings.dt):
         raise SceneError([SceneIssue(None, f"dt must be a positive number of seconds, got {settings.dt}")])
-    body_index = {name: i for i, name in enumerate(model.body_names)}
-    forces = compile_force_tables(spec.gravity, spec.forces, model, body_index, centres)
-    return CompiledScene(spec, model, forces, state, settings)
+    return settings
 
 
 def initial_state(spec: SceneSpec, model: Model) -> State:

@@ -165,15 +165,15 @@ def _analyse(
     warnings = issues.sorted()
     # the compile step finds what only the assembled scene shows (force terms naming unknown bodies or
     # particles, singular inertia): run it here so `validate` reports it, still without simulating
-    from rbcli.scene.checks import stability_warnings
-    from rbcli.scene.compile import compile_scene
+    from rbcli.scene.compile import compile_model, compile_scene
 
     try:
-        compiled = compile_scene(spec)
+        spec = replace(spec, warnings=tuple(warnings), compiled_model=compile_model(spec))
     except SceneError as exc:
         return None, sorted([*warnings, *exc.issues], key=_issue_order)
-    warnings = sorted([*warnings, *stability_warnings(compiled)], key=_issue_order)
-    return (replace(spec, warnings=tuple(warnings)) if warnings else spec), warnings
+    # spec.warnings are the load's own; the stability warnings depend on the dt that runs, so each
+    # CompiledScene computes them for its settings (here: the scene's, for `validate`)
+    return spec, compile_scene(spec).warnings
 
 
 def _issue_order(issue: SceneIssue) -> tuple[int, int]:

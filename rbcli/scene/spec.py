@@ -7,6 +7,7 @@ to unit quaternions); no raw YAML reaches the physics. Units are SI throughout: 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -114,3 +115,6 @@ class SceneSpec:
     source_path: str | None = None
     source_text: str = ""
     warnings: tuple[SceneIssue, ...] = ()  # non-fatal issues found while loading (e.g. a normalised quaternion)
+    # the model compiled while loading (scene/compile.py CompiledModel), reused by every compile_scene of
+    # this spec: it does not depend on dt or the integrator, so a scene is compiled once however it runs
+    compiled_model: Any = field(default=None, compare=False, repr=False)

@@ -96,7 +96,9 @@ def test_compiled_step_matches_numpy_reference():
     a, b = compiled.initial_state.copy(), compiled.initial_state.copy()
     F, tau = np.zeros((7, 3)), np.zeros((7, 3))
     for k in range(50):
-        euler_matrix.step(km, forces, k * 0.01, 0.01, a.x, a.q, a.P, a.L, F, tau, np.zeros((7, 0)))
+        euler_matrix.step(
+            km, forces, k * 0.01, 0.01, a.x, a.q, a.P, a.L, F, tau, np.zeros((7, euler_matrix.SCRATCH_WIDTH))
+        )
         euler_matrix.step_numpy(km, forces, k * 0.01, 0.01, b.x, b.q, b.P, b.L)
     for name in "xqPL":
         np.testing.assert_allclose(getattr(a, name), getattr(b, name), rtol=0, atol=1e-12)

@@ -17,7 +17,6 @@ from rbcli.physics.forces.wrench import accumulate_wrench
 from rbcli.physics.integrators import get_integrator
 from rbcli.physics.model import mass_properties
 from rbcli.physics.rotation import quat_to_matrix
-from rbcli.physics.step import empty_buffers
 from rbcli.scene.force_specs import BodyPoint, ForceAtPoint, ForceDrag, ForceImpulse, ForceTorque, Schedule
 
 G = np.array([0.0, 0.0, -9.81])
@@ -133,30 +132,24 @@ def test_impulse_step_indices_follow_apply_impulses_rule():
     assert applied[3] == 4 and applied[2] == 0  # 0.3, 0.3 +- 1e-12 and 0.35 land in the step from 3 * 0.1
 
 
-def test_runner_contract_chunks_stop_at_impulse_steps():
-    """The wiring docs/forces.md proposes for runner/loop.py, done by hand: chunks of the integrator's
-    compiled run_chunk that end at each impulse step, and apply_impulses there. Same result as applying
-    before every step (run_steps), to the last bit."""
+def test_chunk_loop_applies_impulses_whatever_the_chunking():
+    """The impulse stage of the compiled chunk loop (physics/pipeline.py): chunks of 7 steps that start,
+    end and run across the impulse steps give, to the last bit, the reference that applies impulses
+    before every step (run_steps)."""
     J = np.array([0.0, 2.0, 0.0])
     body = make_body("h", velocity=np.array([1.0, 0.0, 0.5]), angular_momentum=np.array([0.01, 0.0, 0.02]))
     specs = [
         ForceImpulse(at=BodyPoint(body="h", point=np.array([0.1, 0.0, 0.0])), time=T, vector=J) for T in (0.3, 0.33)
     ]
     compiled = prepare(with_forces(make_scene([body], dt=0.01, duration=0.5, gravity=G), *specs))
-    kernel = get_integrator("euler-matrix").load()
-    km, forces, dt = compiled.model.kernel(), compiled.forces, compiled.settings.dt
-    s = compiled.initial_state.copy()
-    F, tau, scratch, frames = np.zeros((1, 3)), np.zeros((1, 3)), np.zeros((1, 0)), empty_buffers(100, 1)
-    impulse_at, step, total = impulse_step_indices(forces, dt), 0, 50
-    while step < total:
-        todo = min(7, total - step)  # any chunk size
-        if step in impulse_at:
-            apply_impulses(km, forces, step * dt, (step + 1) * dt, s.x, s.q, s.P, s.L)
-        later = impulse_at[impulse_at > step]
-        if later.size:
-            todo = min(todo, int(later[0]) - step)
-        done, _, _ = kernel.run_chunk(km, forces, dt, step, todo, 10**9, s.x, s.q, s.P, s.L, F, tau, scratch, frames, 0)
-        step += int(done)
+    from rbcli.runner.simulation import Simulation
+
+    sim = Simulation(compiled)
+    assert impulse_step_indices(compiled.forces, compiled.settings.dt).tolist() == [30, 33]
+    total = 50
+    while sim.step_index < total:
+        sim.step(min(7, total - sim.step_index))  # steps 28..34 in one chunk holds both impulses
+    s = sim.data.state
     reference, _ = run_steps(compiled, total)
     for name in "xqPL":
         np.testing.assert_array_equal(getattr(s, name), getattr(reference, name))

@@ -142,15 +142,16 @@ def _mixed(integrator: str, dt: float = 0.01):  # noqa: ANN202
 
 def _run_chunk(name, compiled, forces, steps):  # noqa: ANN001, ANN202
     """The integrator's run_chunk over `steps` steps of the compiled scene with these force tables."""
-    kernel = get_integrator(name).load()
-    s = compiled.initial_state.copy()
+    from rbcli.physics.data import make_data
+
+    chunk = get_integrator(name).chunk()
+    data = make_data(compiled.initial_state, chunk.SCRATCH_WIDTH)
     n, dt = compiled.model.body_count, compiled.settings.dt
-    F, tau, scratch = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, kernel.SCRATCH_WIDTH))
     never = np.iinfo(np.int64).max
-    done, _, status = kernel.run_chunk(compiled.model.kernel(), forces, dt, 0, steps, never, s.x, s.q, s.P, s.L,
-                                       F, tau, scratch, empty_buffers(1, n), 0)  # fmt: skip
+    done, _, status = chunk.run_chunk(compiled.model.kernel(), forces, data.kernel(), dt, 0, steps, never,
+                                      empty_buffers(1, n), 0)  # fmt: skip
     assert (done, status) == (steps, STATUS_OK)
-    return s
+    return data.state
 
 
 def _bits(state):  # noqa: ANN001, ANN202

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from rbcli.analysis.exact import quat_geodesic_angle, torque_free, torque_free_axisymmetric
+from rbcli.physics.elliptic import JACOBI_WORK_SIZE
 from rbcli.physics.free_rotation_exact import free_rotation_exact, free_rotation_exact_batch
 from rbcli.physics.rotation import quat_multiply, quat_to_matrix
 
@@ -52,7 +53,7 @@ def test_batch_agrees_with_analysis_reference():
     inertia, q, L = random_bodies(rng, 40)
     h = 20.0
     out = np.empty_like(q)
-    free_rotation_exact_batch(inertia, q, L, h, out)
+    free_rotation_exact_batch(inertia, q, L, h, out, np.empty(JACOBI_WORK_SIZE))
     for i in range(q.shape[0]):
         R0 = quat_to_matrix(q[i])
         ref = torque_free(inertia[i], R0, R0.T @ L[i] / inertia[i], [0.0, h])
@@ -64,11 +65,11 @@ def test_batch_equals_single_body_calls_and_allows_in_place():
     rng = np.random.default_rng(2)
     inertia, q, L = random_bodies(rng, 16)
     out = np.empty_like(q)
-    free_rotation_exact_batch(inertia, q, L, 0.37, out)
+    free_rotation_exact_batch(inertia, q, L, 0.37, out, np.empty(JACOBI_WORK_SIZE))
     for i in range(q.shape[0]):
         np.testing.assert_array_equal(out[i], flow(inertia[i], q[i], L[i], 0.37))
     q_in_place = q.copy()
-    free_rotation_exact_batch(inertia, q_in_place, L, 0.37, q_in_place)
+    free_rotation_exact_batch(inertia, q_in_place, L, 0.37, q_in_place, np.empty(JACOBI_WORK_SIZE))
     np.testing.assert_array_equal(q_in_place, out)
 
 

@@ -74,14 +74,17 @@ def test_compiled_step_matches_numpy_reference(name, kind):
 @pytest.mark.parametrize("name", list(INTEGRATORS))
 def test_chunk_loop_equals_repeated_steps(name):
     """`run_chunk` (what the runner calls) is exactly the step repeated, with frames recorded on cadence."""
+    from rbcli.physics.data import make_data
+
     kernel = get_integrator(name).load()
+    chunk = get_integrator(name).chunk()
     compiled = prepare(make_scene(random_bodies(3, seed=1)))
     kmodel, forces = compiled.model.kernel(), _forces("torque-free")
-    a, b = compiled.initial_state.copy(), compiled.initial_state.copy()
+    data = make_data(compiled.initial_state, chunk.SCRATCH_WIDTH)
+    a, b = data.state, compiled.initial_state.copy()
     F, tau, scratch = np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, kernel.SCRATCH_WIDTH))
     frames = empty_buffers(4, 3)
-    done, filled, status = kernel.run_chunk(kmodel, forces, 0.01, 0, 10, 3, a.x, a.q, a.P, a.L, F, tau, scratch,
-                                            frames, 0)  # fmt: skip
+    done, filled, status = chunk.run_chunk(kmodel, forces, data.kernel(), 0.01, 0, 10, 3, frames, 0)
     assert (done, filled, status) == (10, 3, 0)
     assert frames.step[:3].tolist() == [3, 6, 9]
     for k in range(10):
@@ -92,14 +95,15 @@ def test_chunk_loop_equals_repeated_steps(name):
 
 
 def test_registry_entries_are_complete_and_cheap_to_import():
-    """Every entry names a module with step / step_numpy / run_chunk / SCRATCH_WIDTH; importing the
+    """Every entry names a module with step / step_numpy / SCRATCH_WIDTH and a generated chunk loop; importing the
     registry itself loads no numba (the CLI's --help and `rbsim integrators --no-measure` stay fast)."""
     for name in integrator_names():
         info = INTEGRATORS[name]
         assert info.order >= 1 and info.force_evals >= 1 and info.conserves and info.summary
         module = info.load()
-        for attribute in ("step", "step_numpy", "run_chunk"):
+        for attribute in ("step", "step_numpy"):
             assert callable(getattr(module, attribute)), (name, attribute)
+        assert callable(info.chunk().run_chunk) and info.chunk().SCRATCH_WIDTH == module.SCRATCH_WIDTH
         assert isinstance(module.SCRATCH_WIDTH, int) and module.SCRATCH_WIDTH >= 0
     assert [n for n, i in INTEGRATORS.items() if i.adaptive] == ["dopri5"]
     assert [n for n, i in INTEGRATORS.items() if i.demonstration] == ["semi-implicit-gyro"]
@@ -150,7 +154,8 @@ def test_rotate_and_axis_order():
 def test_integrators_command_lists_every_method_and_times_one(capsys):
     """`rbsim integrators` (the lead registers it on the app): the table names every integrator, and
     the in-process timing gives a positive cost per body-step."""
-    from rbcli.cli.integrators import integrators, measure_cost
+    from rbcli.cli.integrators import integrators
+    from rbcli.runner.study import measure_cost
 
     integrators(measure=False)
     out = capsys.readouterr().out

@@ -123,15 +123,11 @@ def test_one_frame_buffers_record_every_frame(monkeypatch, integrator, every):
 
 def test_a_chunk_given_a_full_buffer_writes_nothing():
     """The kernel's own guard: called with no room left, it reports STATUS_NO_ROOM and leaves memory alone."""
-    from rbcli.physics.integrators import split2
     from rbcli.physics.step import STATUS_NO_ROOM, empty_buffers
+    from rbcli.runner.simulation import Simulation
 
-    compiled = prepare(make_scene(random_bodies(2), dt=0.01, duration=1.0, every=1))
-    s = compiled.initial_state.copy()
-    n = compiled.model.body_count
-    frames = empty_buffers(2, n)
-    F, tau, scratch = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, split2.SCRATCH_WIDTH))
-    done, filled, status = split2.run_chunk(
-        compiled.model.kernel(), compiled.forces, 0.01, 0, 5, 1, s.x, s.q, s.P, s.L, F, tau, scratch, frames, 2
-    )
-    assert (done, filled, status) == (1, 2, STATUS_NO_ROOM)
+    sim = Simulation(make_scene(random_bodies(2), dt=0.01, duration=1.0, every=1, integrator="split2"))
+    frames = empty_buffers(2, sim.model.body_count)
+    frames.step[:] = -7  # sentinel: must survive
+    assert sim.advance(5, 1, frames, 2) == (1, 2, STATUS_NO_ROOM)
+    assert frames.step.tolist() == [-7, -7]

@@ -92,7 +92,7 @@ def test_every_chunk_kernel_releases_the_gil():
     """The recording thread only overlaps the integration if the compiled chunk drops the GIL."""
     from rbcli.physics.adaptive import run_adaptive_chunk
 
-    kernels = {name: info.load().run_chunk for name, info in INTEGRATORS.items()}
+    kernels = {name: info.chunk().run_chunk for name, info in INTEGRATORS.items()}
     kernels["adaptive"] = run_adaptive_chunk
     assert {name: k.targetoptions.get("nogil") for name, k in kernels.items()} == dict.fromkeys(kernels, True)
 

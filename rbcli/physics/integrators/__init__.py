@@ -1,10 +1,12 @@
 """Registry of integrators: metadata here (cheap to import: no numba), kernels loaded on demand.
 
-Every integrator module defines
+Every integrator module defines only its update maths:
   step(model, forces, t, dt, x, q, P, L, F, tau, scratch)   # numba njit, in place, all bodies
   step_numpy(model, forces, t, dt, x, q, P, L)               # plain numpy reference, in place
 and `SCRATCH_WIDTH`, the float64 scratch columns per body its compiled step needs. The forces come
-only from `accumulate_wrench`. `kinematics.py` holds the per-body kernels they share (not a method).
+only from `accumulate_wrench`. The chunk loop that runs a step's stages around it is generated from
+physics/pipeline.py into physics/chunks/<module>.py (`IntegratorInfo.chunk`).
+`kinematics.py` holds the per-body kernels they share (not a method).
 Adaptive time stepping (a tolerance instead of dt) is `rbcli.physics.adaptive`, driven by the
 methods flagged `adaptive`. docs/integrators.md has the measured orders, errors and costs.
 """
@@ -40,8 +42,18 @@ class IntegratorInfo:
     demonstration: bool = False
 
     def load(self) -> ModuleType:
-        """Import the kernel module (pulls in numba)."""
+        """Import the integrator's module: step, step_numpy, SCRATCH_WIDTH (pulls in numba)."""
         return importlib.import_module(self.module)
+
+    @property
+    def chunk_module(self) -> str:
+        """The module of its generated chunk loop (physics/pipeline.py)."""
+        return f"{_PKG.rsplit('.', 1)[0]}.chunks.{self.module.rsplit('.', 1)[1]}"
+
+    def chunk(self) -> ModuleType:
+        """Import the generated chunk loop: run_chunk(model, forces, data, dt, step0, n_steps,
+        record_every, frames, filled) and SCRATCH_WIDTH."""
+        return importlib.import_module(self.chunk_module)
 
 
 _PKG = "rbcli.physics.integrators"

@@ -27,7 +27,6 @@ from rbcli.physics.forces.wrench import accumulate_wrench
 from rbcli.physics.integrators.kinematics import rotate_inverse
 from rbcli.physics.integrators.rk4 import align, align_numpy, body_rates, rates_numpy
 from rbcli.physics.rotation import quat_rotate_inverse
-from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, chunk_status, record_if_due
 
 SCRATCH_WIDTH = 131
 STATE_SIZE = 16  # x (3), q (4), P (3), L (3), m (3)
@@ -206,14 +205,3 @@ def step_numpy(model, forces, t, dt, x, q, P, L) -> None:  # noqa: ANN001
             return
         y[1] = y[1] / np.linalg.norm(y[1], axis=1, keepdims=True)
         rates.append(rates_numpy(model, forces, t + C[row] * dt, *y))
-
-
-@numba.njit(**CHUNK_KERNEL)
-def run_chunk(model, forces, dt, step0, n_steps, record_every, x, q, P, L, F, tau, scratch, frames, filled):  # noqa: ANN001
-    """n_steps of `step` with recording (the chunk loop of physics/step.py, one per module for caching)."""
-    for k in range(n_steps):
-        step(model, forces, (step0 + k) * dt, dt, x, q, P, L, F, tau, scratch)
-        filled, stop = record_if_due(step0 + k + 1, record_every, x, q, P, L, frames, filled)
-        if stop != STATUS_OK:
-            return k + 1, filled, stop
-    return n_steps, filled, chunk_status(x, q, P, L)

@@ -17,18 +17,18 @@ import numpy as np
 from rbcli.physics.forces.wrench import accumulate_wrench, wrench_numpy
 from rbcli.physics.rotation import gram_schmidt, matrix_to_quat, quat_to_matrix, skew
 from rbcli.physics.rotation_kernels import matrix_to_quat_nb, quat_to_matrix_nb
-from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, chunk_status, record_if_due
 
-SCRATCH_WIDTH = 0
+# three 3x3 matrices (R, its update, R in the user frame) in row 0: views, so a step allocates nothing
+SCRATCH_WIDTH = 27
 
 
 @numba.njit(cache=True)
 def step(model, forces, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One explicit Euler step of every body, in place."""
     accumulate_wrench(model, forces, t, x, q, P, L, F, tau)
-    R = np.empty((3, 3))
-    Rn = np.empty((3, 3))
-    Ru = np.empty((3, 3))
+    R = scratch[0, 0:9].reshape((3, 3))
+    Rn = scratch[0, 9:18].reshape((3, 3))
+    Ru = scratch[0, 18:27].reshape((3, 3))
     for b in range(x.shape[0]):
         quat_to_matrix_nb(q[b], R)
         inv_mass = 1.0 / model.body_mass[b]
@@ -96,14 +96,3 @@ def step_numpy(model, forces, t, dt, x, q, P, L) -> None:  # noqa: ANN001
     L += dt * tau
     R_user = R @ np.swapaxes(model.body_frame, -1, -2)
     q[:] = matrix_to_quat(gram_schmidt(R_user + dt * skew(omega) @ R_user) @ model.body_frame)
-
-
-@numba.njit(**CHUNK_KERNEL)
-def run_chunk(model, forces, dt, step0, n_steps, record_every, x, q, P, L, F, tau, scratch, frames, filled):  # noqa: ANN001
-    """n_steps of `step` with recording (the chunk loop of physics/step.py, one per module for caching)."""
-    for k in range(n_steps):
-        step(model, forces, (step0 + k) * dt, dt, x, q, P, L, F, tau, scratch)
-        filled, stop = record_if_due(step0 + k + 1, record_every, x, q, P, L, frames, filled)
-        if stop != STATUS_OK:
-            return k + 1, filled, stop
-    return n_steps, filled, chunk_status(x, q, P, L)

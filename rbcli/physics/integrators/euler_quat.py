@@ -16,7 +16,6 @@ import numpy as np
 from rbcli.physics.forces.wrench import accumulate_wrench, wrench_numpy
 from rbcli.physics.integrators.kinematics import angular_velocity_numpy, rotate, rotate_inverse
 from rbcli.physics.rotation import quat_multiply
-from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, chunk_status, record_if_due
 
 SCRATCH_WIDTH = 0
 
@@ -57,14 +56,3 @@ def step_numpy(model, forces, t, dt, x, q, P, L) -> None:  # noqa: ANN001
         L += dt * tau
     q += 0.5 * dt * quat_multiply(np.concatenate([np.zeros((len(q), 1)), omega], axis=1), q)
     q /= np.linalg.norm(q, axis=1, keepdims=True)
-
-
-@numba.njit(**CHUNK_KERNEL)
-def run_chunk(model, forces, dt, step0, n_steps, record_every, x, q, P, L, F, tau, scratch, frames, filled):  # noqa: ANN001
-    """n_steps of `step` with recording (the chunk loop of physics/step.py, one per module for caching)."""
-    for k in range(n_steps):
-        step(model, forces, (step0 + k) * dt, dt, x, q, P, L, F, tau, scratch)
-        filled, stop = record_if_due(step0 + k + 1, record_every, x, q, P, L, frames, filled)
-        if stop != STATUS_OK:
-            return k + 1, filled, stop
-    return n_steps, filled, chunk_status(x, q, P, L)

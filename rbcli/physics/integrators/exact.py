@@ -22,12 +22,13 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from rbcli.physics.elliptic import JACOBI_WORK_SIZE
 from rbcli.physics.forces.wrench import accumulate_wrench, wrench_numpy
 from rbcli.physics.free_rotation_exact import free_rotation_exact_batch
-from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, chunk_status, record_if_due
 
 # per body: the orientation at the current force evaluation, when torque-free (see `compose`)
-SCRATCH_WIDTH = 4
+# per body: the orientation at the force evaluation (4); row 0 also holds the Jacobi functions' work
+SCRATCH_WIDTH = 4 + JACOBI_WORK_SIZE
 
 WEIGHTS = np.array([1.0])
 
@@ -51,13 +52,14 @@ def compose(model, forces, t, h, weights, x, q, P, L, F, tau, q_mid) -> None:  #
     """
     count = weights.shape[0]
     torque = forces.has_torque
+    work = q_mid[0, 4:]  # a view: the step allocates nothing
     elapsed = 0.5 * weights[0] * h
     _drift_centre(model, elapsed, x, P)
     if torque:
-        free_rotation_exact_batch(model.body_inertia, q, L, elapsed, q)
+        free_rotation_exact_batch(model.body_inertia, q, L, elapsed, q, work)
     for i in range(count):
         if not torque:
-            free_rotation_exact_batch(model.body_inertia, q, L, elapsed, q_mid)
+            free_rotation_exact_batch(model.body_inertia, q, L, elapsed, q_mid, work)
         q_now = q if torque else q_mid  # (one wrench call site: the compiled wrench is inlined once)
         accumulate_wrench(model, forces, t + elapsed, x, q_now, P, L, F, tau)
         h_prev = weights[i] * h
@@ -65,10 +67,10 @@ def compose(model, forces, t, h, weights, x, q, P, L, F, tau, q_mid) -> None:  #
         _kick(model, torque, forces.torque_body, h_prev, P, L, F, tau)
         _drift_centre(model, 0.5 * (h_prev + h_next), x, P)
         if torque:
-            free_rotation_exact_batch(model.body_inertia, q, L, 0.5 * (h_prev + h_next), q)
+            free_rotation_exact_batch(model.body_inertia, q, L, 0.5 * (h_prev + h_next), q, work)
         elapsed += 0.5 * (h_prev + h_next)
     if not torque:
-        free_rotation_exact_batch(model.body_inertia, q, L, h, q)
+        free_rotation_exact_batch(model.body_inertia, q, L, h, q, work)
 
 
 @numba.njit(cache=True)
@@ -102,22 +104,11 @@ def compose_numpy(model, forces, t, h, weights, x, q, P, L) -> None:  # noqa: AN
     for weight in weights:
         s = weight * h
         x += 0.5 * s * P / model.body_mass[:, None]
-        free_rotation_exact_batch(model.body_inertia, q, L, 0.5 * s, q)
+        free_rotation_exact_batch(model.body_inertia, q, L, 0.5 * s, q, np.empty(JACOBI_WORK_SIZE))
         F, tau = wrench_numpy(model, forces, t + elapsed + 0.5 * s, x, q, P, L)
         P += s * F
         if forces.has_torque:
             L += s * tau
         x += 0.5 * s * P / model.body_mass[:, None]
-        free_rotation_exact_batch(model.body_inertia, q, L, 0.5 * s, q)
+        free_rotation_exact_batch(model.body_inertia, q, L, 0.5 * s, q, np.empty(JACOBI_WORK_SIZE))
         elapsed += s
-
-
-@numba.njit(**CHUNK_KERNEL)
-def run_chunk(model, forces, dt, step0, n_steps, record_every, x, q, P, L, F, tau, scratch, frames, filled):  # noqa: ANN001
-    """n_steps of `step` with recording (the chunk loop of physics/step.py, one per module for caching)."""
-    for k in range(n_steps):
-        step(model, forces, (step0 + k) * dt, dt, x, q, P, L, F, tau, scratch)
-        filled, stop = record_if_due(step0 + k + 1, record_every, x, q, P, L, frames, filled)
-        if stop != STATUS_OK:
-            return k + 1, filled, stop
-    return n_steps, filled, chunk_status(x, q, P, L)

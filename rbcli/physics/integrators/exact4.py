@@ -11,7 +11,6 @@ import numba
 
 from rbcli.physics.integrators import exact
 from rbcli.physics.integrators.split4 import WEIGHTS
-from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, chunk_status, record_if_due
 
 SCRATCH_WIDTH = exact.SCRATCH_WIDTH
 
@@ -25,14 +24,3 @@ def step(model, forces, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: AN
 def step_numpy(model, forces, t, dt, x, q, P, L) -> None:  # noqa: ANN001
     """Numpy reference of `step`."""
     exact.compose_numpy(model, forces, t, dt, WEIGHTS, x, q, P, L)
-
-
-@numba.njit(**CHUNK_KERNEL)
-def run_chunk(model, forces, dt, step0, n_steps, record_every, x, q, P, L, F, tau, scratch, frames, filled):  # noqa: ANN001
-    """n_steps of `step` with recording (the chunk loop of physics/step.py, one per module for caching)."""
-    for k in range(n_steps):
-        step(model, forces, (step0 + k) * dt, dt, x, q, P, L, F, tau, scratch)
-        filled, stop = record_if_due(step0 + k + 1, record_every, x, q, P, L, frames, filled)
-        if stop != STATUS_OK:
-            return k + 1, filled, stop
-    return n_steps, filled, chunk_status(x, q, P, L)

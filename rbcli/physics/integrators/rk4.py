@@ -32,7 +32,7 @@ import numpy as np
 from rbcli.physics.forces.wrench import accumulate_wrench, wrench_numpy
 from rbcli.physics.integrators.kinematics import rotate, rotate_inverse
 from rbcli.physics.rotation import quat_multiply, quat_rotate, quat_rotate_inverse
-from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, STEP_KERNEL, chunk_status, record_if_due
+from rbcli.physics.step import STEP_KERNEL
 
 # per body: y0 = (x, q, P, L, m) (16), the weighted sum of stage rates (16), the stage's m (3)
 SCRATCH_WIDTH = 35
@@ -202,14 +202,3 @@ def step_numpy(model, forces, t, dt, x, q, P, L) -> None:  # noqa: ANN001
     new = [y + dt / 6.0 * (a + 2.0 * b + 2.0 * c + d) for y, a, b, c, d in zip(y0, k1, k2, k3, k4, strict=True)]
     x[:], P[:], L[:] = new[0], new[2], new[3]
     q[:] = align_numpy(new[1], new[4], L)
-
-
-@numba.njit(**CHUNK_KERNEL)
-def run_chunk(model, forces, dt, step0, n_steps, record_every, x, q, P, L, F, tau, scratch, frames, filled):  # noqa: ANN001
-    """n_steps of `step` with recording (the chunk loop of physics/step.py, one per module for caching)."""
-    for k in range(n_steps):
-        step(model, forces, (step0 + k) * dt, dt, x, q, P, L, F, tau, scratch)
-        filled, stop = record_if_due(step0 + k + 1, record_every, x, q, P, L, frames, filled)
-        if stop != STATUS_OK:
-            return k + 1, filled, stop
-    return n_steps, filled, chunk_status(x, q, P, L)

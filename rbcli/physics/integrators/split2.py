@@ -57,7 +57,7 @@ from rbcli.physics.integrators.kinematics import (
     turn,
     turn_numpy,
 )
-from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, STEP_KERNEL, chunk_status, record_if_due
+from rbcli.physics.step import STEP_KERNEL
 
 # per body: body-frame angular momentum m (3), cos and sin of the half angle of the last T_c (2)
 SCRATCH_WIDTH = 5
@@ -193,14 +193,3 @@ def compose_numpy(model, forces, t, h, weights, x, q, P, L) -> None:  # noqa: AN
         x += 0.5 * s * P / model.body_mass[:, None]
         elapsed += s
     q /= np.linalg.norm(q, axis=1, keepdims=True)
-
-
-@numba.njit(**CHUNK_KERNEL)
-def run_chunk(model, forces, dt, step0, n_steps, record_every, x, q, P, L, F, tau, scratch, frames, filled):  # noqa: ANN001
-    """n_steps of `step` with recording (the chunk loop of physics/step.py, one per module for caching)."""
-    for k in range(n_steps):
-        step(model, forces, (step0 + k) * dt, dt, x, q, P, L, F, tau, scratch)
-        filled, stop = record_if_due(step0 + k + 1, record_every, x, q, P, L, frames, filled)
-        if stop != STATUS_OK:
-            return k + 1, filled, stop
-    return n_steps, filled, chunk_status(x, q, P, L)

@@ -22,7 +22,6 @@ import numba
 import numpy as np
 
 from rbcli.physics.integrators import split2
-from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, chunk_status, record_if_due
 
 SCRATCH_WIDTH = split2.SCRATCH_WIDTH
 
@@ -39,14 +38,3 @@ def step(model, forces, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: AN
 def step_numpy(model, forces, t, dt, x, q, P, L) -> None:  # noqa: ANN001
     """Plain numpy reference of `step`, vectorised over bodies, in place."""
     split2.compose_numpy(model, forces, t, dt, WEIGHTS, x, q, P, L)
-
-
-@numba.njit(**CHUNK_KERNEL)
-def run_chunk(model, forces, dt, step0, n_steps, record_every, x, q, P, L, F, tau, scratch, frames, filled):  # noqa: ANN001
-    """n_steps of `step` with recording (the chunk loop of physics/step.py, one per module for caching)."""
-    for k in range(n_steps):
-        step(model, forces, (step0 + k) * dt, dt, x, q, P, L, F, tau, scratch)
-        filled, stop = record_if_due(step0 + k + 1, record_every, x, q, P, L, frames, filled)
-        if stop != STATUS_OK:
-            return k + 1, filled, stop
-    return n_steps, filled, chunk_status(x, q, P, L)

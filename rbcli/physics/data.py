@@ -1,0 +1,77 @@
+"""Data: every mutable array of a run, allocated once (MuJoCo's mjData beside the constant Model).
+
+The Model (physics/model.py) and the force tables never change during a run; everything a step
+writes lives here, so kernels never allocate and a run's memory is known when it starts:
+
+    x, q, P, L   the state (physics/state.py has the frames and units); `step` counts grid steps
+    F, tau       wrench accumulators [N], [N m], shape (body_count, 3), world frame, about each centre
+                 of mass: the force pass sets them, the integrator reads them
+    scratch      the integrator's work columns, shape (body_count, SCRATCH_WIDTH of its module)
+    adaptive     error-controlled runs only (physics/adaptive.py): stage work (body_count, dopri5
+                 width), controller state `control` (2,) and step `counters` int64 (2,) that persist
+                 between chunks
+
+Frame buffers are the recorder's (runner/recorder.py): they are handed between threads, so they are
+passed to a chunk beside the Data rather than owned by it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from rbcli.physics.state import State
+
+
+class KernelData(NamedTuple):
+    """The arrays of a Data as compiled chunk loops take them (numba-friendly named tuple)."""
+
+    x: np.ndarray
+    q: np.ndarray
+    P: np.ndarray
+    L: np.ndarray
+    F: np.ndarray
+    tau: np.ndarray
+    scratch: np.ndarray
+
+
+@dataclass
+class Data:
+    """The mutable arrays of one run (see the module docstring); `state` views x, q, P, L and step."""
+
+    state: State
+    F: np.ndarray
+    tau: np.ndarray
+    scratch: np.ndarray
+    adaptive_work: np.ndarray | None = None
+    adaptive_control: np.ndarray | None = None
+    adaptive_counters: np.ndarray | None = None
+
+    def kernel(self) -> KernelData:
+        s = self.state
+        return KernelData(s.x, s.q, s.P, s.L, self.F, self.tau, self.scratch)
+
+    def clear_work(self) -> None:
+        """Forget everything carried between steps but the state (after the state is set from outside):
+        the adaptive controller then chooses its first step afresh, as at the start of a run."""
+        self.F[:] = 0.0
+        self.tau[:] = 0.0
+        self.scratch[:] = 0.0
+        if self.adaptive_work is not None:
+            assert self.adaptive_control is not None
+            self.adaptive_work[:] = 0.0
+            self.adaptive_control[:] = 0.0
+
+
+def make_data(initial: State, scratch_width: int, *, adaptive_width: int | None = None) -> Data:
+    """A Data for `initial` (copied): zeroed accumulators and scratch; adaptive arrays when asked."""
+    n = initial.x.shape[0]
+    state = initial.copy()
+    data = Data(state, np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, scratch_width)))
+    if adaptive_width is not None:
+        data.adaptive_work = np.zeros((n, adaptive_width))
+        data.adaptive_control = np.zeros(2)
+        data.adaptive_counters = np.zeros(2, dtype=np.int64)
+    return data

@@ -1,0 +1,322 @@
+"""The object API: compile a scene once, then step, read and change the state, reset, and run.
+
+    import rbcli
+    sim = rbcli.Simulation("scenes/tumbling_plate.yaml", integrator="split2", dt=1e-3)
+    sim.step(1000)                 # compiled chunk, no recording
+    sim.state.omega                # (N, 3) [rad/s], world frame
+    sim.set_state(omega=...)       # in the user's frames; the internal principal-frame state follows
+    sim.reset()
+    summary = sim.run(2.0, sinks=[...])   # the CLI's run: chunks, recording, interrupts
+
+A Simulation owns the compiled scene (constant Model and force tables, runner settings) and one Data
+(every mutable array, physics/data.py). The user's frames (the particle frame given in the scene) are
+converted to the internal principal frame only here and in the recording blocks.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from rbcli.physics.data import make_data
+from rbcli.physics.frames import body_angular_velocity, internal_orientation, user_orientation
+from rbcli.physics.integrators import get_integrator
+from rbcli.physics.rotation import quat_rotate, quat_rotate_inverse
+from rbcli.physics.state import State
+from rbcli.scene.compile import CompiledScene
+
+if TYPE_CHECKING:
+    from rbcli.record.frame import RunSummary, Sink
+    from rbcli.runner.loop import ProgressCallback
+    from rbcli.scene.spec import SceneSpec
+
+# record_every for steps that record nothing: no grid index below 2^62 is a multiple of it but 0
+NEVER = 2**62
+
+
+class SimulationDiverged(RuntimeError):
+    """The state became non-finite or blew up; `trajectory` holds every frame up to that point (when the
+    run recorded one; `Simulation.step` records nothing)."""
+
+    def __init__(self, message: str, trajectory=None) -> None:  # noqa: ANN001 - Trajectory | None
+        super().__init__(message)
+        self.trajectory = trajectory
+
+
+@dataclass(frozen=True)
+class BodyState:
+    """A snapshot of every body, in the user's frames. SI units; arrays (body_count, ...).
+
+    x: centre of mass [m], world. q: (w, x, y, z) world-from-user-body-frame. v [m/s], omega [rad/s]:
+    world. P [kg m/s], L [kg m^2/s]: world, L about the centre of mass. t = step * dt [s].
+    """
+
+    step: int
+    t: float
+    x: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
+    omega: np.ndarray
+    P: np.ndarray
+    L: np.ndarray
+
+
+class Simulation:
+    """A scene compiled once, with its state: step, read, write, reset, run (see the module docstring)."""
+
+    def __init__(
+        self,
+        scene: SceneSpec | CompiledScene | str | Path,
+        *,
+        dt: float | None = None,
+        duration: float | None = None,
+        integrator: str | None = None,
+        record_every: int | None = None,
+        tolerance: float | None = None,
+        compression: str | None = None,
+    ) -> None:
+        if isinstance(scene, CompiledScene):
+            given = (dt, duration, integrator, record_every, tolerance, compression)
+            if any(value is not None for value in given):
+                raise ValueError("overrides apply when compiling: pass a scene or a path, not a CompiledScene")
+            compiled = scene
+        else:
+            from rbcli.api import prepare
+
+            compiled = prepare(
+                scene, dt=dt, duration=duration, integrator=integrator, record_every=record_every,
+                tolerance=tolerance, compression=compression,
+            )  # fmt: skip
+        self.compiled = compiled
+        self.model = compiled.model
+        self.forces = compiled.forces
+        self.settings = compiled.settings
+        info = get_integrator(self.settings.integrator)
+        self.adaptive = self.settings.tolerance is not None
+        if self.adaptive:
+            from rbcli.physics.integrators import dopri5
+
+            self._chunk = None
+            self.data = make_data(compiled.initial_state, 0, adaptive_width=dopri5.SCRATCH_WIDTH)
+        else:
+            chunk = info.chunk()
+            self._chunk = chunk.run_chunk
+            self.data = make_data(compiled.initial_state, chunk.SCRATCH_WIDTH)
+        self._kmodel = self.model.kernel()
+        self._kdata = self.data.kernel()
+        from rbcli.physics.step import empty_buffers
+
+        self._no_frames = empty_buffers(1, self.model.body_count)  # never written: nothing is due
+        if self.adaptive:
+            from rbcli.physics.forces.impulse import impulse_step_indices
+
+            self._impulse_at = impulse_step_indices(self.forces, self.settings.dt)
+
+    # ---- time -------------------------------------------------------------------------------------
+
+    @property
+    def dt(self) -> float:
+        """The step [s] (with a tolerance: the spacing of output times)."""
+        return self.settings.dt
+
+    @property
+    def step_index(self) -> int:
+        """Grid steps taken since the initial state (or the last reset)."""
+        return self.data.state.step
+
+    @property
+    def time(self) -> float:
+        """t = step_index * dt [s] (never accumulated)."""
+        return self.data.state.step * self.settings.dt
+
+    def step(self, n: int = 1) -> None:
+        """Advance n grid steps in compiled code, recording nothing; raises SimulationDiverged when the
+        state at the end of the call is non-finite or exceeds 1e100 (checked once per call, not per step:
+        `run` checks every recorded frame)."""
+        from rbcli.physics.step import STATUS_DIVERGED, STATUS_OK
+
+        if n < 0:
+            raise ValueError(f"steps must be >= 0, got {n}")
+        if self._chunk is not None:  # the fixed-step path, kept lean: it is the API's hot path
+            done, _, status = self._chunk(
+                self._kmodel, self.forces, self._kdata, self.settings.dt, self.data.state.step, n, NEVER,
+                self._no_frames, 0,
+            )  # fmt: skip
+        else:
+            done, _, status = self.advance(n, NEVER, self._no_frames, 0)
+        self.data.state.step += int(done)
+        if status == STATUS_DIVERGED or (status != STATUS_OK and self._chunk is None):
+            raise SimulationDiverged(
+                f"diverged by step {self.data.state.step} (t = {self.time:.6g} s): the state became non-finite "
+                f"or exceeded 1e100 with integrator {self.settings.integrator!r} at dt = {self.settings.dt:g} s"
+            )
+
+    def advance(
+        self,
+        n_steps: int,
+        record_every: int = NEVER,
+        frames=None,
+        filled: int = 0,  # noqa: ANN001 - FrameBuffers
+    ) -> tuple[int, int, int]:
+        """At most n_steps grid steps from the current one, recording due frames into `frames` (from
+        `filled` on; None: record nothing); returns (steps done, frames filled, status) and raises nothing.
+        The caller adds the steps done to `data.state.step` (the runner does, between chunks)."""
+        if frames is None:
+            frames, record_every = self._no_frames, NEVER
+        step0 = self.data.state.step
+        if self._chunk is not None:
+            return self._chunk(
+                self._kmodel, self.forces, self._kdata, self.settings.dt, step0, n_steps, record_every, frames, filled
+            )
+        return self._advance_adaptive(step0, n_steps, record_every, frames, filled)
+
+    def _advance_adaptive(self, step0: int, n_steps: int, every: int, frames, filled: int) -> tuple[int, int, int]:  # noqa: ANN001
+        """The adaptive chunk, split at the steps that hold impulses (applied exactly between steps)."""
+        from rbcli.physics.adaptive import run_adaptive_chunk
+        from rbcli.physics.forces.impulse import apply_impulses
+        from rbcli.physics.step import STATUS_OK
+
+        d, st, s = self.data, self.settings, self.data.state
+        assert d.adaptive_work is not None and d.adaptive_control is not None and d.adaptive_counters is not None
+        done, status = 0, STATUS_OK
+        while done < n_steps and status == STATUS_OK:
+            index = step0 + done
+            todo = n_steps - done
+            if self._impulse_at.size:
+                if index in self._impulse_at:
+                    t0 = index * st.dt
+                    apply_impulses(self._kmodel, self.forces, t0, t0 + st.dt, s.x, s.q, s.P, s.L)
+                later = self._impulse_at[self._impulse_at > index]
+                if later.size:
+                    todo = min(todo, int(later[0]) - index)
+            steps, filled, status = run_adaptive_chunk(
+                self._kmodel, self.forces, st.dt, index, todo, every, st.tolerance, st.steps * st.dt,
+                s.x, s.q, s.P, s.L, d.F, d.tau, d.adaptive_work, d.adaptive_control, d.adaptive_counters,
+                frames, filled,
+            )  # fmt: skip
+            done += int(steps)
+        return done, filled, status
+
+    # ---- state ------------------------------------------------------------------------------------
+
+    @property
+    def state(self) -> BodyState:
+        """A copy of the current state in the user's frames (see BodyState)."""
+        s, model = self.data.state, self.model
+        return BodyState(
+            step=s.step,
+            t=self.time,
+            x=s.x.copy(),
+            q=user_orientation(model, s.q),
+            v=s.P / model.body_mass[:, None],
+            omega=body_angular_velocity(model, s.q, s.L),
+            P=s.P.copy(),
+            L=s.L.copy(),
+        )
+
+    def set_state(
+        self,
+        *,
+        x: np.ndarray | None = None,
+        q: np.ndarray | None = None,
+        v: np.ndarray | None = None,
+        omega: np.ndarray | None = None,
+        P: np.ndarray | None = None,
+        L: np.ndarray | None = None,
+        step: int | None = None,
+    ) -> None:
+        """Change the state between steps, in the user's frames (as BodyState): give v or P, omega or L.
+
+        q is normalised. omega is converted with the orientation in effect after this call
+        (L = R I R^T omega), so set q and omega together when both change. The integrator's carried
+        work is cleared, as at the start of a run.
+        """
+        s, model = self.data.state, self.model
+        n = model.body_count
+
+        def rows(value: np.ndarray, width: int, name: str) -> np.ndarray:
+            array = np.array(value, dtype=np.float64).reshape(-1, width) if np.ndim(value) else None
+            if array is None or array.shape != (n, width) or not np.isfinite(array).all():
+                raise ValueError(f"{name} must be finite numbers of shape ({n}, {width})")
+            return array
+
+        if v is not None and P is not None:
+            raise ValueError("give v or P, not both")
+        if omega is not None and L is not None:
+            raise ValueError("give omega or L, not both")
+        if x is not None:
+            s.x[:] = rows(x, 3, "x")
+        if q is not None:
+            q_user = rows(q, 4, "q")
+            norm = np.linalg.norm(q_user, axis=1, keepdims=True)
+            if not (norm > 0).all():
+                raise ValueError("q must be non-zero quaternions (w, x, y, z)")
+            s.q[:] = internal_orientation(model, q_user / norm)
+        if v is not None:
+            s.P[:] = model.body_mass[:, None] * rows(v, 3, "v")
+        if P is not None:
+            s.P[:] = rows(P, 3, "P")
+        if omega is not None:  # L = R diag(I) R^T omega, R world-from-principal
+            w = rows(omega, 3, "omega")
+            s.L[:] = quat_rotate(s.q, model.body_inertia * quat_rotate_inverse(s.q, w))
+        if L is not None:
+            s.L[:] = rows(L, 3, "L")
+        if step is not None:
+            if step < 0:
+                raise ValueError(f"step must be >= 0, got {step}")
+            s.step = int(step)
+        self.data.clear_work()
+
+    def reset(self) -> None:
+        """Back to the scene's initial state at step 0, with cleared work arrays."""
+        initial = self.compiled.initial_state
+        s = self.data.state
+        s.x[:], s.q[:], s.P[:], s.L[:] = initial.x, initial.q, initial.P, initial.L
+        s.step = 0
+        self.data.clear_work()
+        if self.data.adaptive_counters is not None:
+            self.data.adaptive_counters[:] = 0
+        self.forces.term_evaluations[:] = 0
+
+    # ---- runs -------------------------------------------------------------------------------------
+
+    def run(
+        self,
+        duration: float | None = None,
+        *,
+        sinks: Sequence[Sink] = (),
+        record_every: int | None = None,
+        progress: ProgressCallback | None = None,
+        threaded: bool = True,
+    ) -> RunSummary:
+        """Run `duration` seconds (default: the scene's) from the current state, streaming recorded
+        frames (every `record_every` grid steps, and always the first and last) to the sinks."""
+        from rbcli.runner.loop import run_simulation
+
+        steps = self.settings.steps if duration is None else _steps_for(duration, self.settings.dt)
+        every = self.settings.record_every if record_every is None else int(record_every)
+        if every < 1:
+            raise ValueError(f"record_every must be >= 1, got {every}")
+        return run_simulation(self, sinks, steps=steps, record_every=every, progress=progress, threaded=threaded)
+
+    def copy_state(self) -> State:
+        """The internal state (principal frame) as a copy: what `restore_state` takes back."""
+        return self.data.state.copy()
+
+    def restore_state(self, state: State) -> None:
+        """Set the internal state from `copy_state`'s result, bitwise."""
+        s = self.data.state
+        s.x[:], s.q[:], s.P[:], s.L[:], s.step = state.x, state.q, state.P, state.L, state.step
+        self.data.clear_work()
+
+
+def _steps_for(duration: float, dt: float) -> int:
+    from rbcli.scene.compile import step_count
+
+    if not duration > 0:
+        raise ValueError(f"duration must be > 0 s, got {duration}")
+    return step_count(duration, dt)
