@@ -96,10 +96,26 @@ def simulate(
 
 
 def run_to_file(compiled: CompiledScene, output: str | Path, *, progress=None) -> RunSummary:  # noqa: ANN001
-    """Run a compiled scene streaming to an .mcap or .rrd file (memory stays flat)."""
+    """Run a compiled scene streaming to an .mcap or .rrd file (memory stays flat).
+
+    The run writes `x.partial.mcap` beside `x.mcap` and renames it onto `x.mcap` when it ends (completed,
+    interrupted or diverged); a run that fails leaves `x.mcap` as it was (record/output_file.py).
+    Raises OutputError (a ValueError) before any work when the file cannot be written, another run is
+    writing it, or the disk is too full for the estimated size.
+    """
+    from rbcli.record.output_file import OutputFile, expected_run_bytes
     from rbcli.record.sinks import open_file_sink
     from rbcli.runner.loop import run
 
-    output = Path(output)
-    output.parent.mkdir(parents=True, exist_ok=True)
-    return run(compiled, [open_file_sink(output, compression=compiled.settings.compression)], progress=progress)
+    out = OutputFile(output, expected_bytes=expected_run_bytes(compiled, output))
+    partial = out.open()
+    sink = None
+    try:
+        sink = open_file_sink(partial, compression=compiled.settings.compression)
+        summary = run(compiled, [sink], progress=progress)
+    except BaseException:
+        # frames written: the sink closed the partial, a readable log up to the error; keep it
+        out.abandon(keep=getattr(sink, "frames_written", 0) > 0)
+        raise
+    out.commit()
+    return summary

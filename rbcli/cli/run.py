@@ -2,16 +2,21 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
+import signal
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import typer
 
 EXIT_INVALID = 1
 EXIT_DIVERGED = 3
-EXIT_INTERRUPTED = 130
+EXIT_INTERRUPTED = 130  # 128 + the signal's number: 130 SIGINT, 143 SIGTERM, 129 SIGHUP
+_STOP_SIGNALS = ("SIGTERM", "SIGHUP")  # handled as Ctrl-C is; SIGINT is the run loop's own
 COMPRESSIONS = ("zstd", "lz4", "none")  # as schemas/scene.schema.json's record.compression
 
 
@@ -21,7 +26,8 @@ def run(
         None,
         "--output",
         "-o",
-        help="Output file, .mcap or .rrd [default: the scene's output, else outputs/<name>.rrd].",
+        help="Output file, .mcap or .rrd, written as <name>.partial.<ext> and renamed when the run ends "
+        "[default: the scene's output, else outputs/<name>.rrd].",
     ),
     dt: float | None = typer.Option(None, "--dt", help="Override the time step [s]."),
     duration: float | None = typer.Option(None, "--duration", help="Override the duration [s]."),
@@ -37,17 +43,24 @@ def run(
     ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar or summary."),
 ) -> None:
-    """Integrate SCENE and record it; exits 1 on an invalid scene (writing nothing), 3 on divergence."""
+    """Integrate SCENE and record it; exits 1 on an invalid scene or output (writing nothing), 3 on divergence."""
     from rich.console import Console
+    from rich.markup import escape
 
     from rbcli.api import prepare
     from rbcli.physics.integrators import get_integrator
-    from rbcli.record.sinks import output_format
+    from rbcli.record.output_file import (
+        OutputError,
+        check_output,
+        default_output_path,
+        expected_run_bytes,
+        partial_path,
+    )
     from rbcli.scene.spec import SceneError
 
-    err = Console(stderr=True, highlight=False)
+    err = Console(stderr=True, highlight=False, soft_wrap=True)  # soft_wrap: one message, one line
     if not scene.is_file():
-        err.print(f"[red]error:[/] scene file not found: {scene}")
+        err.print(f"[red]error:[/] scene file not found: {escape(str(scene))}")
         raise typer.Exit(EXIT_INVALID)
     try:
         if compression is not None and compression not in COMPRESSIONS:
@@ -62,20 +75,35 @@ def run(
             compression=compression,
         )
         get_integrator(compiled.settings.integrator)
-        target = output or Path(compiled.spec.simulation.output or Path("outputs") / f"{compiled.spec.name}.rrd")
-        output_format(target)
+        scene_output = compiled.spec.simulation.output
+        target = output or (Path(scene_output) if scene_output else default_output_path(compiled.spec.name))
+        # before any work: a folder, an unknown format, an unwritable place, another run on it, a too-full disk
+        check_output(target, expected_bytes=expected_run_bytes(compiled, target))
     except SceneError as exc:
         for issue in exc.issues:
             err.print(str(issue), markup=False)
         raise typer.Exit(EXIT_INVALID) from None
     except (KeyError, ValueError) as exc:
-        err.print(f"[red]error:[/] {exc.args[0] if exc.args else exc}", markup=False)
+        err.print(f"[red]error:[/] {escape(str(exc.args[0] if exc.args else exc))}")
         raise typer.Exit(EXIT_INVALID) from None
 
     for warning in compiled.warnings:
         err.print(str(warning), markup=False)
     _warm_up_kernels(compiled, err, quiet)
-    summary, wall = _run_with_progress(compiled, target, err, quiet)
+    try:
+        with _terminate_as_interrupt() as received:
+            summary, wall = _run_with_progress(compiled, target, err, quiet)
+    except OutputError as exc:  # the output was taken or went away after the check
+        err.print(f"[red]error:[/] {escape(str(exc))}")
+        raise typer.Exit(EXIT_INVALID) from None
+    except (OSError, ValueError, KeyboardInterrupt) as exc:  # the disk or a sink failed; Ctrl-C before the loop
+        kept = partial_path(os.path.realpath(target))
+        note = f"the log up to the stop is in {kept}" if kept.is_file() else f"{target} is unchanged"
+        if isinstance(exc, KeyboardInterrupt):
+            err.print(f"[yellow]interrupted[/]; {escape(note)}")
+            raise typer.Exit(128 + received[-1] if received else EXIT_INTERRUPTED) from None
+        err.print(f"[red]error:[/] {escape(f'{type(exc).__name__}: {exc}; {note}')}")
+        raise typer.Exit(EXIT_INVALID) from None
     settings = compiled.settings
     if not quiet:
         rate = summary.steps * compiled.model.body_count / max(wall, 1e-9)
@@ -91,11 +119,40 @@ def run(
             markup=False,
         )
     if summary.status == "diverged":
-        err.print(f"[red]error:[/] {summary.message}; the log up to that point is complete: {target}")
+        err.print(
+            f"[red]error:[/] {escape(summary.message)}; the log up to that point is complete: {escape(str(target))}"
+        )
         raise typer.Exit(EXIT_DIVERGED)
     if summary.status == "interrupted":
-        err.print(f"[yellow]{summary.message}[/]; the log up to that point is complete: {target}")
-        raise typer.Exit(EXIT_INTERRUPTED)
+        err.print(f"[yellow]{escape(summary.message)}[/]; the log up to that point is complete: {escape(str(target))}")
+        raise typer.Exit(128 + received[-1] if received else EXIT_INTERRUPTED)
+
+
+@contextlib.contextmanager
+def _terminate_as_interrupt() -> Iterator[list[int]]:
+    """SIGTERM (kill, a job scheduler's stop) and SIGHUP (a closed terminal) end the run as Ctrl-C does:
+    at the end of a chunk, with the log up to there complete and renamed into place. Yields the list of
+    signal numbers received, so the exit status can be 128 + that signal (143, 129)."""
+    received: list[int] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield received
+        return
+
+    def forward(signum, frame) -> None:  # noqa: ANN001
+        received.append(int(signum))
+        handler = signal.getsignal(signal.SIGINT)  # the run loop's flag while it runs
+        if callable(handler):
+            handler(signal.SIGINT, frame)
+        else:
+            raise KeyboardInterrupt
+
+    names = [name for name in _STOP_SIGNALS if hasattr(signal, name)]
+    previous = {name: signal.signal(getattr(signal, name), forward) for name in names}
+    try:
+        yield received
+    finally:
+        for name, handler in previous.items():
+            signal.signal(getattr(signal, name), handler)
 
 
 def _warm_up_kernels(compiled, err, quiet: bool) -> None:  # noqa: ANN001
