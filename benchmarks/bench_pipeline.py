@@ -119,16 +119,20 @@ def compare_api(n: int, repeats: int, integrator: str = "split2") -> tuple[float
 def load_and_compile_seconds(count: int = 10_000) -> float:
     text = (
         "name: grid\nsimulation: {dt: 0.001, duration: 0.01, integrator: split2}\n"
-        "bodies:\n  - name: cell\n    particles:\n"
-        "      positions: [[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0], [0, 0, 0.1]]\n      masses: 1.0\n"
-        f"    grid: {{count: [{count}, 1, 1], spacing: [0.5, 0.5, 0.5]}}\n"
+        "bodies:\n  - grid:\n      name: cell\n"
+        f"      count: [{count}, 1, 1]\n      spacing: 0.5\n      origin: [0, 0, 0]\n"
+        "      template:\n        particles:\n"
+        "          positions: [[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0], [0, 0, 0.1]]\n          masses: 1.0\n"
     )
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "grid.yaml"
         path.write_text(text)
         started = time.perf_counter()
         rbcli.prepare(rbcli.load_scene(path))
-        return time.perf_counter() - started
+        first = time.perf_counter() - started
+        started = time.perf_counter()
+        rbcli.prepare(rbcli.load_scene(path))
+        return min(first, time.perf_counter() - started)
 
 
 def main() -> None:
