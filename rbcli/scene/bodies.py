@@ -14,9 +14,10 @@ from typing import Any, overload
 
 import numpy as np
 
+from rbcli.physics.rotation import quat_to_matrix
 from rbcli.scene import mesh as mesh_io
 from rbcli.scene.issues import IssueCollector
-from rbcli.scene.orientation import matrix_from_quat, random_unit_quaternions, resolve_orientation
+from rbcli.scene.orientation import random_unit_quaternions, resolve_orientation
 from rbcli.scene.shapes import (
     SamplingError,
     inertia_degeneracy,
@@ -230,7 +231,7 @@ class BodyResolver:
         """World-frame angular momentum from a plain list (world), {world: ...} or {body: ...} (L = R L_body)."""
         if isinstance(value, dict):
             if "body" in value:
-                return _vec(matrix_from_quat(q) @ np.asarray(value["body"], dtype=float))
+                return _vec(quat_to_matrix(q) @ np.asarray(value["body"], dtype=float))
             value = value["world"]
         return _vec(value)
 
@@ -445,7 +446,7 @@ class BodyResolver:
                     ok = False
                     continue
             offset = np.asarray(part.get("offset", [0.0, 0.0, 0.0]), dtype=float)
-            positions.append(points @ matrix_from_quat(q).T + offset)
+            positions.append(points @ quat_to_matrix(q).T + offset)
             masses.append(mass)
             radii.append(radius)
         if not ok:

@@ -2,7 +2,7 @@
 
 Forms: `{wxyz: [...]}`, `{xyzw: [...]}`, `{matrix: 3x3}`, `{axis_angle: {axis, angle, degrees?}}`,
 `{euler: {angles, convention, degrees?}}` with scipy's convention names (lowercase extrinsic, uppercase
-intrinsic). Numbers here are plain numpy; the physics keeps its own rotation kernels.
+intrinsic). The conversions themselves live in physics/rotation.py (one home); this module only parses forms.
 """
 
 from __future__ import annotations
@@ -12,6 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from rbcli.physics.rotation import matrix_to_quat, quat_multiply
+
 # Report(subpath, message, expected, severity): how resolution tells the loader about a problem.
 Report = Callable[[tuple[str | int, ...], str, str, str], None]
 
@@ -19,54 +21,6 @@ Report = Callable[[tuple[str | int, ...], str, str, str], None]
 MATRIX_TOLERANCE = 1e-3
 # below this a deviation is rounding, not worth a warning
 QUIET_TOLERANCE = 1e-9
-
-
-def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product a * b of quaternions (w, x, y, z); rotation b first, then a."""
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return np.array(
-        [
-            aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-        ]
-    )
-
-
-def matrix_from_quat(q: np.ndarray) -> np.ndarray:
-    """Rotation matrix of a unit quaternion (w, x, y, z), shape (3, 3)."""
-    w, x, y, z = q
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
-def quat_from_matrix(r: np.ndarray) -> np.ndarray:
-    """Unit quaternion (w, x, y, z) of a rotation matrix, Shepperd's method (divide by the largest term)."""
-    trace = np.trace(r)
-    diag = np.diag(r)
-    k = int(np.argmax([trace, *diag]))
-    if k == 0:
-        s = 2.0 * np.sqrt(1.0 + trace)
-        terms = [0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s]
-    elif k == 1:
-        s = 2.0 * np.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2])
-        terms = [(r[2, 1] - r[1, 2]) / s, 0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s]
-    elif k == 2:
-        s = 2.0 * np.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2])
-        terms = [(r[0, 2] - r[2, 0]) / s, (r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s]
-    else:
-        s = 2.0 * np.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1])
-        terms = [(r[1, 0] - r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s]
-    q = np.asarray(terms, dtype=float)
-    q /= np.linalg.norm(q)
-    return q if q[0] >= 0 else -q
 
 
 def quat_from_axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
@@ -140,7 +94,7 @@ def _resolve_orientation(spec: Mapping[str, Any] | None, report: Report) -> np.n
             report(("matrix",), f"matrix orthonormalised (deviation {deviation:.3g})", "", "warning")
         # nearest rotation (polar decomposition) before converting
         u, _, vt = np.linalg.svd(r)
-        return quat_from_matrix(u @ vt)
+        return matrix_to_quat(u @ vt)
     if "axis_angle" in spec:
         aa = spec["axis_angle"]
         axis = np.asarray(aa["axis"], dtype=float)

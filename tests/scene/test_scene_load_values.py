@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from rbcli.physics.rotation import quat_to_matrix
 from rbcli.scene.load import load_scene, load_scene_text
-from rbcli.scene.orientation import matrix_from_quat
 from rbcli.scene.shapes import mass_properties
 
 SKELETON = """\
@@ -331,5 +331,5 @@ def test_count_sets_the_spacing():
 
 def test_orientation_of_a_compound_part_rotates_its_particles():
     part_q = one_body("orientation: {axis_angle: {axis: [1, 1, 0], angle: 0.7}}\n").bodies[0].orientation_wxyz
-    r = matrix_from_quat(part_q)
+    r = quat_to_matrix(part_q)
     assert np.allclose(r @ r.T, np.eye(3), atol=1e-14)
