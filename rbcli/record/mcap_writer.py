@@ -65,6 +65,9 @@ MAGIC = b"\x89MCAP0\r\n"
 ZSTD_LEVEL = 1
 COMPRESSIONS = ("zstd", "lz4", "none")
 MAX_PENDING = 2  # file tasks queued for the background worker before the caller waits
+# Schema and channel ids are uint16 in MCAP (spec: Schema.id, Channel.id, Message.channel_id); schema id 0
+# means "no schema" and ids here start at 1, so a file holds at most 65,535 of each.
+MAX_ID = 0xFFFF
 
 # Message record: opcode, content length | channel_id u16, sequence u32, log_time u64, publish_time u64
 _MESSAGE_HEAD = struct.Struct("<BQHIQQ")
@@ -81,6 +84,14 @@ def _record(record: McapRecord) -> bytes:
     builder = RecordBuilder()
     record.write(builder)
     return builder.end()
+
+
+def _check_id(kind: str, new_id: int) -> None:
+    """Refuse an id MCAP cannot hold, before any byte of it is written (else struct.error mid-record)."""
+    if new_id > MAX_ID:
+        raise ValueError(
+            f"an MCAP file holds at most {MAX_ID:,} {kind}s ({kind} ids are 16-bit); this is {kind} {new_id:,}"
+        )
 
 
 class McapChunkWriter:
@@ -151,12 +162,16 @@ class McapChunkWriter:
         self._task(self._write, MAGIC + _record(Header(profile=profile, library=library)))
 
     def register_schema(self, name: str, encoding: str, data: bytes) -> int:
+        """A new schema's id (1, 2, ...); ValueError past MAX_ID (the file is left as it was)."""
+        _check_id("schema", len(self._schemas) + 1)
         schema = Schema(id=len(self._schemas) + 1, name=name, encoding=encoding, data=data)
         self._schemas[schema.id] = schema
         self._add_to_chunk(_record(schema))
         return schema.id
 
     def register_channel(self, topic: str, message_encoding: str, schema_id: int, metadata: dict | None = None) -> int:
+        """A new channel's id (1, 2, ...); ValueError past MAX_ID (the file is left as it was)."""
+        _check_id("channel", len(self._channels) + 1)
         channel = Channel(
             id=len(self._channels) + 1,
             topic=topic,

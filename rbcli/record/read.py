@@ -104,7 +104,8 @@ def read_mcap(path: str | Path) -> RecordedRun:
 def read_rrd(path: str | Path, *, bodies: bool = True) -> RecordedRun:
     """An rbsim .rrd read with rerun's own reader: transforms per body (float32 -> float64), invariants.
 
-    bodies=False skips the body transforms (x and q come back with no bodies).
+    Either layout of `record.rerun_sink` (an entity per body, or all bodies in one). bodies=False skips
+    the body transforms (x and q come back with no bodies).
     """
     from rbcli.record.rerun_sink import body_entity, read_rrd_file
 
@@ -113,7 +114,20 @@ def read_rrd(path: str | Path, *, bodies: bool = True) -> RecordedRun:
     names = tuple(_json_list(meta.get("body_names")))
     entities = ["/" + body_entity(n) for n in names]
     recorded = [e for e in entities if e in contents.body_translation]
-    if bodies and recorded:
+    offsets = tuple(contents.particle_offset.get(e, np.zeros((0, 3))) for e in entities)
+    if contents.bodies_particle_offset is not None:
+        offsets = contents.bodies_particle_offset
+    if bodies and contents.bodies is not None:
+        # the one-entity layout: every body in each row, in header order
+        t, step, x, q = (
+            contents.bodies.time,
+            contents.bodies.step,
+            contents.bodies.translation,
+            contents.bodies.quaternion,
+        )
+        if x.shape[1] != len(names):
+            raise ValueError(f"{path}: {x.shape[1]} bodies per row in the one-entity layout, {len(names)} named")
+    elif bodies and recorded:
         steps = [contents.body_step[e] for e in recorded]
         if len(recorded) < len(entities) or any(not np.array_equal(s, steps[0]) for s in steps):
             missing = sorted(set(entities) - set(recorded))
@@ -140,7 +154,7 @@ def read_rrd(path: str | Path, *, bodies: bool = True) -> RecordedRun:
         x=x,
         q=q,
         invariants=contents.invariants,
-        particle_offset=tuple(contents.particle_offset.get(e, np.zeros((0, 3))) for e in entities),
+        particle_offset=offsets,
         entity_paths=tuple(contents.entity_paths),
     )
 

@@ -13,6 +13,21 @@ Entities (timelines `time`, a duration [s], and `step`, a sequence):
 Run parameters are also recording properties (`rbsim`, `rbsim.summary`), and the default blueprint
 shows the 3D view beside one time-series plot per invariant family.
 
+A scene of more than BODY_ENTITIES_MAX bodies is written with all bodies in ONE entity instead:
+
+    bodies                     Boxes3D per recorded step: centers = centres of mass, quaternions =
+                               orientations, one instance per body in header order; static half_sizes
+                               (the box about the centre of mass that holds the body's particles, body
+                               frame) and colours; static `particle_offset` (all bodies' clouds, float64
+                               x, y, z, body frames, concatenated) and `particle_count` (per body)
+
+Why: the footer Rerun writes into every .rrd (its manifest, which `RrdReader` and the viewer read
+before any data) has a column per entity and component, and rerun's reader refuses a manifest whose
+flatbuffer holds more than 1,000,000 tables: with an entity per body (~54 tables each) the file is
+unreadable from ~18,700 bodies (rerun-sdk 0.41.0: readable at 18,500 bodies, "TooManyTables" at 18,750).
+The one-entity layout has a fixed number of columns whatever the body count; the viewer draws each body
+as its oriented box (an entity's points cannot follow a per-instance transform).
+
 Per-step data goes out with `send_columns`, one call per entity per flush. Rerun's cost is mostly per
 call (tens of microseconds), so the sink gathers blocks until `flush_frames` frames or `flush_bytes`
 of input are buffered: memory stays bounded and the file grows as the run goes.
@@ -41,6 +56,15 @@ APPLICATION_ID = "rbsim"
 TIMELINE_TIME = "time"
 TIMELINE_STEP = "step"
 
+# Bodies up to which each gets its own entities; above it, the one-entity layout (module docstring).
+# ~1.9x below the measured limit of 18,500-18,750 bodies, for the fixed entities and for rerun versions;
+# a test writes exactly this many bodies and opens the file with rerun's reader.
+BODY_ENTITIES_MAX = 10_000
+ENTITY_BODIES = "bodies"
+# Centre-of-mass path samples kept for `trajectories`, over all bodies: 2^22 float32 x, y, z = 48 MiB, so
+# memory stays flat for big scenes too (4,096 points per body up to 1,024 bodies, fewer above).
+TRAJECTORY_POINTS_TOTAL = 1 << 22
+
 # Distinct, colour-blind-friendly body colours (Okabe-Ito), cycled by body index.
 PALETTE = np.array(
     [[0, 114, 178], [230, 159, 0], [0, 158, 115], [204, 121, 167], [86, 180, 233], [213, 94, 0], [240, 228, 66]],
@@ -51,6 +75,11 @@ PALETTE = np.array(
 def body_entity(name: str) -> str:
     """The entity path of a body (its name escaped as one path part)."""
     return f"bodies/{rr.escape_entity_path_part(name)}"
+
+
+def bodies_in_one_entity(body_count: int) -> bool:
+    """True when a run of this many bodies is written in the one-entity layout (module docstring)."""
+    return body_count > BODY_ENTITIES_MAX
 
 
 def invariant_family(name: str) -> str:
@@ -144,7 +173,8 @@ class SinkRerun:
     """Records a run to an .rrd file (see the module docstring for the layout).
 
     flush_frames / flush_bytes: how many frames (or bytes of x and q input) to gather before sending.
-    trajectory_points: at most this many points per body path (older points are thinned by 2 to fit).
+    trajectory_points: at most this many points per body path (older points are thinned by 2 to fit),
+    and at most TRAJECTORY_POINTS_TOTAL over all bodies.
     """
 
     def __init__(
@@ -164,9 +194,13 @@ class SinkRerun:
 
     def open(self, header: RunHeader) -> None:
         self._header = header
-        self._bodies = [body_entity(n) for n in header.body_names]
-        # gathered per block, only what is sent: t, step, x and q as float32 (N, k, 3|4) body-major,
-        # invariants, particle positions (the block itself is not kept: v, omega, P, L are not sent)
+        body_count = len(header.body_names)
+        self._batched = bodies_in_one_entity(body_count)
+        self._bodies = [] if self._batched else [body_entity(n) for n in header.body_names]
+        self._path_budget = max(2, min(self._trajectory_points, TRAJECTORY_POINTS_TOTAL // max(1, body_count)))
+        # gathered per block, only what is sent: t, step, x and q as float32 (N, k, 3|4) body-major
+        # ((k, N, 3|4) frame-major in the one-entity layout), invariants, particle positions (the block
+        # itself is not kept: v, omega, P, L are not sent)
         self._pending: list[dict[str, Any]] = []
         self._pending_bytes = 0
         self._path_points: list[np.ndarray] = []  # (k, N, 3) float32 kept centre-of-mass samples
@@ -187,6 +221,7 @@ class SinkRerun:
         ref = [
             *rr.Transform3D.columns(translation=np.zeros((1, 3)), quaternion=[[0.0, 0.0, 0.0, 1.0]]),
             *rr.Points3D.columns(positions=np.zeros((1, 3)), radii=[1.0], colors=PALETTE[:1]),
+            *rr.Boxes3D.columns(centers=np.zeros((1, 3)), quaternions=[[0.0, 0.0, 0.0, 1.0]]),
         ]
         self._columns = {
             c.component_descriptor().component: (c.component_descriptor(), c.component_batch.as_arrow_array().type)
@@ -209,6 +244,9 @@ class SinkRerun:
         archetype cost ~0.25 ms per body, one `send_columns` per body ~0.1 ms).
         """
         assert self._rec is not None
+        if self._batched:
+            self._log_body_boxes()
+            return
         scale = 1.0
         if first is not None and len(first) and first.x.shape[1] > 1:
             span = np.ptp(first.x[0], axis=0).max()
@@ -239,20 +277,48 @@ class SinkRerun:
         rr.send_chunks(chunks, recording=self._rec)
         self._clouds_logged = True
 
+    def _log_body_boxes(self) -> None:
+        """The one-entity layout's static part: box half sizes, colours and every cloud (see the module docstring)."""
+        assert self._rec is not None
+        clouds = [np.asarray(c, dtype=np.float64).reshape(-1, 3) for c in self._header.body_particle_offset]
+        counts = np.array([len(c) for c in clouds], dtype=np.int64)
+        stacked = np.concatenate(clouds) if clouds else np.zeros((0, 3))
+        half = np.zeros((len(clouds), 3))
+        filled = counts > 0
+        if filled.any():  # per body max |offset| per axis, in one call: reduceat over the non-empty clouds
+            starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+            half[filled] = np.maximum.reduceat(np.abs(stacked), starts[filled], axis=0)
+        # a single particle (or an empty cloud) spans nothing: a small cube, a fiftieth of the largest body
+        point = ~(half > 0).any(axis=1)
+        half[point] = 0.02 * (half.max() if half.max() > 0 else 1.0)
+        colors = PALETTE[np.arange(len(clouds)) % len(PALETTE)]
+        self._rec.log(
+            ENTITY_BODIES,
+            rr.Boxes3D(half_sizes=half, colors=colors),
+            rr.AnyValues(particle_offset=stacked.reshape(-1), particle_count=counts),
+            static=True,
+        )
+        self._clouds_logged = True
+
     def write(self, block: FrameBlock) -> None:
         if self._rec is None or self._closed:
             raise RuntimeError("SinkRerun.write before open() or after close()")
         if not self._clouds_logged:
             self._log_clouds(block)
-        # body-major float32 now, while the block is hot in cache; rotations as Rerun's xyzw. A diverged
+        # float32 in send order now, while the block is hot in cache; rotations as Rerun's xyzw. A diverged
         # run may hold values beyond float32: they become inf, without a warning on the user's terminal.
         body_count, k_count = block.x.shape[1], len(block)
-        xf = np.empty((body_count, k_count, 3), dtype=np.float32)
-        qf = np.empty((body_count, k_count, 4), dtype=np.float32)
+        shape = (k_count, body_count) if self._batched else (body_count, k_count)
+        xf = np.empty((*shape, 3), dtype=np.float32)
+        qf = np.empty((*shape, 4), dtype=np.float32)
         with np.errstate(over="ignore", invalid="ignore"):
-            xf[...] = block.x.transpose(1, 0, 2)
-            qf[..., :3] = block.q[..., 1:].transpose(1, 0, 2)
-            qf[..., 3] = block.q[..., 0].T
+            if self._batched:
+                xf[...] = block.x
+                qf[..., :3], qf[..., 3] = block.q[..., 1:], block.q[..., 0]
+            else:
+                xf[...] = block.x.transpose(1, 0, 2)
+                qf[..., :3] = block.q[..., 1:].transpose(1, 0, 2)
+                qf[..., 3] = block.q[..., 0].T
             pp = None if block.particle_position is None else np.asarray(block.particle_position, dtype=np.float32)
         inv = {name: np.asarray(block.invariants[name], dtype=np.float64) for name in self._header.invariant_names}
         self._pending.append({"t": block.t, "step": block.step, "x": xf, "q": qf, "inv": inv, "particles": pp})
@@ -269,7 +335,7 @@ class SinkRerun:
         if keep.any():
             with np.errstate(over="ignore", invalid="ignore"):
                 self._path_points.append(np.asarray(x[keep], dtype=np.float32))
-        if sum(len(p) for p in self._path_points) > self._trajectory_points:
+        if sum(len(p) for p in self._path_points) > self._path_budget:
             self._path_points = [np.concatenate(self._path_points)[::2]]
             self._path_stride *= 2
 
@@ -287,6 +353,22 @@ class SinkRerun:
             rr.TimeColumn(TIMELINE_TIME, duration=np.rint(t * 1e9).astype(np.int64).astype("timedelta64[ns]")),
             rr.TimeColumn(TIMELINE_STEP, sequence=step),
         ]
+        if self._batched:
+            self._send_body_boxes(pending, times)
+        else:
+            self._send_body_transforms(pending, times)
+        for name in self._header.invariant_names:
+            values = np.concatenate([p["inv"][name] for p in pending])
+            self._rec.send_columns(f"invariants/{name}", indexes=times, columns=rr.Scalars.columns(scalars=values))
+        if all(p["particles"] is not None for p in pending):
+            pp = np.concatenate([p["particles"] for p in pending], axis=0)
+            points = rr.Points3D.columns(positions=pp.reshape(-1, 3)).partition(np.full(k_count, pp.shape[1]))
+            self._rec.send_columns("particles", indexes=times, columns=points)
+        self.frames_written += k_count
+
+    def _send_body_transforms(self, pending: list[dict[str, Any]], times: list[Any]) -> None:
+        """One Transform3D chunk per body entity, all in one send_chunks call."""
+        k_count = sum(len(p["t"]) for p in pending)
         # (N*K, width) per component, body-major, so each body's column is a zero-copy slice
         arrays = {}
         for name, key in (("Transform3D:translation", "x"), ("Transform3D:quaternion", "q")):
@@ -302,14 +384,22 @@ class SinkRerun:
             ]
             chunks.append(Chunk.from_columns(entity, times, cols))
         rr.send_chunks(chunks, recording=self._rec)  # one call for every body
-        for name in self._header.invariant_names:
-            values = np.concatenate([p["inv"][name] for p in pending])
-            self._rec.send_columns(f"invariants/{name}", indexes=times, columns=rr.Scalars.columns(scalars=values))
-        if all(p["particles"] is not None for p in pending):
-            pp = np.concatenate([p["particles"] for p in pending], axis=0)
-            points = rr.Points3D.columns(positions=pp.reshape(-1, 3)).partition(np.full(k_count, pp.shape[1]))
-            self._rec.send_columns("particles", indexes=times, columns=points)
-        self.frames_written += k_count
+
+    def _send_body_boxes(self, pending: list[dict[str, Any]], times: list[Any]) -> None:
+        """The one-entity layout: a row per frame holding every body's centre and orientation."""
+        assert self._rec is not None
+        k_count = sum(len(p["t"]) for p in pending)
+        body_count = len(self._header.body_names)
+        columns = []
+        for name, key in (("Boxes3D:centers", "x"), ("Boxes3D:quaternions", "q")):
+            values = np.concatenate([p[key] for p in pending], axis=0).reshape(-1)
+            descriptor, arrow_type = self._columns[name]
+            array = pa.FixedSizeListArray.from_arrays(pa.array(values), type=arrow_type)
+            # row k holds instances k N ... (k + 1) N - 1; int32 offsets, as rerun takes them: a flush holds
+            # about flush_bytes / 28 instances (28 bytes of x and q each) plus one block, far below 2^31
+            offsets = pa.array(np.arange(k_count + 1, dtype=np.int32) * np.int32(body_count))
+            columns.append(rr.ComponentColumn(descriptor, _ArrowBatch(array), offsets=offsets))
+        self._rec.send_columns(ENTITY_BODIES, indexes=times, columns=columns)
 
     def close(self, summary: RunSummary) -> None:
         """Send what is gathered, the trajectories and the summary, then finish the file (any status)."""
@@ -322,7 +412,7 @@ class SinkRerun:
             self._flush()
             if not self._clouds_logged:
                 self._log_clouds(None)
-            if self._path_points and self._bodies:
+            if self._path_points and self._header.body_names:
                 paths = np.concatenate(self._path_points)  # (k, N, 3)
                 # non-finite points (a diverged run) would break the strip and the view bounds
                 per_body = np.ascontiguousarray(paths.transpose(1, 0, 2))
@@ -347,6 +437,16 @@ class SinkRerun:
 
 
 @dataclass
+class RrdBodies:
+    """The bodies of a file in the one-entity layout, in header order: per recorded step, sorted by step."""
+
+    time: np.ndarray  # (T,) [s]
+    step: np.ndarray  # (T,)
+    translation: np.ndarray  # (T, N, 3) [m]
+    quaternion: np.ndarray  # (T, N, 4) wxyz
+
+
+@dataclass
 class RrdContents:
     """What read_rrd_file finds: per entity, rows sorted by step (rotations converted to wxyz)."""
 
@@ -360,6 +460,9 @@ class RrdContents:
     invariant_time: dict[str, np.ndarray] = field(default_factory=dict)  # name -> (T,) [s]
     invariants: dict[str, np.ndarray] = field(default_factory=dict)  # name -> (T,)
     particle_offset: dict[str, np.ndarray] = field(default_factory=dict)  # body entity -> (n, 3) body frame
+    # the one-entity layout (more than BODY_ENTITIES_MAX bodies); None in the other
+    bodies: RrdBodies | None = None
+    bodies_particle_offset: tuple[np.ndarray, ...] | None = None  # per body (n_i, 3) body frame [m], float64
 
 
 def _flat(column: Any, width: int) -> np.ndarray:
@@ -372,7 +475,7 @@ def _flat(column: Any, width: int) -> np.ndarray:
 
 
 def read_rrd_file(path: str | Path, *, bodies: bool = True) -> RrdContents:
-    """Read an .rrd written by SinkRerun with rerun's own chunk reader (rerun.chunk.RrdReader).
+    """Read an .rrd written by SinkRerun, in either layout, with rerun's own chunk reader (rerun.chunk.RrdReader).
 
     bodies=False skips the per-body and particle chunks (enough for a summary of the invariants).
     """
@@ -383,6 +486,7 @@ def read_rrd_file(path: str | Path, *, bodies: bool = True) -> RrdContents:
     scene = ""
     parts: dict[str, dict[str, list[np.ndarray]]] = {}
     offsets: dict[str, np.ndarray] = {}
+    clouds: tuple[np.ndarray, ...] | None = None
     stream = RrdReader(path).stream()
     if not bodies:
         stream = stream.drop(content=["/bodies/**", "/trajectories", "/particles"])
@@ -401,6 +505,10 @@ def read_rrd_file(path: str | Path, *, bodies: bool = True) -> RrdContents:
             scene = batch.column("TextDocument:text").to_pylist()[-1][0]
         if entity.endswith("/particles") and chunk.is_static and "Points3D:positions" in names:
             offsets[entity.removesuffix("/particles")] = _flat(batch.column("Points3D:positions"), 3)
+        if entity == f"/{ENTITY_BODIES}" and chunk.is_static and "particle_offset" in names:
+            flat = np.asarray(batch.column("particle_offset")[-1].values, dtype=np.float64).reshape(-1, 3)
+            counts = np.asarray(batch.column("particle_count")[-1].values, dtype=np.int64)
+            clouds = tuple(np.split(flat, np.cumsum(counts)[:-1])) if counts.size else ()
         if chunk.is_static or TIMELINE_STEP not in names:
             continue
         acc = parts.setdefault(entity, {})
@@ -410,15 +518,21 @@ def read_rrd_file(path: str | Path, *, bodies: bool = True) -> RrdContents:
         for name, width in (("Transform3D:translation", 3), ("Transform3D:quaternion", 4)):
             if name in names:
                 acc.setdefault(name, []).append(_flat(batch.column(name), width))
+        for name, width in (("Boxes3D:centers", 3), ("Boxes3D:quaternions", 4)):
+            if name in names:  # every body in each row: (rows, N, width)
+                acc.setdefault(name, []).append(_flat(batch.column(name), width).reshape(batch.num_rows, -1, width))
         if "Scalars:scalars" in names:
             acc.setdefault("scalar", []).append(_flat(batch.column("Scalars:scalars"), 1)[:, 0])
-    out = RrdContents(sorted(paths), properties, scene, particle_offset=offsets)
+    out = RrdContents(sorted(paths), properties, scene, particle_offset=offsets, bodies_particle_offset=clouds)
     for entity, acc in parts.items():
         order = np.argsort(np.concatenate(acc["step"]), kind="stable")
         cat = {k: np.concatenate(v)[order] for k, v in acc.items()}
         if entity.startswith("/invariants/") and "scalar" in cat:
             name = entity.removeprefix("/invariants/")
             out.invariant_time[name], out.invariants[name] = cat["time"], cat["scalar"]
+        elif entity == f"/{ENTITY_BODIES}" and "Boxes3D:centers" in cat:
+            wxyz = cat["Boxes3D:quaternions"][..., [3, 0, 1, 2]]
+            out.bodies = RrdBodies(cat["time"], cat["step"], cat["Boxes3D:centers"], wxyz)
         elif "Transform3D:translation" in cat:
             out.body_time[entity], out.body_step[entity] = cat["time"], cat["step"]
             out.body_translation[entity] = cat["Transform3D:translation"]
