@@ -48,7 +48,7 @@ def prepare(
     the spacing of the output times, not the step.
     """
     spec = scene if isinstance(scene, SceneSpec) else load_scene(scene)
-    compiled = compile_scene(
+    return compile_scene(
         spec,
         dt=dt,
         duration=duration,
@@ -57,14 +57,6 @@ def prepare(
         tolerance=tolerance,
         compression=compression,
     )
-    from rbcli.physics.integrators import get_integrator
-
-    settings = compiled.settings
-    if settings.tolerance is not None and not get_integrator(settings.integrator).adaptive:
-        raise ValueError(
-            f"a tolerance needs an adaptive integrator; {settings.integrator!r} is fixed-step (use dopri5)"
-        )
-    return compiled
 
 
 def simulate(

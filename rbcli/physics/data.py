@@ -65,13 +65,17 @@ class Data:
             self.adaptive_control[:] = 0.0
 
 
-def make_data(initial: State, scratch_width: int, *, adaptive_width: int | None = None) -> Data:
-    """A Data for `initial` (copied): zeroed accumulators and scratch; adaptive arrays when asked."""
+def make_data(initial: State, scratch_width: int, *, adaptive: bool = False) -> Data:
+    """A Data for `initial` (copied): zeroed accumulators and scratch; the adaptive chunk's arrays
+    (physics/adaptive.py: adaptive_work, their one definition) when asked."""
     n = initial.x.shape[0]
     state = initial.copy()
     data = Data(state, np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, scratch_width)))
-    if adaptive_width is not None:
-        data.adaptive_work = np.zeros((n, adaptive_width))
-        data.adaptive_control = np.zeros(2)
-        data.adaptive_counters = np.zeros(2, dtype=np.int64)
+    if adaptive:
+        from rbcli.physics.adaptive import adaptive_work
+
+        work = adaptive_work(n)
+        data.adaptive_work = work["work"]
+        data.adaptive_control = work["control"]
+        data.adaptive_counters = work["counters"]
     return data

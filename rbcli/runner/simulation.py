@@ -26,7 +26,6 @@ from rbcli.physics.data import make_data
 from rbcli.physics.frames import body_angular_velocity, internal_orientation, user_orientation
 from rbcli.physics.integrators import get_integrator
 from rbcli.physics.rotation import quat_rotate, quat_rotate_inverse
-from rbcli.physics.state import State
 from rbcli.scene.compile import CompiledScene
 
 if TYPE_CHECKING:
@@ -85,10 +84,13 @@ class Simulation:
                 raise ValueError("overrides apply when compiling: pass a scene or a path, not a CompiledScene")
             compiled = scene
         else:
-            from rbcli.api import prepare
+            from rbcli.scene.compile import compile_scene
+            from rbcli.scene.load import load_scene
+            from rbcli.scene.spec import SceneSpec
 
-            compiled = prepare(
-                scene, dt=dt, duration=duration, integrator=integrator, record_every=record_every,
+            spec = scene if isinstance(scene, SceneSpec) else load_scene(scene)
+            compiled = compile_scene(
+                spec, dt=dt, duration=duration, integrator=integrator, record_every=record_every,
                 tolerance=tolerance, compression=compression,
             )  # fmt: skip
         self.compiled = compiled
@@ -98,10 +100,8 @@ class Simulation:
         info = get_integrator(self.settings.integrator)
         self.adaptive = self.settings.tolerance is not None
         if self.adaptive:
-            from rbcli.physics.integrators import dopri5
-
             self._chunk = None
-            self.data = make_data(compiled.initial_state, 0, adaptive_width=dopri5.SCRATCH_WIDTH)
+            self.data = make_data(compiled.initial_state, 0, adaptive=True)
         else:
             chunk = info.chunk()
             self._chunk = chunk.run_chunk
@@ -302,16 +302,6 @@ class Simulation:
         if every < 1:
             raise ValueError(f"record_every must be >= 1, got {every}")
         return run_simulation(self, sinks, steps=steps, record_every=every, progress=progress, threaded=threaded)
-
-    def copy_state(self) -> State:
-        """The internal state (principal frame) as a copy: what `restore_state` takes back."""
-        return self.data.state.copy()
-
-    def restore_state(self, state: State) -> None:
-        """Set the internal state from `copy_state`'s result, bitwise."""
-        s = self.data.state
-        s.x[:], s.q[:], s.P[:], s.L[:], s.step = state.x, state.q, state.P, state.L, state.step
-        self.data.clear_work()
 
 
 def _steps_for(duration: float, dt: float) -> int:

@@ -140,6 +140,13 @@ def run_settings(
     )
     if settings.dt <= 0 or not math.isfinite(settings.dt):
         raise SceneError([SceneIssue(None, f"dt must be a positive number of seconds, got {settings.dt}")])
+    if settings.tolerance is not None:
+        from rbcli.physics.integrators import get_integrator
+
+        if not get_integrator(settings.integrator).adaptive:
+            raise ValueError(
+                f"a tolerance needs an adaptive integrator; {settings.integrator!r} is fixed-step (use dopri5)"
+            )
     return settings
 
 
