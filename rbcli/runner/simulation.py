@@ -137,22 +137,22 @@ class Simulation:
         """Advance n grid steps in compiled code, recording nothing; raises SimulationDiverged when the
         state at the end of the call is non-finite or exceeds 1e100 (checked once per call, not per step:
         `run` checks every recorded frame)."""
-        from rbcli.physics.step import STATUS_DIVERGED, STATUS_OK
+        from rbcli.physics.adaptive import STATUS_STEP_TOO_SMALL
+        from rbcli.physics.step import STATUS_OK
 
         if n < 0:
             raise ValueError(f"steps must be >= 0, got {n}")
-        if self._chunk is not None:  # the fixed-step path, kept lean: it is the API's hot path
-            done, _, status = self._chunk(
-                self._kmodel, self.forces, self._kdata, self.settings.dt, self.data.state.step, n, NEVER,
-                self._no_frames, 0,
-            )  # fmt: skip
-        else:
-            done, _, status = self.advance(n, NEVER, self._no_frames, 0)
+        done, _, status = self.advance(n)
         self.data.state.step += int(done)
-        if status == STATUS_DIVERGED or (status != STATUS_OK and self._chunk is None):
+        if status != STATUS_OK:  # nothing is recorded, so a full buffer cannot be the reason
+            why = (
+                "the adaptive step fell below 1e-12 t"
+                if status == STATUS_STEP_TOO_SMALL
+                else "the state became non-finite or exceeded 1e100"
+            )
             raise SimulationDiverged(
-                f"diverged by step {self.data.state.step} (t = {self.time:.6g} s): the state became non-finite "
-                f"or exceeded 1e100 with integrator {self.settings.integrator!r} at dt = {self.settings.dt:g} s"
+                f"diverged by step {self.data.state.step} (t = {self.time:.6g} s): {why} with integrator "
+                f"{self.settings.integrator!r} at dt = {self.settings.dt:g} s"
             )
 
     def advance(
