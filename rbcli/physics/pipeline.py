@@ -24,8 +24,8 @@ committed files differ from the template, and regenerates them with
 
 Adding a stage: one entry in STEP_STAGES (this file), the stage's own module, and the regeneration.
 Adaptive runs (a tolerance instead of dt) step between output times under error control: their loop is
-`physics/adaptive.py` (dopri5 only), which runs the same update and record stages; impulses split its
-chunks in the runner.
+`physics/adaptive.py` (dopri5 only), which runs the same update and record stages;
+`runner/simulation.py` applies impulses between its chunks.
 """
 
 from __future__ import annotations

@@ -66,7 +66,7 @@ class CompiledScene:
         from rbcli.scene.checks import stability_warnings
 
         issues = [*self.spec.warnings, *stability_warnings(self)]
-        return sorted(issues, key=lambda i: (i.location.line, i.location.column) if i.location else (0, 0))
+        return sorted(issues, key=SceneIssue.order)
 
 
 def step_count(duration: float, dt: float) -> int:

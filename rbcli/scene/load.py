@@ -170,14 +170,10 @@ def _analyse(
     try:
         spec = replace(spec, warnings=tuple(warnings), compiled_model=compile_model(spec))
     except SceneError as exc:
-        return None, sorted([*warnings, *exc.issues], key=_issue_order)
+        return None, sorted([*warnings, *exc.issues], key=SceneIssue.order)
     # spec.warnings are the load's own; the stability warnings depend on the dt that runs, so each
     # CompiledScene computes them for its settings (here: the scene's, for `validate`)
     return spec, compile_scene(spec).warnings
-
-
-def _issue_order(issue: SceneIssue) -> tuple[int, int]:
-    return (issue.location.line, issue.location.column) if issue.location else (0, 0)
 
 
 def _frozen_vector(value: list[float]) -> Any:

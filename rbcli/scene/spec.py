@@ -38,6 +38,10 @@ class SceneIssue:
         tail = f" — expected {self.expected}" if self.expected else ""
         return f"{where}: {self.severity}: {self.message}{tail}"
 
+    def order(self) -> tuple[int, int]:
+        """Sort key: by position in the file, unlocated issues first."""
+        return (self.location.line, self.location.column) if self.location else (0, 0)
+
 
 class SceneError(Exception):
     """A scene that cannot be run; carries every issue found, each with its location."""
