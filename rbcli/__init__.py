@@ -1,8 +1,9 @@
 """rbsim: rigid-body dynamics from YAML scenes (package `rbcli`).
 
 Public API: `load_scene`, `simulate`, `Simulation` (step, read and write the state, reset, run),
-`BodyState`, `prepare`, `run_to_file`, `Trajectory`, `SimulationDiverged`,
-`__version__`. Units are SI throughout (m, kg, s, rad); quaternions are (w, x, y, z), world-from-body.
+`BodyState`, `prepare`, `run_to_file`, `Trajectory` (`to_npz`, `from_npz`, `to_csv`), `read_recording`
+(a .mcap or .rrd back as a Trajectory), `SimulationDiverged`, `__version__`. Units are SI throughout
+(m, kg, s, rad); quaternions are (w, x, y, z), world-from-body.
 Attributes are imported lazily so that `rbsim --help` and `rbsim validate` stay light.
 """
 
@@ -21,12 +22,14 @@ __all__ = [
     "prepare",
     "run_to_file",
     "Trajectory",
+    "read_recording",
     "SimulationDiverged",
 ]
 
 if TYPE_CHECKING:
     from rbcli.api import BodyState, Simulation, SimulationDiverged, load_scene, prepare, run_to_file, simulate
     from rbcli.record.memory_sink import Trajectory
+    from rbcli.record.read import read_trajectory as read_recording
 
 
 def __getattr__(name: str) -> Any:
@@ -34,6 +37,10 @@ def __getattr__(name: str) -> Any:
         from rbcli.record.memory_sink import Trajectory
 
         return Trajectory
+    if name == "read_recording":  # record/ only: reading a file compiles nothing
+        from rbcli.record.read import read_trajectory
+
+        return read_trajectory
     if name in __all__:
         from rbcli import api
 

@@ -1,19 +1,25 @@
-"""Read rbsim recordings back (.mcap or .rrd) for `rbsim info`, `rbsim replay` and the tests.
+"""Read rbsim recordings back (.mcap or .rrd) for `rbsim info`, `rbsim replay`, `rbcli.read_recording`
+and the tests.
 
 The file formats are owned by their sinks: the MCAP readers live in `record/mcap_sink.py` and the RRD
 reader in `record/rerun_sink.py` (each third-party library is imported by exactly one module). This
-module imports them lazily and turns what they find into one shape, `RecordedRun`, and into the
-summary `rbsim info` prints, `RunInfo`.
+module imports them lazily and turns what they find into one shape, `RecordedRun`, into the public
+`Trajectory` (`read_trajectory`, which is `rbcli.read_recording`), and into the summary `rbsim info`
+prints, `RunInfo`.
 """
 
 from __future__ import annotations
 
+import errno
 import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from rbcli.record.frame import RunSummary
+from rbcli.record.memory_sink import Trajectory, header_from_parameters
 
 # |f(0)| below this (SI units) makes a relative drift meaningless: the value is zero up to rounding,
 # as for a momentum component that starts at zero.
@@ -160,8 +166,104 @@ def read_rrd(path: str | Path, *, bodies: bool = True) -> RecordedRun:
 
 
 def read_recording(path: str | Path) -> RecordedRun:
-    """read_mcap or read_rrd by extension."""
+    """read_mcap or read_rrd by extension (the internal shape; the public API returns a Trajectory:
+    `read_trajectory`)."""
     return read_mcap(path) if recording_format(path) == "mcap" else read_rrd(path)
+
+
+# --- the public reader: a recording as the Trajectory `rbcli.simulate` returns ------------------------
+
+# what a Trajectory holds that an .rrd does not (it stores transforms only)
+_DYNAMICS = ("v", "omega", "P", "L")
+
+
+def read_trajectory(path: str | Path) -> Trajectory:
+    """A recording written by `rbsim run` / `rbcli.run_to_file` (.mcap or .rrd) as a `Trajectory`: the
+    object `rbcli.simulate` returns, so the same code reads either. Public as `rbcli.read_recording`.
+
+    Both formats hold, per recorded frame (every `record_every`-th step): the time t [s], the step index,
+    each body's centre of mass x [m] and orientation q (w, x, y, z; world-from-body, in the scene's body
+    frame), the invariants (energies [J], momentum components and norms; float64), and once: the run
+    parameters (`header`: scene text, body names and masses, particle offsets, integrator, dt, ...) and
+    how the run ended (`summary`, `status`).
+
+    - .mcap: every array exactly as simulated (float64), including v [m/s], omega [rad/s] (world),
+      P [kg m/s] and L [kg m^2/s] (world).
+    - .rrd: x and q are stored as float32 (each value the float64 one rounded to nearest: relative
+      error <= 2^-24, about 6e-8), and t as whole nanoseconds (|error| <= 0.5 ns). Velocities and
+      momenta are not stored: v, omega, P and L come back NaN-filled and are named in `not_recorded`.
+      Particle offsets in `header` are float32 too, except in the one-entity layout (> 10,000 bodies).
+
+    Neither gives back `particle_position` (None; world particles are x + R(q) offset, from
+    `header.body_particle_offset`), nor, for an adaptive run, the accepted/rejected step counts. A file
+    without the run's summary record reads as far as it goes, with `summary` None and `status` "unknown";
+    an .mcap cut off before its summary section (a killed process) is not readable (ValueError).
+    Invariants appear only if the "invariants" stream was recorded.
+
+    Raises FileNotFoundError for a missing file and ValueError (the file named) for another extension
+    or a file that is not a readable rbsim recording.
+    """
+    path = Path(path)
+    fmt = recording_format(path)
+    if not path.is_file():
+        reason = "is a directory, not a recording" if path.is_dir() else "no such recording"
+        raise FileNotFoundError(errno.ENOENT, reason, str(path))
+    try:
+        run = read_recording(path)
+    except (OSError, ImportError):
+        raise
+    except Exception as exc:  # the readers raise several types for damaged or foreign files
+        raise ValueError(f"{str(path)!r}: not a readable rbsim .{fmt} recording ({exc})") from exc
+    return trajectory_from_run(run)
+
+
+def trajectory_from_run(run: RecordedRun) -> Trajectory:
+    """A RecordedRun as a Trajectory (see `read_trajectory` for what each format gives back)."""
+    if "body_names" not in run.metadata:
+        raise ValueError(f"{str(run.path)!r}: no rbsim run parameters in the file (not written by rbsim?)")
+    frames, bodies = run.x.shape[0], len(run.body_names)
+    if run.x.shape[1] != bodies or run.t.shape[0] != frames:
+        raise ValueError(
+            f"{str(run.path)!r}: {run.x.shape[1]} bodies per frame for {bodies} names, "
+            f"{run.t.shape[0]} times for {frames} frames"
+        )
+    for name, series in run.invariants.items():
+        if series.shape[0] != frames:
+            raise ValueError(f"{str(run.path)!r}: invariant {name!r} has {series.shape[0]} samples, {frames} frames")
+    missing = tuple(name for name in _DYNAMICS if getattr(run, name) is None)
+
+    def dynamics(values: np.ndarray | None) -> np.ndarray:
+        return np.full((frames, bodies, 3), np.nan) if values is None else np.asarray(values, dtype=np.float64)
+
+    header = header_from_parameters(run.metadata, run.scene_text, run.particle_offset)
+    return Trajectory(
+        body_names=run.body_names,
+        t=np.asarray(run.t, dtype=np.float64),
+        step=np.asarray(run.step, dtype=np.int64),
+        x=np.asarray(run.x, dtype=np.float64),
+        q=np.asarray(run.q, dtype=np.float64),
+        v=dynamics(run.v),
+        omega=dynamics(run.omega),
+        P=dynamics(run.P),
+        L=dynamics(run.L),
+        invariants={name: np.asarray(s, dtype=np.float64) for name, s in run.invariants.items()},
+        header=header,
+        summary=_run_summary(run.summary),
+        not_recorded=missing,
+    )
+
+
+def _run_summary(fields: dict[str, str]) -> RunSummary | None:
+    """The RunSummary a file's summary record holds (None when the run was cut short before writing it)."""
+    if "status" not in fields:
+        return None
+    return RunSummary(
+        status=fields["status"],
+        steps=int(fields.get("steps", "-1")),
+        frames=int(fields.get("frames", "-1")),
+        t_end=float(fields.get("t_end", "nan")),
+        message=fields.get("message", ""),
+    )
 
 
 # --- the summary `rbsim info` prints ---------------------------------------------------------------
