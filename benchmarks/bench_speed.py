@@ -218,7 +218,7 @@ def chunk_runner(compiled: CompiledScene, integrator: str) -> Runner:
 
     def make(steps: int) -> Callable[[], float]:
         def run() -> float:
-            data = make_data(compiled.initial_state, chunk.SCRATCH_WIDTH).kernel()
+            data = make_data(compiled.initial_state, compiled.forces, chunk.SCRATCH_WIDTH).kernel()
             started = time.perf_counter()
             done, _, status = chunk.run_chunk(km, forces, data, DT, 0, steps, steps, frames, 0)
             elapsed = time.perf_counter() - started
@@ -235,7 +235,7 @@ def dispatch_seconds(compiled: CompiledScene, integrator: str, calls: int = 200)
     """Seconds of one Python call of `run_chunk` for 0 steps: unboxing the arguments, the chunk's fixed cost."""
     chunk = get_integrator(integrator).chunk()
     km, n = compiled.model.kernel(), compiled.model.body_count
-    data = make_data(compiled.initial_state, chunk.SCRATCH_WIDTH).kernel()
+    data = make_data(compiled.initial_state, compiled.forces, chunk.SCRATCH_WIDTH).kernel()
     frames = empty_buffers(2, n)
     best = float("inf")
     for _ in range(5):

@@ -2,7 +2,8 @@
 positional state arrays, impulses applied by the runner between chunks), for split2 and rk4.
 
 bench_pipeline.py times the generated loops of rbcli/physics/chunks/ against these in the same run
-(interleaved medians): the refactor must keep the chunk kernels within 5 % of them. Do not edit.
+(interleaved medians): the refactor must keep the chunk kernels within 5 % of them. Do not edit
+beyond following the step signature (force_data, the force pass's mutable arrays, came later).
 """
 
 import numba
@@ -12,9 +13,26 @@ from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, chunk_status, record_if_
 
 
 @numba.njit(**CHUNK_KERNEL)
-def run_chunk_split2(model, forces, dt, step0, n_steps, record_every, x, q, P, L, F, tau, scratch, frames, filled):  # noqa: ANN001, ANN201
+def run_chunk_split2(
+    model,
+    forces,
+    force_data,
+    dt,
+    step0,
+    n_steps,
+    record_every,
+    x,
+    q,
+    P,
+    L,
+    F,
+    tau,
+    scratch,
+    frames,
+    filled,  # noqa: ANN001
+):  # noqa: ANN201
     for k in range(n_steps):
-        split2.step(model, forces, (step0 + k) * dt, dt, x, q, P, L, F, tau, scratch)
+        split2.step(model, forces, force_data, (step0 + k) * dt, dt, x, q, P, L, F, tau, scratch)
         filled, stop = record_if_due(step0 + k + 1, record_every, x, q, P, L, frames, filled)
         if stop != STATUS_OK:
             return k + 1, filled, stop
@@ -22,9 +40,26 @@ def run_chunk_split2(model, forces, dt, step0, n_steps, record_every, x, q, P, L
 
 
 @numba.njit(**CHUNK_KERNEL)
-def run_chunk_rk4(model, forces, dt, step0, n_steps, record_every, x, q, P, L, F, tau, scratch, frames, filled):  # noqa: ANN001, ANN201
+def run_chunk_rk4(
+    model,
+    forces,
+    force_data,
+    dt,
+    step0,
+    n_steps,
+    record_every,
+    x,
+    q,
+    P,
+    L,
+    F,
+    tau,
+    scratch,
+    frames,
+    filled,  # noqa: ANN001
+):  # noqa: ANN201
     for k in range(n_steps):
-        rk4.step(model, forces, (step0 + k) * dt, dt, x, q, P, L, F, tau, scratch)
+        rk4.step(model, forces, force_data, (step0 + k) * dt, dt, x, q, P, L, F, tau, scratch)
         filled, stop = record_if_due(step0 + k + 1, record_every, x, q, P, L, frames, filled)
         if stop != STATUS_OK:
             return k + 1, filled, stop

@@ -23,7 +23,7 @@ import numpy as np
 from rbcli.analysis.exact import free_flight, quat_geodesic_angle, torque_free
 from rbcli.api import prepare, simulate
 from rbcli.physics.adaptive import STATUS_STEP_TOO_SMALL, adaptive_work, run_adaptive_chunk
-from rbcli.physics.forces import WORLD, build_force_tables, spring_table
+from rbcli.physics.forces import WORLD, build_force_tables, make_force_data, spring_table
 from rbcli.physics.frames import user_orientation
 from rbcli.physics.integrators import INTEGRATORS
 from rbcli.physics.rotation import quat_to_matrix
@@ -141,7 +141,8 @@ def adaptive_run(compiled, tolerance: float):  # noqa: ANN001, ANN201
     F, tau = np.zeros((n, 3)), np.zeros((n, 3))
     while index < total:
         done, filled, status = run_adaptive_chunk(
-            model.kernel(), compiled.forces, dt, index, total - index, settings.record_every, tolerance, total * dt,
+            model.kernel(), compiled.forces, make_force_data(compiled.forces), dt, index, total - index,
+            settings.record_every, tolerance, total * dt,
             state.x, state.q, state.P, state.L, F, tau, work["work"], work["control"], work["counters"],
             frames, filled,
         )  # fmt: skip

@@ -74,7 +74,7 @@ def _initial_step(x, q, P, L, work, tolerance, limit) -> float:  # noqa: ANN001
 
 @numba.njit(**CHUNK_KERNEL)
 def run_adaptive_chunk(
-    model, forces, dt, step0, n_steps, record_every, tolerance, duration,  # noqa: ANN001
+    model, forces, force_data, dt, step0, n_steps, record_every, tolerance, duration,  # noqa: ANN001
     x, q, P, L, F, tau, work, control, counters, frames, filled,
 ):  # fmt: skip
     """Advance from grid index step0 (t = step0 dt) to step0 + n_steps with error-controlled steps.
@@ -90,7 +90,7 @@ def run_adaptive_chunk(
     index = step0
     end = step0 + n_steps
     t = step0 * dt
-    dopri5.begin(model, forces, t, x, q, P, L, F, tau, work)  # y0 and k_1 (one evaluation per chunk)
+    dopri5.begin(model, forces, force_data, t, x, q, P, L, F, tau, work)  # y0 and k_1 (one evaluation per chunk)
     h = control[CONTROL_STEP]
     if h <= 0.0:
         h = _initial_step(x, q, P, L, work, tolerance, record_every * dt)
@@ -102,8 +102,8 @@ def run_adaptive_chunk(
         remaining = target * dt - t
         landing = h >= remaining * (1.0 - 1e-12)  # a sliver short of the target counts as landing
         h_try = remaining if landing else h
-        dopri5.advance(model, forces, t, h_try, x, q, P, L, F, tau, work)
-        err = dopri5.error_norm(model, forces, t, h_try, per_time * h_try, x, q, P, L, F, tau, work)
+        dopri5.advance(model, forces, force_data, t, h_try, x, q, P, L, F, tau, work)
+        err = dopri5.error_norm(model, forces, force_data, t, h_try, per_time * h_try, x, q, P, L, F, tau, work)
         if err <= 1.0:
             counters[COUNT_ACCEPTED] += 1
             dopri5.accept(x, q, P, L, work)

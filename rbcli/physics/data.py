@@ -7,6 +7,8 @@ writes lives here, so kernels never allocate and a run's memory is known when it
     F, tau       wrench accumulators [N], [N m], shape (body_count, 3), world frame, about each centre
                  of mass: the force pass sets them, the integrator reads them
     scratch      the integrator's work columns, shape (body_count, SCRATCH_WIDTH of its module)
+    force        what the force pass writes besides F and tau (forces/tables.py ForceData): stage
+                 counters, and the contact stage's grid, pair lists and contact history
     adaptive     error-controlled runs only (physics/adaptive.py): stage work (body_count, dopri5
                  width), controller state `control` (2,) and step `counters` int64 (2,) that persist
                  between chunks
@@ -22,6 +24,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from rbcli.physics.forces.tables import ForceData, ForceTables, make_force_data
 from rbcli.physics.state import State
 
 
@@ -35,6 +38,7 @@ class KernelData(NamedTuple):
     F: np.ndarray
     tau: np.ndarray
     scratch: np.ndarray
+    force: ForceData
 
 
 @dataclass
@@ -45,13 +49,14 @@ class Data:
     F: np.ndarray
     tau: np.ndarray
     scratch: np.ndarray
+    force: ForceData
     adaptive_work: np.ndarray | None = None
     adaptive_control: np.ndarray | None = None
     adaptive_counters: np.ndarray | None = None
 
     def kernel(self) -> KernelData:
         s = self.state
-        return KernelData(s.x, s.q, s.P, s.L, self.F, self.tau, self.scratch)
+        return KernelData(s.x, s.q, s.P, s.L, self.F, self.tau, self.scratch, self.force)
 
     def clear_work(self) -> None:
         """Forget everything carried between steps but the state (after the state is set from outside):
@@ -65,12 +70,13 @@ class Data:
             self.adaptive_control[:] = 0.0
 
 
-def make_data(initial: State, scratch_width: int, *, adaptive: bool = False) -> Data:
-    """A Data for `initial` (copied): zeroed accumulators and scratch; the adaptive chunk's arrays
-    (physics/adaptive.py: adaptive_work, their one definition) when asked."""
+def make_data(initial: State, forces: ForceTables, scratch_width: int, *, adaptive: bool = False) -> Data:
+    """A Data for `initial` (copied) and the force tables `forces`: zeroed accumulators, scratch and
+    force data; the adaptive chunk's arrays (physics/adaptive.py: adaptive_work, their one
+    definition) when asked."""
     n = initial.x.shape[0]
     state = initial.copy()
-    data = Data(state, np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, scratch_width)))
+    data = Data(state, np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, scratch_width)), make_force_data(forces))
     if adaptive:
         from rbcli.physics.adaptive import adaptive_work
 

@@ -55,14 +55,14 @@ STEP_STAGES: tuple[Stage, ...] = (
         "impulses",
         "impulses: exact jumps of P and L at the start of the step that holds them",
         ("from rbcli.physics.forces.impulse import apply_impulses",),
-        "apply_impulses(model, forces, t, t + dt, x, q, P, L)",
+        "apply_impulses(model, forces, data.force, t, t + dt, x, q, P, L)",
         when="forces.impulse.body.shape[0]",
     ),
     Stage(
         "update",
         "update: the integrator's maths, its force evaluations through forces.wrench.accumulate_wrench",
         (),
-        "integrator_step(model, forces, t, dt, x, q, P, L, data.F, data.tau, data.scratch)",
+        "integrator_step(model, forces, data.force, t, dt, x, q, P, L, data.F, data.tau, data.scratch)",
     ),
     Stage(
         "record",

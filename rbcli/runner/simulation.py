@@ -101,11 +101,11 @@ class Simulation:
         self.adaptive = self.settings.tolerance is not None
         if self.adaptive:
             self._chunk = None
-            self.data = make_data(compiled.initial_state, 0, adaptive=True)
+            self.data = make_data(compiled.initial_state, self.forces, 0, adaptive=True)
         else:
             chunk = info.chunk()
             self._chunk = chunk.run_chunk
-            self.data = make_data(compiled.initial_state, chunk.SCRATCH_WIDTH)
+            self.data = make_data(compiled.initial_state, self.forces, chunk.SCRATCH_WIDTH)
         self._kmodel = self.model.kernel()
         self._kdata = self.data.kernel()
         from rbcli.physics.step import empty_buffers
@@ -189,12 +189,12 @@ class Simulation:
             if self._impulse_at.size:
                 if index in self._impulse_at:
                     t0 = index * st.dt
-                    apply_impulses(self._kmodel, self.forces, t0, t0 + st.dt, s.x, s.q, s.P, s.L)
+                    apply_impulses(self._kmodel, self.forces, d.force, t0, t0 + st.dt, s.x, s.q, s.P, s.L)
                 later = self._impulse_at[self._impulse_at > index]
                 if later.size:
                     todo = min(todo, int(later[0]) - index)
             steps, filled, status = run_adaptive_chunk(
-                self._kmodel, self.forces, st.dt, index, todo, every, st.tolerance, st.steps * st.dt,
+                self._kmodel, self.forces, d.force, st.dt, index, todo, every, st.tolerance, st.steps * st.dt,
                 s.x, s.q, s.P, s.L, d.F, d.tau, d.adaptive_work, d.adaptive_control, d.adaptive_counters,
                 frames, filled,
             )  # fmt: skip
@@ -280,7 +280,7 @@ class Simulation:
         self.data.clear_work()
         if self.data.adaptive_counters is not None:
             self.data.adaptive_counters[:] = 0
-        self.forces.term_evaluations[:] = 0
+        self.data.force.term_evaluations[:] = 0
 
     # ---- runs -------------------------------------------------------------------------------------
 

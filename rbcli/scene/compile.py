@@ -92,9 +92,7 @@ def compile_scene(
         spec, dt=dt, duration=duration, integrator=integrator, record_every=record_every, tolerance=tolerance,
         compression=compression,
     )  # fmt: skip
-    # each compiled scene counts its own term evaluations (the one mutable array of the tables)
-    forces = base.forces._replace(term_evaluations=np.zeros_like(base.forces.term_evaluations))
-    return CompiledScene(spec, base.model, forces, base.initial_state.copy(), settings)
+    return CompiledScene(spec, base.model, base.forces, base.initial_state.copy(), settings)
 
 
 def compile_model(spec: SceneSpec) -> CompiledModel:

@@ -5,6 +5,7 @@ import pytest
 from conftest import make_body, make_scene, random_bodies
 
 from rbcli.api import prepare, simulate
+from rbcli.physics.forces import make_force_data
 from rbcli.physics.forces.wrench import wrench_numpy
 from rbcli.physics.frames import particle_world
 from rbcli.physics.integrators import euler_matrix
@@ -94,10 +95,21 @@ def test_compiled_step_matches_numpy_reference():
     compiled = prepare(make_scene(random_bodies(7), gravity=G))
     km, forces = compiled.model.kernel(), compiled.forces
     a, b = compiled.initial_state.copy(), compiled.initial_state.copy()
-    F, tau = np.zeros((7, 3)), np.zeros((7, 3))
+    F, tau, force_data = np.zeros((7, 3)), np.zeros((7, 3)), make_force_data(forces)
     for k in range(50):
         euler_matrix.step(
-            km, forces, k * 0.01, 0.01, a.x, a.q, a.P, a.L, F, tau, np.zeros((7, euler_matrix.SCRATCH_WIDTH))
+            km,
+            forces,
+            force_data,
+            k * 0.01,
+            0.01,
+            a.x,
+            a.q,
+            a.P,
+            a.L,
+            F,
+            tau,
+            np.zeros((7, euler_matrix.SCRATCH_WIDTH)),
         )
         euler_matrix.step_numpy(km, forces, k * 0.01, 0.01, b.x, b.q, b.P, b.L)
     for name in "xqPL":

@@ -13,6 +13,7 @@ from conftest import HANDLE_POSITIONS, make_body, make_scene
 
 from rbcli.api import prepare, simulate
 from rbcli.physics.forces.impulse import apply_impulses, impulse_step_indices
+from rbcli.physics.forces.tables import make_force_data
 from rbcli.physics.forces.wrench import accumulate_wrench
 from rbcli.physics.integrators import get_integrator
 from rbcli.physics.model import mass_properties
@@ -33,7 +34,8 @@ def wrench_at_start(compiled):  # noqa: ANN001, ANN201
     s = compiled.initial_state
     n = compiled.model.body_count
     F, tau = np.zeros((n, 3)), np.zeros((n, 3))
-    accumulate_wrench(compiled.model.kernel(), compiled.forces, 0.0, s.x, s.q, s.P, s.L, F, tau)
+    force_data = make_force_data(compiled.forces)
+    accumulate_wrench(compiled.model.kernel(), compiled.forces, force_data, 0.0, s.x, s.q, s.P, s.L, F, tau)
     return F, tau
 
 
@@ -46,8 +48,8 @@ def run_steps(compiled, steps, integrator="euler-matrix"):  # noqa: ANN001, ANN2
     F, tau, scratch = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, kernel.SCRATCH_WIDTH))
     P_history = [s.P.copy()]
     for k in range(steps):
-        apply_impulses(km, forces, k * dt, (k + 1) * dt, s.x, s.q, s.P, s.L)
-        kernel.step(km, forces, k * dt, dt, s.x, s.q, s.P, s.L, F, tau, scratch)
+        apply_impulses(km, forces, make_force_data(forces), k * dt, (k + 1) * dt, s.x, s.q, s.P, s.L)
+        kernel.step(km, forces, make_force_data(forces), k * dt, dt, s.x, s.q, s.P, s.L, F, tau, scratch)
         P_history.append(s.P.copy())
     return s, np.array(P_history)
 
@@ -95,7 +97,8 @@ def test_impulse_changes_P_by_J_and_L_by_r_cross_J_exactly():
         compiled = prepare(with_forces(make_scene([body]), spec))
         s = compiled.initial_state.copy()
         P0, L0 = s.P.copy(), s.L.copy()
-        assert apply_impulses(compiled.model.kernel(), compiled.forces, 0.0, 0.01, s.x, s.q, s.P, s.L) == 1
+        force_data = make_force_data(compiled.forces)
+        assert apply_impulses(compiled.model.kernel(), compiled.forces, force_data, 0.0, 0.01, s.x, s.q, s.P, s.L) == 1
         np.testing.assert_allclose(s.P[0] - P0[0], J_world, rtol=0, atol=1e-15)
         np.testing.assert_allclose(s.L[0] - L0[0], np.cross(R @ (p - centre), J_world), rtol=0, atol=1e-15)
 
@@ -126,7 +129,8 @@ def test_impulse_step_indices_follow_apply_impulses_rule():
     compiled = prepare(with_forces(make_scene([make_body("h")]), *specs))
     km, forces, dt = compiled.model.kernel(), compiled.forces, 0.1
     s = compiled.initial_state.copy()
-    applied = {n: apply_impulses(km, forces, n * dt, (n + 1) * dt, s.x, s.q, s.P, s.L) for n in range(30)}
+    force_data = make_force_data(forces)
+    applied = {n: apply_impulses(km, forces, force_data, n * dt, (n + 1) * dt, s.x, s.q, s.P, s.L) for n in range(30)}
     assert impulse_step_indices(forces, dt).tolist() == [n for n, count in applied.items() if count]
     assert sum(applied.values()) == len(times) - 1  # all but the one before t = 0
     assert applied[3] == 4 and applied[2] == 0  # 0.3, 0.3 +- 1e-12 and 0.35 land in the step from 3 * 0.1

@@ -16,6 +16,7 @@ from rbcli.api import prepare
 from rbcli.physics.forces import force_terms_present
 from rbcli.physics.forces.impulse import apply_impulses, impulses_numpy
 from rbcli.physics.forces.schedule import schedule_value, schedule_values_numpy
+from rbcli.physics.forces.tables import make_force_data
 from rbcli.physics.forces.wrench import accumulate_wrench, potential_energy, wrench_numpy
 from rbcli.physics.rotation import quat_multiply
 from rbcli.scene.force_specs import (
@@ -114,7 +115,7 @@ def test_compiled_wrench_matches_numpy_reference(term, t):
     for seed in range(3):
         x, q, P, L = random_state(5, seed)
         F, tau = np.zeros((5, 3)), np.zeros((5, 3))
-        accumulate_wrench(km, tables, t, x, q, P, L, F, tau)
+        accumulate_wrench(km, tables, make_force_data(tables), t, x, q, P, L, F, tau)
         F_ref, tau_ref = wrench_numpy(compiled.model, tables, t, x, q, P, L)
         np.testing.assert_allclose(F, F_ref, rtol=0, atol=1e-12)
         np.testing.assert_allclose(tau, tau_ref, rtol=0, atol=1e-12)
@@ -152,7 +153,7 @@ def test_apply_impulses_matches_numpy_reference():
     x, q, P, L = random_state(5, 1)
     P2, L2 = P.copy(), L.copy()
     for t_prev, t_next, expected in [(0.4, 0.5, 0), (0.5, 0.55, 2), (0.55, 0.7, 0), (0.7, 0.8, 1)]:
-        assert apply_impulses(km, tables, t_prev, t_next, x, q, P, L) == expected
+        assert apply_impulses(km, tables, make_force_data(tables), t_prev, t_next, x, q, P, L) == expected
         assert impulses_numpy(tables.impulse, t_prev, t_next, q, P2, L2) == expected
         np.testing.assert_allclose(P, P2, rtol=0, atol=1e-15)
         np.testing.assert_allclose(L, L2, rtol=0, atol=1e-15)

@@ -10,10 +10,9 @@ from conftest import make_body, make_scene, random_bodies
 
 from rbcli.api import prepare
 from rbcli.physics.forces import TERM_NAMES, force_terms_present
-from rbcli.physics.forces.tables import table_rows
+from rbcli.physics.forces.tables import make_force_data, table_rows
 from rbcli.physics.forces.wrench import accumulate_wrench
-from rbcli.record.memory_sink import SinkMemory
-from rbcli.runner.loop import run
+from rbcli.runner.simulation import Simulation
 from rbcli.scene.force_specs import (
     BodyPoint,
     ForceAtPoint,
@@ -35,9 +34,9 @@ def run_and_count(forces, bodies=10, gravity=G):  # noqa: ANN001, ANN201
     scene = replace(make_scene(random_bodies(bodies), dt=1e-3, duration=STEPS * 1e-3, gravity=gravity),
                     forces=tuple(forces))  # fmt: skip
     compiled = prepare(scene)
-    compiled.forces.term_evaluations[:] = 0
-    run(compiled, [SinkMemory()])
-    return compiled, dict(zip(TERM_NAMES, compiled.forces.term_evaluations.tolist(), strict=True))
+    sim = Simulation(compiled)
+    sim.step(STEPS)
+    return compiled, dict(zip(TERM_NAMES, sim.data.force.term_evaluations.tolist(), strict=True))
 
 
 def test_gravity_only_scene_evaluates_gravity_and_nothing_else():
@@ -105,7 +104,8 @@ def test_torque_free_scenes_never_write_tau():
     assert not compiled.forces.has_torque
     s = compiled.initial_state
     F, tau = np.full((4, 3), np.nan), np.full((4, 3), np.nan)
-    accumulate_wrench(compiled.model.kernel(), compiled.forces, 0.1, s.x, s.q, s.P, s.L, F, tau)
+    force_data = make_force_data(compiled.forces)
+    accumulate_wrench(compiled.model.kernel(), compiled.forces, force_data, 0.1, s.x, s.q, s.P, s.L, F, tau)
     assert np.isfinite(F).all() and np.isnan(tau).all()
 
 

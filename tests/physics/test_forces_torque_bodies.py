@@ -10,7 +10,7 @@ from conftest import make_scene, random_bodies
 
 from rbcli.api import prepare
 from rbcli.physics.adaptive import adaptive_work, run_adaptive_chunk
-from rbcli.physics.forces import build_force_tables, spring_table, terms_with_torque
+from rbcli.physics.forces import build_force_tables, make_force_data, spring_table, terms_with_torque
 from rbcli.physics.forces.wrench import accumulate_wrench, wrench_numpy
 from rbcli.physics.integrators import INTEGRATORS, get_integrator
 from rbcli.physics.step import STATUS_OK, empty_buffers
@@ -118,7 +118,7 @@ def test_wrench_tau_is_right_for_flagged_bodies_and_exactly_zero_for_the_others(
         s.P += rng.normal(size=s.P.shape)
         s.L += rng.normal(size=s.L.shape)
         F, tau = np.full_like(s.x, np.nan), np.full_like(s.x, np.nan)
-        accumulate_wrench(kmodel, forces, 0.1 * trial, s.x, s.q, s.P, s.L, F, tau)
+        accumulate_wrench(kmodel, forces, make_force_data(forces), 0.1 * trial, s.x, s.q, s.P, s.L, F, tau)
         F_np, tau_np = wrench_numpy(kmodel, forces, 0.1 * trial, s.x, s.q, s.P, s.L)
         np.testing.assert_allclose(F, F_np, rtol=0, atol=1e-12)
         np.testing.assert_allclose(tau, tau_np, rtol=0, atol=1e-12)
@@ -145,7 +145,7 @@ def _run_chunk(name, compiled, forces, steps):  # noqa: ANN001, ANN202
     from rbcli.physics.data import make_data
 
     chunk = get_integrator(name).chunk()
-    data = make_data(compiled.initial_state, chunk.SCRATCH_WIDTH)
+    data = make_data(compiled.initial_state, compiled.forces, chunk.SCRATCH_WIDTH)
     n, dt = compiled.model.body_count, compiled.settings.dt
     never = np.iinfo(np.int64).max
     done, _, status = chunk.run_chunk(compiled.model.kernel(), forces, data.kernel(), dt, 0, steps, never,
@@ -204,9 +204,10 @@ def test_adaptive_dopri5_per_body_torque_path_is_bitwise_the_all_bodies_path():
     for forces in (compiled.forces, all_bodies, compiled.forces._replace(has_torque=False)):
         s = compiled.initial_state.copy()
         F, tau, extra = np.zeros((5, 3)), np.zeros((5, 3)), adaptive_work(5)
-        done, _, status = run_adaptive_chunk(compiled.model.kernel(), forces, 0.01, 0, 200, 50, 1e-8, 2.0, s.x, s.q,
-                                             s.P, s.L, F, tau, extra["work"], extra["control"], extra["counters"],
-                                             empty_buffers(8, 5), 0)  # fmt: skip
+        done, _, status = run_adaptive_chunk(
+            compiled.model.kernel(), forces, make_force_data(forces), 0.01, 0, 200, 50, 1e-8, 2.0,
+            s.x, s.q, s.P, s.L, F, tau, extra["work"], extra["control"], extra["counters"], empty_buffers(8, 5), 0,
+        )  # fmt: skip
         assert (done, status) == (200, STATUS_OK)
         results.append((_bits(s), extra["counters"].tolist()))
     assert np.array_equal(results[0][0], results[1][0]) and results[0][1] == results[1][1]

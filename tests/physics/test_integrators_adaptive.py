@@ -12,7 +12,7 @@ from conftest import make_body, make_scene
 from rbcli.analysis.exact import quat_geodesic_angle, torque_free
 from rbcli.api import prepare
 from rbcli.physics.adaptive import STATUS_STEP_TOO_SMALL, adaptive_work, run_adaptive_chunk
-from rbcli.physics.forces import WORLD, build_force_tables, spring_table
+from rbcli.physics.forces import WORLD, build_force_tables, make_force_data, spring_table
 from rbcli.physics.frames import user_orientation
 from rbcli.physics.step import STATUS_FULL, STATUS_OK, empty_buffers
 from rbcli.record.memory_sink import SinkMemory
@@ -49,7 +49,8 @@ def run_adaptive(compiled, tolerance, chunk_steps=None):
     while index < total and status in (STATUS_OK, STATUS_FULL):
         todo = total - index if chunk_steps is None else min(chunk_steps, total - index)
         done, filled, status = run_adaptive_chunk(
-            model.kernel(), compiled.forces, dt, index, todo, every, tolerance, total * dt,
+            model.kernel(), compiled.forces, make_force_data(compiled.forces), dt, index, todo, every, tolerance,
+            total * dt,
             state.x, state.q, state.P, state.L, F, tau, work["work"], work["control"], work["counters"],
             frames, filled,
         )  # fmt: skip

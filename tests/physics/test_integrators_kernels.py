@@ -9,6 +9,7 @@ from conftest import make_scene, random_bodies
 
 from rbcli.api import prepare
 from rbcli.physics.forces import WORLD, build_force_tables, drag_table, spring_table
+from rbcli.physics.forces.tables import make_force_data
 from rbcli.physics.integrators import INTEGRATORS, get_integrator, integrator_names
 from rbcli.physics.integrators.kinematics import axis_order, rotate, rotate_inverse, turn, turn_numpy
 from rbcli.physics.rotation import quat_multiply, quat_to_matrix
@@ -64,7 +65,7 @@ def test_compiled_step_matches_numpy_reference(name, kind):
     scratch = np.zeros((BODY_COUNT, kernel.SCRATCH_WIDTH))
     dt = 0.01
     for k in range(30):
-        kernel.step(kmodel, forces, k * dt, dt, a.x, a.q, a.P, a.L, F, tau, scratch)
+        kernel.step(kmodel, forces, make_force_data(forces), k * dt, dt, a.x, a.q, a.P, a.L, F, tau, scratch)
         kernel.step_numpy(kmodel, forces, k * dt, dt, b.x, b.q, b.P, b.L)
     for field in "xqPL":
         np.testing.assert_allclose(getattr(a, field), getattr(b, field), rtol=0, atol=1e-12, err_msg=field)
@@ -80,7 +81,7 @@ def test_chunk_loop_equals_repeated_steps(name):
     chunk = get_integrator(name).chunk()
     compiled = prepare(make_scene(random_bodies(3, seed=1)))
     kmodel, forces = compiled.model.kernel(), _forces("torque-free")
-    data = make_data(compiled.initial_state, chunk.SCRATCH_WIDTH)
+    data = make_data(compiled.initial_state, compiled.forces, chunk.SCRATCH_WIDTH)
     a, b = data.state, compiled.initial_state.copy()
     F, tau, scratch = np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, kernel.SCRATCH_WIDTH))
     frames = empty_buffers(4, 3)
@@ -88,7 +89,7 @@ def test_chunk_loop_equals_repeated_steps(name):
     assert (done, filled, status) == (10, 3, 0)
     assert frames.step[:3].tolist() == [3, 6, 9]
     for k in range(10):
-        kernel.step(kmodel, forces, k * 0.01, 0.01, b.x, b.q, b.P, b.L, F, tau, scratch)
+        kernel.step(kmodel, forces, make_force_data(forces), k * 0.01, 0.01, b.x, b.q, b.P, b.L, F, tau, scratch)
         if k == 8:
             assert np.array_equal(frames.q[2], b.q)
     assert np.array_equal(a.q, b.q) and np.array_equal(a.x, b.x)

@@ -77,7 +77,7 @@ def test_a_stage_added_to_the_list_runs_in_the_generated_loop(tmp_path, name):
     stages = (*STEP_STAGES[:2], PUSH_STAGE, STEP_STAGES[2])
     pushed = _load_generated(tmp_path, name, stages)
     compiled = prepare(make_scene(random_bodies(3, seed=2), integrator=name))
-    data = make_data(compiled.initial_state, pushed.SCRATCH_WIDTH)
+    data = make_data(compiled.initial_state, compiled.forces, pushed.SCRATCH_WIDTH)
     P0 = data.state.P.copy()
     frames = empty_buffers(4, 3)
     steps = 12

@@ -174,7 +174,8 @@ def test_load_compiles_once():
     finally:
         compile_module.compile_model = original
     assert calls == [] and a.model is b.model
-    assert a.forces.term_evaluations is not b.forces.term_evaluations  # each run counts its own
+    sa, sb = rbcli.Simulation(a), rbcli.Simulation(b)
+    assert sa.data.force.term_evaluations is not sb.data.force.term_evaluations  # each run counts its own
 
 
 def test_chunk_loops_do_not_allocate_per_step():

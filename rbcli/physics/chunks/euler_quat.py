@@ -27,9 +27,9 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
         t = index * dt
         # impulses: exact jumps of P and L at the start of the step that holds them
         if forces.impulse.body.shape[0]:
-            apply_impulses(model, forces, t, t + dt, x, q, P, L)
+            apply_impulses(model, forces, data.force, t, t + dt, x, q, P, L)
         # update: the integrator's maths, its force evaluations through forces.wrench.accumulate_wrench
-        integrator_step(model, forces, t, dt, x, q, P, L, data.F, data.tau, data.scratch)
+        integrator_step(model, forces, data.force, t, dt, x, q, P, L, data.F, data.tau, data.scratch)
         # record: on recording steps, the divergence check and the state copied into the next frame
         filled, status = record_if_due(index + 1, record_every, x, q, P, L, frames, filled)
         if status != STATUS_OK:

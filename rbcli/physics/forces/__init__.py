@@ -26,6 +26,7 @@ from rbcli.physics.forces.tables import (
     WORLD,
     DragTable,
     FieldTable,
+    ForceData,
     ForceTables,
     ImpulseTable,
     PointForceTable,
@@ -35,6 +36,7 @@ from rbcli.physics.forces.tables import (
     drag_table,
     field_table,
     impulse_table,
+    make_force_data,
     point_force_table,
     schedule_table,
     spring_table,
@@ -48,6 +50,7 @@ __all__ = [
     "WORLD",
     "DragTable",
     "FieldTable",
+    "ForceData",
     "ForceTables",
     "ImpulseTable",
     "PointForceTable",
@@ -57,6 +60,7 @@ __all__ = [
     "bodies_with_torque",
     "build_force_tables",
     "force_terms_present",
+    "make_force_data",
     "terms_with_torque",
 ]
 
@@ -97,7 +101,6 @@ def build_force_tables(
         has_gravity=gravity is not None and bool(np.any(g != 0.0)),
         has_torque=bool(torque_body.any()),
         torque_body=torque_body,
-        term_evaluations=np.zeros(len(TERM_NAMES), dtype=np.int64),
         **tables,
     )
 

@@ -2,12 +2,13 @@
 
 Applied BETWEEN steps, not through the wrench, so the change is exactly J and r x J whatever the
 integrator (a force spike of J / dt inside one step would be smeared differently by each method).
-The runner calls `apply_impulses(model, forces, t_prev, t_next, x, q, P, L)` on the state at t_prev
-just before stepping from t_prev to t_next (between chunks: it ends a chunk at each step that
-`impulse_step_indices` lists): an impulse at time T is applied in the first step with
-t_prev <= T < t_next, to the state at t_prev (so the recorded frame at t_prev shows the momentum just
-before it, the next frame the momentum after it). T within 1e-9 dt below a step's start time counts
-as that start time, because t = n dt carries round-off (3 * 0.1 = 0.30000000000000004 > 0.3).
+The step pipeline's impulse stage calls `apply_impulses(model, forces, force_data, t_prev, t_next,
+x, q, P, L)` on the state at t_prev just before stepping from t_prev to t_next (adaptive runs: between
+chunks, ending a chunk at each step that `impulse_step_indices` lists): an impulse at time T is
+applied in the first step with t_prev <= T < t_next, to the state at t_prev (so the recorded frame at
+t_prev shows the momentum just before it, the next frame the momentum after it). T within 1e-9 dt
+below a step's start time counts as that start time, because t = n dt carries round-off
+(3 * 0.1 = 0.30000000000000004 > 0.3).
 A body-frame J turns with the body: J_world = R(t_prev) J0.
 """
 
@@ -25,7 +26,7 @@ IMPULSE_TIME_SLACK = 1e-9
 
 
 @numba.njit(cache=True)
-def apply_impulses(model, forces, t_prev, t_next, x, q, P, L) -> int:  # noqa: ANN001 - numba types
+def apply_impulses(model, forces, force_data, t_prev, t_next, x, q, P, L) -> int:  # noqa: ANN001 - numba types
     """Apply every impulse of the step [t_prev, t_next) to P and L in place; returns how many."""
     impulse = forces.impulse
     slack = IMPULSE_TIME_SLACK * (t_next - t_prev)
@@ -49,7 +50,7 @@ def apply_impulses(model, forces, t_prev, t_next, x, q, P, L) -> int:  # noqa: A
         L[b, 1] += rz * jx - rx * jz
         L[b, 2] += rx * jy - ry * jx
         applied += 1
-    forces.term_evaluations[TERM_IMPULSE] += applied
+    force_data.term_evaluations[TERM_IMPULSE] += applied
     return applied
 
 
@@ -69,7 +70,7 @@ def impulses_numpy(impulse: ImpulseTable, t_prev: float, t_next: float, q, P, L)
 def impulse_step_indices(forces, dt: float) -> np.ndarray:  # noqa: ANN001
     """Sorted distinct step indices n >= 0 whose step [n dt, (n + 1) dt) holds an impulse, by exactly the
     rule of `apply_impulses` (same products n * dt, same slack), so a runner that stops its chunks at
-    these steps and calls `apply_impulses(model, forces, n * dt, (n + 1) * dt, ...)` there applies every
+    these steps and calls `apply_impulses(model, forces, force_data, n * dt, (n + 1) * dt, ...)` there applies every
     impulse once. Impulses before t = 0 never apply."""
     steps = set()
     for T in forces.impulse.time.tolist():

@@ -5,8 +5,8 @@ with 0 rows, so the compiled wrench loops over nothing and the numba types stay 
 scene (one compiled kernel serves all). Points are body-fixed offsets about the centre of mass in the
 PRINCIPAL frame (`KernelModel.particle_offset`'s frame), converted once at compile time from the
 user's body frame: r = E^T (p_user - centre_user). Vectors flagged `body_frame` are in the principal
-frame too (v = E^T v_user); the others are world-frame. Parameter arrays are read-only; only
-`ForceTables.term_evaluations` is written at run time.
+frame too (v = E^T v_user); the others are world-frame. Every array of the tables is read-only; what
+the force pass writes at run time is a `ForceData`, owned by the run's Data (physics/data.py).
 
 This module imports numpy only (no numba), so `scene/compile.py` can build tables cheaply.
 """
@@ -27,7 +27,7 @@ SCHEDULE_PIECEWISE_LINEAR = 1
 SCHEDULE_SINE = 2
 SCHEDULE_KINDS = {"constant": SCHEDULE_CONSTANT, "piecewise_linear": SCHEDULE_PIECEWISE_LINEAR, "sine": SCHEDULE_SINE}
 
-# Indices into ForceTables.term_evaluations, and the names force_terms_present reports.
+# Indices into ForceData.term_evaluations, and the names force_terms_present reports.
 TERM_NAMES = ("gravity", "field", "point_force", "torque", "spring", "drag", "impulse")
 TERM_GRAVITY, TERM_FIELD, TERM_POINT_FORCE, TERM_TORQUE, TERM_SPRING, TERM_DRAG, TERM_IMPULSE = range(7)
 
@@ -138,9 +138,6 @@ class ForceTables(NamedTuple):
       run their torque path (L += h tau, the body-frame torque in Euler's equations) only for these
       bodies; every other body's tau is exactly zero, so skipping it changes nothing. Impulses act
       on L between steps, not through tau, so they flag nothing.
-    term_evaluations: int64 (len(TERM_NAMES),), a diagnostic counter (Rapier's stage counters): each
-      evaluation of a term adds the rows (field: particles; impulse: impulses applied) it processed.
-      It accumulates over runs of the same tables; reset with `term_evaluations[:] = 0`.
     """
 
     gravity: np.ndarray
@@ -154,7 +151,22 @@ class ForceTables(NamedTuple):
     spring: SpringTable
     drag: DragTable
     impulse: ImpulseTable
+
+
+class ForceData(NamedTuple):
+    """What the force pass writes besides F and tau: the mutable part beside the read-only tables,
+    allocated once per run (`make_force_data`) and owned by the run's Data.
+
+    term_evaluations: int64 (len(TERM_NAMES),), a diagnostic counter (Rapier's stage counters): each
+      evaluation of a term adds the rows (field: particles; impulse: impulses applied) it processed.
+    """
+
     term_evaluations: np.ndarray
+
+
+def make_force_data(forces: ForceTables) -> ForceData:
+    """A zeroed ForceData for `forces`."""
+    return ForceData(term_evaluations=np.zeros(len(TERM_NAMES), dtype=np.int64))
 
 
 # ---- constructors: every table has the same dtypes and layouts whether empty or not ----------------

@@ -29,14 +29,15 @@ from rbcli.physics.step import STEP_KERNEL
 
 
 @numba.njit(**STEP_KERNEL)
-def accumulate_wrench(model, forces, t, x, q, P, L, F, tau) -> None:  # noqa: ANN001 - numba types
+def accumulate_wrench(model, forces, force_data, t, x, q, P, L, F, tau) -> None:  # noqa: ANN001 - numba types
     """Set F [N] and tau [N m] (body_count, 3), world frame, about each centre of mass, to the sum of the
     scene's force terms at time t [s]. tau is left untouched (zero) when forces.has_torque is False;
-    otherwise it is exactly zero for every body that forces.torque_body does not flag."""
+    otherwise it is exactly zero for every body that forces.torque_body does not flag. force_data
+    (ForceData) holds what the pass writes besides F and tau: the stage counters."""
     F[:, :] = 0.0
     if forces.has_torque:
         tau[:, :] = 0.0
-    counts = forces.term_evaluations
+    counts = force_data.term_evaluations
     if forces.has_gravity:
         accumulate_gravity(model.body_mass, forces.gravity, F)
         counts[TERM_GRAVITY] += F.shape[0]

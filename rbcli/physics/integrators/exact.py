@@ -34,13 +34,13 @@ WEIGHTS = np.array([1.0])
 
 
 @numba.njit(cache=True)
-def step(model, forces, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
+def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One `exact` step of every body, in place (one force evaluation, at t + dt/2)."""
-    compose(model, forces, t, dt, WEIGHTS, x, q, P, L, F, tau, scratch)
+    compose(model, forces, force_data, t, dt, WEIGHTS, x, q, P, L, F, tau, scratch)
 
 
 @numba.njit(cache=True)
-def compose(model, forces, t, h, weights, x, q, P, L, F, tau, q_mid) -> None:  # noqa: ANN001
+def compose(model, forces, force_data, t, h, weights, x, q, P, L, F, tau, q_mid) -> None:  # noqa: ANN001
     """The composition exact(w_{s-1} h) ... exact(w_0 h), adjacent half drifts merged, in place.
 
     With torques the kicks change L, so the flow is chained through the stages. Torque-free L stays
@@ -61,7 +61,7 @@ def compose(model, forces, t, h, weights, x, q, P, L, F, tau, q_mid) -> None:  #
         if not torque:
             free_rotation_exact_batch(model.body_inertia, q, L, elapsed, q_mid, work)
         q_now = q if torque else q_mid  # (one wrench call site: the compiled wrench is inlined once)
-        accumulate_wrench(model, forces, t + elapsed, x, q_now, P, L, F, tau)
+        accumulate_wrench(model, forces, force_data, t + elapsed, x, q_now, P, L, F, tau)
         h_prev = weights[i] * h
         h_next = weights[i + 1] * h if i + 1 < count else 0.0
         _kick(model, torque, forces.torque_body, h_prev, P, L, F, tau)

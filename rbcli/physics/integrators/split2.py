@@ -67,16 +67,16 @@ WEIGHTS = np.array([1.0])
 
 
 @numba.njit(**STEP_KERNEL)
-def step(model, forces, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
+def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One split2 step of every body, in place (one force evaluation, at t + dt/2)."""
-    compose(model, forces, t, dt, WEIGHTS, x, q, P, L, F, tau, scratch)
+    compose(model, forces, force_data, t, dt, WEIGHTS, x, q, P, L, F, tau, scratch)
 
 
 # compose and its two passes are inlined at numba level: a call boundary costs a reference-count
 # update per array argument (the model and force tables hold dozens), measured 2.25 -> 1.65 us per
 # step for one body, and 93 -> 88 ns per body-step at 100 bodies.
 @numba.njit(cache=True, inline="always")
-def compose(model, forces, t, h, weights, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001
+def compose(model, forces, force_data, t, h, weights, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001
     """The composition split2(w_{s-1} h) ... split2(w_0 h) of every body, in place.
 
     weights (s,) must be symmetric for the composition to be; force evaluation i happens at the
@@ -86,7 +86,7 @@ def compose(model, forces, t, h, weights, x, q, P, L, F, tau, scratch) -> None: 
     _drift_to_first_kick(model, weights[0] * h, x, q, P, L, scratch)
     elapsed = 0.5 * weights[0] * h
     for i in range(count):
-        accumulate_wrench(model, forces, t + elapsed, x, q, P, L, F, tau)
+        accumulate_wrench(model, forces, force_data, t + elapsed, x, q, P, L, F, tau)
         h_prev = weights[i] * h
         h_next = weights[i + 1] * h if i + 1 < count else 0.0
         _kick_and_drift(model, forces.has_torque, forces.torque_body, h_prev, h_next, x, q, P, L, F, tau, scratch)
