@@ -14,6 +14,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
+from rbcli.physics.integrators import INTEGRATORS, IntegratorInfo, get_integrator
 from rbcli.record.frame import RunSummary, Sink
 from rbcli.record.memory_sink import SinkMemory, Trajectory
 from rbcli.runner.simulation import BodyState, Simulation, SimulationDiverged
@@ -28,6 +29,17 @@ def load_scene(path: str | Path) -> SceneSpec:
     from rbcli.scene.load import load_scene as _load
 
     return _load(path)
+
+
+def list_integrators() -> tuple[IntegratorInfo, ...]:
+    """The integrators rbsim offers, in the registry's order: name, order, symplectic, what each conserves,
+    force evaluations per step, adaptive (metadata only: no kernel is imported or compiled)."""
+    return tuple(INTEGRATORS.values())
+
+
+def integrator_info(name: str) -> IntegratorInfo:
+    """One integrator's registry entry; KeyError names the known ones."""
+    return get_integrator(name)
 
 
 def prepare(

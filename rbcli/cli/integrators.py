@@ -21,8 +21,7 @@ def integrators(
     from rich.console import Console
     from rich.table import Table
 
-    from rbcli.physics.integrators import INTEGRATORS
-    from rbcli.runner.study import measure_cost
+    from rbcli.api import list_integrators
 
     console = Console()
     table = Table(title="rbsim integrators (docs/integrators.md)")
@@ -30,8 +29,10 @@ def integrators(
     for column in ("order", "symplectic", "conserves exactly", "forces/step", "adaptive"):
         table.add_column(column, justify="right" if column in ("order", "forces/step") else "left")
     if measure:
+        from rbcli.runner.study import measure_cost  # numpy, scipy, the study: only to time them
+
         table.add_column(f"ns / body-step ({MEASURE_BODIES} bodies)", justify="right")
-    for info in INTEGRATORS.values():
+    for info in list_integrators():
         row = [
             info.name + (" (demo)" if info.demonstration else ""),
             str(info.order),

@@ -47,8 +47,7 @@ def run(
     from rich.console import Console
     from rich.markup import escape
 
-    from rbcli.api import prepare
-    from rbcli.physics.integrators import get_integrator
+    from rbcli.api import integrator_info, prepare
     from rbcli.record.output_file import (
         OutputError,
         check_output,
@@ -74,7 +73,7 @@ def run(
             tolerance=tolerance,
             compression=compression,
         )
-        get_integrator(compiled.settings.integrator)
+        integrator_info(compiled.settings.integrator)  # an unknown name: KeyError listing the known ones
         scene_output = compiled.spec.simulation.output
         target = output or (Path(scene_output) if scene_output else default_output_path(compiled.spec.name))
         # before any work: a folder, an unknown format, an unwritable place, another run on it, a too-full disk
@@ -168,14 +167,14 @@ def _warm_up_kernels(compiled, err, quiet: bool) -> None:  # noqa: ANN001
 
 
 def _run_with_progress(compiled, target: Path, err, quiet: bool):  # noqa: ANN001, ANN202
-    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
-
     from rbcli.api import run_to_file
 
     started = time.perf_counter()
     if quiet or not sys.stderr.isatty():
         summary = run_to_file(compiled, target)
         return summary, time.perf_counter() - started
+    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn  # only for the bar
+
     columns = (TextColumn("simulating"), BarColumn(), TextColumn("t = {task.fields[t]:.4g} s"), TimeRemainingColumn())
     with Progress(*columns, console=err, transient=True) as bar:
         task = bar.add_task("run", total=compiled.settings.steps, t=0.0)

@@ -166,13 +166,13 @@ def format_order(fitted: float | None, nominal: int) -> str:
 
 def table_rows(result: StudyResult) -> list[list[str]]:
     """The table's cells, one row per run (TABLE_COLUMNS); adaptive runs show their tolerance."""
-    from rbcli.physics.integrators import get_integrator
+    from rbcli.api import integrator_info
 
     rows = []
     for run in result.runs:
         name, order = (
             run.integrator,
-            format_order(result.fitted_order(run.integrator), get_integrator(run.integrator).order),
+            format_order(result.fitted_order(run.integrator), integrator_info(run.integrator).order),
         )
         if run.tolerance is not None:
             name, order = f"{run.integrator} tol={run.tolerance:.0e}", "adaptive"
