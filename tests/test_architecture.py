@@ -1,12 +1,111 @@
-"""Import rules of docs/architecture.md: physics is pure numerics; the CLI front door stays light."""
+"""Import rules of docs/architecture.md: each part of rbcli imports only the parts below it (one explicit
+table, checked on every import statement of every file); physics is pure numerics; the CLI front door
+stays light."""
 
+import ast
 import subprocess
 import sys
+from collections.abc import Iterator
+from graphlib import CycleError, TopologicalSorter
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "rbcli"
+
+# What each part of rbcli (a subpackage, or a module at the top: "__init__" is rbcli itself) may import
+# from the other parts, anywhere in its files (imports inside functions and under TYPE_CHECKING count).
+# Data flows one way: scene YAML -> scene -> physics, run by runner, recorded by record, offered by api,
+# driven by cli. A part missing here fails test_every_part_of_rbcli_has_a_rule: a new one needs a line.
+ALLOWED_IMPORTS: dict[str, frozenset[str]] = {
+    "_version": frozenset(),
+    "physics": frozenset(),  # numpy and numba only (test_physics_imports_only_numpy_and_numba)
+    "scene": frozenset({"physics"}),
+    "record": frozenset({"physics", "scene"}),
+    "analysis": frozenset({"physics", "scene", "record"}),
+    "runner": frozenset({"_version", "physics", "scene", "record", "analysis"}),  # never api: api is above it
+    "api": frozenset({"physics", "scene", "record", "runner"}),
+    "cli": frozenset({"_version", "api", "runner", "scene", "record"}),  # not physics: what it needs is in api
+    "__init__": frozenset({"_version", "api", "record"}),
+    "__main__": frozenset({"cli"}),
+}
+
+
+def _parts() -> set[str]:
+    """rbcli's subpackages and top-level modules, from the tree."""
+    packages = {p.name for p in PACKAGE.iterdir() if p.is_dir() and (p / "__init__.py").is_file()}
+    return packages | {p.stem for p in PACKAGE.glob("*.py")}
+
+
+def _part_of(module: str, parts: set[str]) -> str | None:
+    """The part of rbcli a dotted name lies in (None outside rbcli): `rbcli.physics.step` -> physics;
+    `rbcli` itself, or a name defined in rbcli/__init__.py, -> __init__."""
+    names = module.split(".")
+    if names[0] != "rbcli":
+        return None
+    return names[1] if len(names) > 1 and names[1] in parts else "__init__"
+
+
+def _imported_names(path: Path) -> Iterator[tuple[str, int]]:
+    """(dotted name, line) of everything the file imports; `from a import b` gives a.b; relative
+    imports resolved."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    package = path.relative_to(ROOT).with_suffix("").parts[:-1]
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                yield alias.name, node.lineno
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                base = ".".join([*package[: len(package) - node.level + 1], *filter(None, [node.module])])
+            for alias in node.names:
+                yield (base if alias.name == "*" else f"{base}.{alias.name}"), node.lineno
+
+
+def _imports_between_parts() -> list[tuple[str, str, str]]:
+    """(importing part, imported part, file:line) for every import of one part of rbcli by another."""
+    parts = _parts()
+    found = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        source = _part_of(".".join(path.relative_to(ROOT).with_suffix("").parts), parts)
+        for name, line in _imported_names(path):
+            target = _part_of(name, parts)
+            if target is not None and target != source:
+                found.append((str(source), target, f"{path.relative_to(ROOT)}:{line}"))
+    return found
+
+
+def test_every_part_of_rbcli_has_a_rule():
+    assert _parts() == set(ALLOWED_IMPORTS), "give each new part of rbcli a line in ALLOWED_IMPORTS"
+
+
+def test_the_rules_are_layers():
+    """No cycle, even through several parts: the table is an order, top (cli) to bottom (physics)."""
+    try:
+        order = list(TopologicalSorter(ALLOWED_IMPORTS).static_order())
+    except CycleError as exc:
+        pytest.fail(f"ALLOWED_IMPORTS has a cycle: {exc.args[1]}")
+    assert order.index("physics") < order.index("scene") < order.index("runner") < order.index("api")
+    assert order.index("api") < order.index("cli") < order.index("__main__")
+
+
+def test_each_part_imports_only_the_parts_below_it():
+    wrong = [
+        f"{where}: {source} imports {target} (allowed: {', '.join(sorted(ALLOWED_IMPORTS[source])) or 'nothing'})"
+        for source, target, where in _imports_between_parts()
+        if target not in ALLOWED_IMPORTS[source]
+    ]
+    assert not wrong, "\n".join(wrong)
+
+
+def test_cli_does_not_import_physics_directly():
+    """cli parses arguments and calls rbcli.api (or runner, scene, record); the integrator registry and
+    the kernels reach it only through them."""
+    direct = [where for source, target, where in _imports_between_parts() if (source, target) == ("cli", "physics")]
+    assert not direct, f"rbcli/cli imports rbcli.physics at {', '.join(direct)}; go through rbcli.api"
+    assert {source for source, target, _ in _imports_between_parts() if target == "cli"} == {"__main__"}
 
 
 def _modules_after(code: str) -> set[str]:
