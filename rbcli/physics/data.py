@@ -8,7 +8,8 @@ writes lives here, so kernels never allocate and a run's memory is known when it
                  of mass: the force pass sets them, the integrator reads them
     scratch      the integrator's work columns, shape (body_count, SCRATCH_WIDTH of its module)
     force        what the force pass writes besides F and tau (forces/tables.py ForceData): stage
-                 counters, and the contact stage's grid, pair lists and contact history
+                 counters, and the contact stage's grid, per-evaluation arrays and contact history
+    substeps     integrator steps per grid step (contact sub-stepping; 1 otherwise), a run setting
     adaptive     error-controlled runs only (physics/adaptive.py): stage work (body_count, dopri5
                  width), controller state `control` (2,) and step `counters` int64 (2,) that persist
                  between chunks
@@ -39,6 +40,7 @@ class KernelData(NamedTuple):
     tau: np.ndarray
     scratch: np.ndarray
     force: ForceData
+    substeps: int
 
 
 @dataclass
@@ -50,13 +52,14 @@ class Data:
     tau: np.ndarray
     scratch: np.ndarray
     force: ForceData
+    substeps: int = 1
     adaptive_work: np.ndarray | None = None
     adaptive_control: np.ndarray | None = None
     adaptive_counters: np.ndarray | None = None
 
     def kernel(self) -> KernelData:
         s = self.state
-        return KernelData(s.x, s.q, s.P, s.L, self.F, self.tau, self.scratch, self.force)
+        return KernelData(s.x, s.q, s.P, s.L, self.F, self.tau, self.scratch, self.force, int(self.substeps))
 
     def clear_work(self) -> None:
         """Forget everything carried between steps but the state (after the state is set from outside):
@@ -64,19 +67,25 @@ class Data:
         self.F[:] = 0.0
         self.tau[:] = 0.0
         self.scratch[:] = 0.0
+        self.force.contact.hist_count[:] = 0  # contacts form afresh from the new state
         if self.adaptive_work is not None:
             assert self.adaptive_control is not None
             self.adaptive_work[:] = 0.0
             self.adaptive_control[:] = 0.0
 
 
-def make_data(initial: State, forces: ForceTables, scratch_width: int, *, adaptive: bool = False) -> Data:
+def make_data(
+    initial: State, forces: ForceTables, scratch_width: int, *, adaptive: bool = False, substeps: int = 1
+) -> Data:
     """A Data for `initial` (copied) and the force tables `forces`: zeroed accumulators, scratch and
     force data; the adaptive chunk's arrays (physics/adaptive.py: adaptive_work, their one
     definition) when asked."""
     n = initial.x.shape[0]
     state = initial.copy()
-    data = Data(state, np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, scratch_width)), make_force_data(forces))
+    if substeps < 1:
+        raise ValueError(f"substeps must be >= 1, got {substeps}")
+    F, tau, scratch = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, scratch_width))
+    data = Data(state, F, tau, scratch, make_force_data(forces), substeps=int(substeps))
     if adaptive:
         from rbcli.physics.adaptive import adaptive_work
 

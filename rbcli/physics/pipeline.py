@@ -2,12 +2,15 @@
 
 A step from grid index n (t = n dt) to n + 1 runs, in this order (STEP_STAGES):
 
-    impulses   exact jumps P += J, L += r x J of the impulses due in [t, t + dt)   (forces/impulse.py)
-    update     the integrator's maths (integrators/<name>.py `step`); every force evaluation it needs
-               is the force pass `forces/wrench.accumulate_wrench`, itself a list of force stages
-               (gravity, fields, point forces, torques, springs, drag), each present only when the
-               scene has rows for it
-    record     on recording steps: the divergence check, then the state copied into the next frame
+    impulses        exact jumps P += J, L += r x J of the impulses due in [t, t + dt)  (forces/impulse.py)
+    then data.substeps times (1 unless contact sub-stepping is on), over [ts, ts + h), h = dt / substeps:
+      contact_begin   the contact springs' clock: the (sub-)step being taken            (contact/force.py)
+      update          the integrator's maths (integrators/<name>.py `step`); every force evaluation it
+                      needs is the force pass `forces/wrench.accumulate_wrench`, itself a list of force
+                      stages (gravity, fields, point forces, torques, springs, drag, contact), each
+                      present only when the scene has rows for it
+      contact_commit  the last evaluation's contacts and tangential springs become the history
+    record          on recording steps: the divergence check, then the state copied into the next frame
 
 Each stage is present only when the scene needs it (its `when` test is a table size, decided once per
 step in compiled code at the cost of one comparison). The runner (runner/loop.py) owns time, chunk
@@ -39,8 +42,9 @@ class Stage:
 
     Names the code may use: model, forces, data (KernelData), x, q, P, L (data's state arrays), dt,
     index (the grid step being taken), t = index * dt, k (steps done in this chunk), frames, filled,
-    record_every; `integrator_step` is the integrator's update. A stage that ends the chunk returns
-    (k + 1, filled, status).
+    record_every; `integrator_step` is the integrator's update. Consecutive sub-step stages form one
+    loop run data.substeps times (contact sub-stepping, 1 otherwise), where ts and h are the sub-step's
+    start time and length. A stage that ends the chunk returns (k + 1, filled, status).
     """
 
     name: str
@@ -48,6 +52,7 @@ class Stage:
     imports: tuple[str, ...]
     code: str  # lines of the loop body, without indentation
     when: str = ""  # a condition that must hold for the stage to run ("" = always)
+    substep: bool = False  # runs data.substeps times per step, at ts = t + sub h, h = dt / data.substeps
 
 
 STEP_STAGES: tuple[Stage, ...] = (
@@ -59,10 +64,27 @@ STEP_STAGES: tuple[Stage, ...] = (
         when="forces.impulse.body.shape[0]",
     ),
     Stage(
+        "contact_begin",
+        "contact_begin: the contact springs measure time from the start of this (sub-)step",
+        ("from rbcli.physics.contact.force import begin_contact_step",),
+        "begin_contact_step(data.force.contact, ts, h)",
+        when="forces.contact.sphere_body.shape[0]",
+        substep=True,
+    ),
+    Stage(
         "update",
         "update: the integrator's maths, its force evaluations through forces.wrench.accumulate_wrench",
         (),
-        "integrator_step(model, forces, data.force, t, dt, x, q, P, L, data.F, data.tau, data.scratch)",
+        "integrator_step(model, forces, data.force, ts, h, x, q, P, L, data.F, data.tau, data.scratch)",
+        substep=True,
+    ),
+    Stage(
+        "contact_commit",
+        "contact_commit: the (sub-)step is complete: its last evaluation's contacts become the history",
+        ("from rbcli.physics.contact.force import commit_contacts",),
+        "commit_contacts(model, forces.contact, data.force.contact, x, q, P, L)",
+        when="forces.contact.sphere_body.shape[0]",
+        substep=True,
     ),
     Stage(
         "record",
@@ -124,12 +146,18 @@ def _import_lines(module: str, stages: tuple[Stage, ...]) -> str:
 def chunk_source(module: str, name: str, stages: tuple[Stage, ...] = STEP_STAGES) -> str:
     """The Python source of the chunk loop of integrator module `module` (registry name `name`)."""
     body = []
+    in_substeps = False
     for stage in stages:
-        body.append(_indent(f"# {stage.why}", 8))
+        if stage.substep and not in_substeps:
+            # h = dt / 1 and ts = t + 0 * h are exactly dt and t: one sub-step is bitwise the plain step
+            body.append(_indent("h = dt / data.substeps\nfor sub in range(data.substeps):\n    ts = t + sub * h", 8))
+        in_substeps = stage.substep
+        depth = 12 if stage.substep else 8
+        body.append(_indent(f"# {stage.why}", depth))
         if stage.when:
-            body.append(_indent(f"if {stage.when}:", 8))
-            body.append(_indent(stage.code, 12))
+            body.append(_indent(f"if {stage.when}:", depth))
+            body.append(_indent(stage.code, depth + 4))
         else:
-            body.append(_indent(stage.code, 8))
+            body.append(_indent(stage.code, depth))
     head = _HEADER.format(name=name, imports=_import_lines(module, stages))
     return head + "".join(body) + _FOOTER

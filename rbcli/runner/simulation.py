@@ -105,7 +105,9 @@ class Simulation:
         else:
             chunk = info.chunk()
             self._chunk = chunk.run_chunk
-            self.data = make_data(compiled.initial_state, self.forces, chunk.SCRATCH_WIDTH)
+            self.data = make_data(
+                compiled.initial_state, self.forces, chunk.SCRATCH_WIDTH, substeps=self.settings.substeps
+            )
         self._kmodel = self.model.kernel()
         self._kdata = self.data.kernel()
         from rbcli.physics.step import empty_buffers

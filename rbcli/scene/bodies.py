@@ -224,6 +224,26 @@ class BodyResolver:
             angular_velocity=angular_velocity,
             angular_velocity_frame=frame,
             location=self.issues.locate(path),
+            **self._contact_keys(entry, path, cloud),
+        )
+
+    def _contact_keys(self, entry: dict[str, Any], path: YamlPath, cloud: ParticleCloud) -> dict[str, Any]:
+        """The BodySpec's contact fields: material, static, collide and where its contact spheres come
+        from (used only when the scene has a `contact:` section)."""
+        from rbcli.scene.contact_spec import material_from_mapping
+
+        if "shape" in entry and entry["shape"].get("type") == "sphere":
+            geometry, size = "sphere", float(entry["shape"]["radius"])
+        elif ("shape" in entry or "mesh" in entry) and cloud.radius is not None and len(cloud.radius):
+            geometry, size = "lattice", 2.0 * float(cloud.radius[0])
+        else:
+            geometry, size = "particles", 0.0
+        return dict(
+            material=material_from_mapping(entry.get("material"), (*path, "material"), self.issues),
+            static=bool(entry.get("static", False)),
+            collide=bool(entry.get("collide", True)),
+            contact_geometry=geometry,
+            contact_size=size,
         )
 
     @staticmethod

@@ -1,4 +1,5 @@
-"""Physics sanity checks on a compiled scene that are warnings, not errors: a dt too large for a spring.
+"""Physics sanity checks on a compiled scene that are warnings, not errors: a dt too large for a spring
+or for the contacts, and an integrator that is a poor match for contact.
 
 A spring of stiffness k between a body point and the world (or another body) is an oscillator of
 angular frequency omega = sqrt(k / m_eff), with 1/m_eff = sum over its body ends of 1/M + |r|^2 / I_min
@@ -33,10 +34,44 @@ def _inverse_effective_mass(compiled: CompiledScene, end: BodyPoint) -> float:
     return 1.0 / model.body_mass[b] + r2 / float(model.body_inertia[b].min())
 
 
-def stability_warnings(compiled: CompiledScene) -> list[SceneIssue]:
-    """One warning per spring whose oscillation the scene's dt cannot follow stably (omega dt >= 2)."""
-    dt = compiled.settings.dt
+def contact_warnings(compiled: CompiledScene) -> list[SceneIssue]:
+    """The contacts' stable step against the (sub-)step that runs; euler-matrix with contact."""
+    contact, spec = compiled.contact, compiled.spec
+    if contact is None or spec.contact is None:
+        return []
     issues = []
+    step = compiled.settings.dt / compiled.settings.substeps
+    if step >= contact.stable_step:
+        substeps = f" ({compiled.settings.substeps} sub-steps)" if compiled.settings.substeps > 1 else ""
+        issues.append(
+            SceneIssue(
+                spec.contact.location,
+                f"the step {step:.3g} s{substeps} is above the contacts' stable step {contact.stable_step:.3g} s "
+                f"(body '{contact.limiting_body}', stiffness {contact.stiffness:.3g} N/m per contact sphere): "
+                "contacts will gain energy and bodies pass through each other",
+                "contact.substeps: auto (sub-steps chosen from the stable step), a smaller dt, or a lower "
+                "material stiffness",
+                severity="warning",
+            )
+        )
+    if compiled.settings.integrator == "euler-matrix":
+        issues.append(
+            SceneIssue(
+                spec.contact.location,
+                "euler-matrix (explicit Euler, the tutorial's) gains energy in every contact: bounces grow and "
+                "resting bodies jitter",
+                "integrator: split2 (the default with contact) or semi-implicit",
+                severity="warning",
+            )
+        )
+    return issues
+
+
+def stability_warnings(compiled: CompiledScene) -> list[SceneIssue]:
+    """One warning per spring whose oscillation the scene's dt cannot follow stably (omega dt >= 2), and
+    the contact warnings (`contact_warnings`)."""
+    dt = compiled.settings.dt
+    issues = contact_warnings(compiled)
     for force in compiled.spec.forces:
         if not isinstance(force, ForceSpring) or force.stiffness <= 0.0:
             continue

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -13,6 +13,7 @@ from rbcli.physics.frames import internal_orientation
 from rbcli.physics.model import Model, build_model
 from rbcli.physics.rotation import quat_rotate, quat_rotate_inverse
 from rbcli.physics.state import State
+from rbcli.scene.compile_contact import ContactSummary, compile_contact
 from rbcli.scene.compile_forces import compile_force_tables
 from rbcli.scene.spec import SceneError, SceneIssue, SceneSpec
 
@@ -29,6 +30,7 @@ class RunSettings:
     seed: int = 0
     compression: str = "zstd"  # MCAP chunk compression ("zstd", "lz4", "none")
     tolerance: float | None = None  # adaptive: error budget of the run; dt is then the grid of output times
+    substeps: int = 1  # integrator steps per dt (contact sub-stepping)
 
     @property
     def duration(self) -> float:
@@ -43,6 +45,7 @@ class CompiledModel:
     model: Model
     forces: ForceTables
     initial_state: State
+    contact: ContactSummary | None = None  # None: the scene has no contact section
 
 
 @dataclass(frozen=True)
@@ -54,6 +57,7 @@ class CompiledScene:
     forces: ForceTables
     initial_state: State
     settings: RunSettings
+    contact: ContactSummary | None = None
 
     @property
     def scene_sha256(self) -> str:
@@ -90,9 +94,9 @@ def compile_scene(
     base = spec.compiled_model if isinstance(spec.compiled_model, CompiledModel) else compile_model(spec)
     settings = run_settings(
         spec, dt=dt, duration=duration, integrator=integrator, record_every=record_every, tolerance=tolerance,
-        compression=compression,
+        compression=compression, contact=base.contact,
     )  # fmt: skip
-    return CompiledScene(spec, base.model, base.forces, base.initial_state.copy(), settings)
+    return CompiledScene(spec, base.model, base.forces, base.initial_state.copy(), settings, base.contact)
 
 
 def compile_model(spec: SceneSpec) -> CompiledModel:
@@ -110,8 +114,9 @@ def compile_model(spec: SceneSpec) -> CompiledModel:
         raise SceneError([SceneIssue(body.location if body else None, str(exc))]) from None
     state = initial_state(spec, model)
     body_index = {name: i for i, name in enumerate(model.body_names)}
-    forces = compile_force_tables(spec.gravity, spec.forces, model, body_index, centres)
-    return CompiledModel(model, forces, state)
+    contact, summary = compile_contact(spec, model, centres) if spec.contact is not None else (None, None)
+    forces = compile_force_tables(spec.gravity, spec.forces, model, body_index, centres, contact)
+    return CompiledModel(model, forces, state, summary)
 
 
 def run_settings(
@@ -123,8 +128,10 @@ def run_settings(
     record_every: int | None = None,
     tolerance: float | None = None,
     compression: str | None = None,
+    contact: ContactSummary | None = None,
 ) -> RunSettings:
-    """The scene's run settings with the given overrides applied: the one place overrides meet the scene."""
+    """The scene's run settings with the given overrides applied: the one place overrides meet the scene.
+    contact: the compiled contacts' summary, whose stable step sets `contact.substeps: auto`."""
     sim = spec.simulation
     settings = RunSettings(
         dt=float(dt if dt is not None else sim.dt),
@@ -136,6 +143,18 @@ def run_settings(
         compression=compression or sim.record.compression,
         tolerance=tolerance if tolerance is not None else sim.tolerance,
     )
+    if spec.contact is not None:
+        substeps = spec.contact.substeps
+        if substeps is None:
+            from rbcli.physics.contact.parameters import substeps_for
+
+            substeps = substeps_for(settings.dt, contact.stable_step) if contact is not None else 1
+        settings = replace(settings, substeps=int(substeps))
+        if settings.tolerance is not None:
+            raise ValueError(
+                "adaptive stepping (a tolerance) does not run contact yet: contact forces are not smooth, so "
+                "give a fixed dt (and contact.substeps: auto)"
+            )
     if settings.dt <= 0 or not math.isfinite(settings.dt):
         raise SceneError([SceneIssue(None, f"dt must be a positive number of seconds, got {settings.dt}")])
     if settings.tolerance is not None:

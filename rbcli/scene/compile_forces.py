@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from rbcli.physics.contact.tables import ContactTable
 from rbcli.physics.forces import NO_SCHEDULE, WORLD, ForceTables, build_force_tables
 from rbcli.physics.forces.tables import (
     SCHEDULE_KINDS,
@@ -56,6 +57,7 @@ def compile_force_tables(
     model: Model,
     body_index: Mapping[str, int],
     body_centres_user: np.ndarray,
+    contact: ContactTable | None = None,
 ) -> ForceTables:
     """ForceTables of a scene: uniform gravity [m/s^2] (3,) or None, its force specs, the compiled
     model, body name -> index, and each body's centre of mass in its user frame [m] (body_count, 3).
@@ -71,7 +73,7 @@ def compile_force_tables(
             issues.append(SceneIssue(spec.location, f"force {spec.kind!r}: {exc}", exc.expected))
     if issues:
         raise SceneError(issues)
-    return builder.tables(gravity)
+    return builder.tables(gravity, contact)
 
 
 def _vector(value: object, name: str, shape: tuple[int, ...] = (3,)) -> np.ndarray:
@@ -285,7 +287,7 @@ class _TableBuilder:
             row["gradient"].append(gradient)
             row["schedule"].append(schedule)
 
-    def tables(self, gravity: np.ndarray | None) -> ForceTables:
+    def tables(self, gravity: np.ndarray | None, contact: ContactTable | None = None) -> ForceTables:
         return build_force_tables(
             gravity,
             body_count=self.model.body_count,
@@ -296,4 +298,5 @@ class _TableBuilder:
             spring=spring_table(**self.spring),
             drag=drag_table(**self.drag),
             impulse=impulse_table(**self.impulse),
+            contact=contact,
         )

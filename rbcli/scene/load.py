@@ -48,6 +48,9 @@ EXCLUSIVE_GROUPS = (
     ("density", "mass"),
 )
 
+# the integrator of a scene with contact that names none (euler-matrix, the tutorial's, warns with contact)
+CONTACT_DEFAULT_INTEGRATOR = "split2"
+
 # a run longer than this many steps is more likely a unit slip (dt in ms?) than intended
 MANY_STEPS = 1_000_000_000
 
@@ -150,6 +153,16 @@ def _analyse(
                 bodies.append(body)
     _check_unique_names(entries, issues)
     forces = _forces(data, clean, issues)
+    contact = None
+    if "contact" in data and clean(("contact",)):
+        from rbcli.scene.contact_spec import check_contact_bodies, contact_from_mapping
+
+        contact = contact_from_mapping(data["contact"], issues)
+        check_contact_bodies(bodies, entries, issues)
+        if simulation is not None and "integrator" not in data["simulation"]:
+            # the tutorial's default (euler-matrix) gains energy in every bounce; split2 is symplectic,
+            # second order and evaluates the contact forces once per step
+            simulation = replace(simulation, integrator=CONTACT_DEFAULT_INTEGRATOR)
     if issues.error_count or simulation is None:
         return None, issues.sorted()
     gravity = data.get("gravity")
@@ -159,6 +172,7 @@ def _analyse(
         bodies=tuple(bodies),
         gravity=None if gravity is None else _frozen_vector(gravity),
         forces=forces,
+        contact=contact,
         source_path=file,
         source_text=text,
     )

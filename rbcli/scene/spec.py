@@ -74,6 +74,48 @@ class SimulationSpec:
 
 
 @dataclass(frozen=True)
+class MaterialSpec:
+    """Contact material (docs/contact.md); None: the scene's `contact.material`, then the defaults.
+
+    stiffness [N/m] of one contact sphere's contact (None: derived from the body's weight and sphere
+    radius, physics/contact/parameters.py), restitution [1] in [0.01, 1], friction [1] (Coulomb mu).
+    """
+
+    stiffness: float | None = None
+    restitution: float | None = None
+    friction: float | None = None
+
+    def over(self, base: MaterialSpec) -> MaterialSpec:
+        """This material's values where given, base's elsewhere."""
+        return MaterialSpec(
+            self.stiffness if self.stiffness is not None else base.stiffness,
+            self.restitution if self.restitution is not None else base.restitution,
+            self.friction if self.friction is not None else base.friction,
+        )
+
+
+@dataclass(frozen=True)
+class PlaneSpec:
+    """A static half-space: `point` [m] on its surface, unit `normal` pointing out of the solid (world)."""
+
+    point: np.ndarray
+    normal: np.ndarray
+    material: MaterialSpec = field(default_factory=MaterialSpec)  # stiffness unused: a plane takes the body's
+    location: SourceLocation | None = None
+
+
+@dataclass(frozen=True)
+class ContactSpec:
+    """The scene's `contact:` section: world planes (ground, walls, container), the default material,
+    and contact sub-stepping (None: `auto`, chosen from the stable step at the dt that runs)."""
+
+    planes: tuple[PlaneSpec, ...] = ()
+    material: MaterialSpec = field(default_factory=MaterialSpec)
+    substeps: int | None = 1
+    location: SourceLocation | None = None
+
+
+@dataclass(frozen=True)
 class BodySpec:
     """One rigid body as a particle cloud with its initial state.
 
@@ -97,6 +139,15 @@ class BodySpec:
     angular_velocity: np.ndarray | None = None
     angular_velocity_frame: str = "world"  # "world" or "body"
     location: SourceLocation | None = None
+    # contact (used only when the scene has a `contact:` section)
+    material: MaterialSpec = field(default_factory=MaterialSpec)
+    static: bool = False  # never moves; other bodies collide with it
+    collide: bool = True  # False: the body passes through everything
+    # where its contact spheres come from: "particles" (every particle, with its radius), "sphere" (one
+    # sphere of radius contact_size at the body origin: a sphere shape's exact surface), "lattice" (the
+    # surface particles of a lattice of spacing contact_size)
+    contact_geometry: str = "particles"
+    contact_size: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -116,6 +167,7 @@ class SceneSpec:
     bodies: tuple[BodySpec, ...]
     gravity: np.ndarray | None = None  # [m/s^2], shape (3,), world frame
     forces: tuple[ForceSpec, ...] = ()
+    contact: ContactSpec | None = None  # None: no contact stage at all
     source_path: str | None = None
     source_text: str = ""
     warnings: tuple[SceneIssue, ...] = ()  # non-fatal issues found while loading (e.g. a normalised quaternion)

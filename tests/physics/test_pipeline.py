@@ -37,8 +37,9 @@ def test_committed_chunk_loops_are_generated_from_the_stage_list(name):
     assert INTEGRATORS[name].chunk().run_chunk is not None
 
 
-def test_stage_list_is_impulses_update_record():
-    assert [stage.name for stage in STEP_STAGES] == ["impulses", "update", "record"]
+def test_stage_list_is_impulses_contact_update_record():
+    assert [stage.name for stage in STEP_STAGES] == ["impulses", "contact_begin", "update", "contact_commit", "record"]
+    assert [stage.name for stage in STEP_STAGES if stage.substep] == ["contact_begin", "update", "contact_commit"]
 
 
 # A trivial stage, as a user of the pipeline would add one: a constant push on every body, applied as an
@@ -74,7 +75,7 @@ def test_a_stage_added_to_the_list_runs_in_the_generated_loop(tmp_path, name):
     from rbcli.physics.data import make_data
     from rbcli.physics.step import empty_buffers
 
-    stages = (*STEP_STAGES[:2], PUSH_STAGE, STEP_STAGES[2])
+    stages = (*STEP_STAGES[:-1], PUSH_STAGE, STEP_STAGES[-1])
     pushed = _load_generated(tmp_path, name, stages)
     compiled = prepare(make_scene(random_bodies(3, seed=2), integrator=name))
     data = make_data(compiled.initial_state, compiled.forces, pushed.SCRATCH_WIDTH)

@@ -79,8 +79,7 @@ def test_every_object_is_closed():
     for path, sub in walk(scene_schema()):
         if sub.get("type") == "object" and sub.get("additionalProperties") is not False:
             open_objects.append(path)
-    # the two placeholders the forces and collision issues will fill in are open on purpose
-    assert sorted(open_objects) == ["#/properties/contact"]  # the collisions issue will define it
+    assert open_objects == []
 
 
 def test_defaults_and_templates_offer_the_body_keys():

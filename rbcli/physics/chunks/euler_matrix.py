@@ -5,6 +5,7 @@ Regenerate with `python tests/physics/test_pipeline.py --regenerate` after chang
 
 import numba
 
+from rbcli.physics.contact.force import begin_contact_step, commit_contacts
 from rbcli.physics.forces.impulse import apply_impulses
 from rbcli.physics.integrators.euler_matrix import SCRATCH_WIDTH
 from rbcli.physics.integrators.euler_matrix import step as integrator_step
@@ -28,8 +29,17 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
         # impulses: exact jumps of P and L at the start of the step that holds them
         if forces.impulse.body.shape[0]:
             apply_impulses(model, forces, data.force, t, t + dt, x, q, P, L)
-        # update: the integrator's maths, its force evaluations through forces.wrench.accumulate_wrench
-        integrator_step(model, forces, data.force, t, dt, x, q, P, L, data.F, data.tau, data.scratch)
+        h = dt / data.substeps
+        for sub in range(data.substeps):
+            ts = t + sub * h
+            # contact_begin: the contact springs measure time from the start of this (sub-)step
+            if forces.contact.sphere_body.shape[0]:
+                begin_contact_step(data.force.contact, ts, h)
+            # update: the integrator's maths, its force evaluations through forces.wrench.accumulate_wrench
+            integrator_step(model, forces, data.force, ts, h, x, q, P, L, data.F, data.tau, data.scratch)
+            # contact_commit: the (sub-)step is complete: its last evaluation's contacts become the history
+            if forces.contact.sphere_body.shape[0]:
+                commit_contacts(model, forces.contact, data.force.contact, x, q, P, L)
         # record: on recording steps, the divergence check and the state copied into the next frame
         filled, status = record_if_due(index + 1, record_every, x, q, P, L, frames, filled)
         if status != STATUS_OK:

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from rbcli.physics.contact.tables import ContactTable, contact_table
 from rbcli.physics.forces.tables import (
     NO_SCHEDULE,
     TERM_NAMES,
@@ -76,6 +77,7 @@ def build_force_tables(
     spring: SpringTable | None = None,
     drag: DragTable | None = None,
     impulse: ImpulseTable | None = None,
+    contact: ContactTable | None = None,
 ) -> ForceTables:
     """Tables for a scene of body_count bodies from plain tables (a missing table = 0 rows).
 
@@ -95,12 +97,15 @@ def build_force_tables(
         impulse=impulse if impulse is not None else impulse_table(),
     )
     _check_bodies(body_count, **tables)
-    torque_body = bodies_with_torque(body_count, **tables)
+    contact = contact if contact is not None else contact_table()
+    _check_contact(body_count, contact)
+    torque_body = bodies_with_torque(body_count, **tables, contact=contact)
     return ForceTables(
         gravity=g,
         has_gravity=gravity is not None and bool(np.any(g != 0.0)),
         has_torque=bool(torque_body.any()),
         torque_body=torque_body,
+        contact=contact,
         **tables,
     )
 
@@ -112,6 +117,7 @@ def terms_with_torque(
     torque: TorqueTable,
     spring: SpringTable,
     drag: DragTable,
+    contact: ContactTable | None = None,
     **_: object,
 ) -> tuple[str, ...]:
     """Names of the terms whose rows can produce a torque about a centre of mass.
@@ -131,6 +137,9 @@ def terms_with_torque(
         names.append("spring")
     if np.any(drag.angular_linear != 0.0) or np.any(drag.angular_quadratic != 0.0):
         names.append("drag")
+    if contact is not None and contact.sphere_body.size:
+        if np.any(contact.sphere_offset != 0.0) or np.any(contact.body_friction[contact.sphere_body] > 0.0):
+            names.append("contact")
     return tuple(names)
 
 
@@ -142,6 +151,7 @@ def bodies_with_torque(
     torque: TorqueTable,
     spring: SpringTable,
     drag: DragTable,
+    contact: ContactTable | None = None,
     **_: object,
 ) -> np.ndarray:
     """bool (body_count,), read-only: True for each body that some row can give a torque; the
@@ -151,9 +161,10 @@ def bodies_with_torque(
     torque that is off for now, a zero vector, a field that happens to be uniform). A field row always
     flags (tau = sum r_i x F_i; even a uniform per-mass field gives round-off torques); a point force
     or spring end flags only when its point is off the centre of mass (r = 0 gives tau = 0 x f = 0
-    exactly); drag only with an angular coefficient. A body that no row flags gets tau = 0 exactly,
-    so an integrator may skip its torque path with bitwise the same result. Impulses flag nothing:
-    they change L between steps, never through tau.
+    exactly); drag only with an angular coefficient; a contact body when it has friction or a sphere
+    off its centre (a frictionless sphere at the centre is pushed along the normal through it). A body
+    that no row flags gets tau = 0 exactly, so an integrator may skip its torque path with bitwise the
+    same result. Impulses flag nothing: they change L between steps, never through tau.
     """
     flag = np.zeros(body_count, dtype=np.bool_)
     flag[field.body] = True
@@ -162,6 +173,12 @@ def bodies_with_torque(
     flag[spring.body_a[np.any(spring.point_a != 0.0, axis=1)]] = True
     flag[spring.body_b[(spring.body_b >= 0) & np.any(spring.point_b != 0.0, axis=1)]] = True
     flag[drag.body[(drag.angular_linear != 0.0) | (drag.angular_quadratic != 0.0)]] = True
+    if contact is not None and contact.sphere_body.size:
+        off_centre = np.any(contact.sphere_offset != 0.0, axis=1)
+        flag[contact.sphere_body[off_centre]] = True
+        with_spheres = np.zeros(body_count, dtype=np.bool_)
+        with_spheres[contact.sphere_body] = True
+        flag |= with_spheres & (contact.body_friction > 0.0)
     flag.setflags(write=False)
     return flag
 
@@ -177,6 +194,20 @@ def _check_bodies(body_count: int, **tables: Any) -> None:
             raise ValueError(f"{name} table names body {body.min()}..{body.max()}, outside 0..{body_count - 1}")
 
 
+def _check_contact(body_count: int, contact: ContactTable) -> None:
+    """ValueError unless the contact table's per-body arrays have body_count rows and its spheres and
+    static bodies name bodies in range (the kernels index with them unchecked)."""
+    if not contact.sphere_body.size:
+        return
+    for name in ("body_inv_mass", "body_stiffness", "body_damping_ratio", "body_friction"):
+        if getattr(contact, name).shape != (body_count,):
+            raise ValueError(f"contact {name} has shape {getattr(contact, name).shape}, expected ({body_count},)")
+    for name in ("sphere_body", "static_body"):
+        body = getattr(contact, name)
+        if body.size and (body.min() < 0 or body.max() >= body_count):
+            raise ValueError(f"contact {name} names body {body.min()}..{body.max()}, outside 0..{body_count - 1}")
+
+
 def force_terms_present(forces: ForceTables) -> tuple[str, ...]:
     """Names of the terms the compiled wrench (and `apply_impulses`) will evaluate, in TERM_NAMES order."""
     rows = {
@@ -187,5 +218,6 @@ def force_terms_present(forces: ForceTables) -> tuple[str, ...]:
         "spring": table_rows(forces.spring),
         "drag": table_rows(forces.drag),
         "impulse": table_rows(forces.impulse),
+        "contact": int(forces.contact.sphere_body.shape[0]),
     }
     return tuple(name for name in TERM_NAMES if rows[name])

@@ -17,6 +17,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from rbcli.physics.contact.tables import ContactTable, ContactWork, make_contact_work
+
 # Row column `schedule` value meaning "no schedule": the force acts at full strength at all times.
 NO_SCHEDULE = -1
 # Row column `body_b` of a spring meaning "the second end is a world anchor".
@@ -28,8 +30,8 @@ SCHEDULE_SINE = 2
 SCHEDULE_KINDS = {"constant": SCHEDULE_CONSTANT, "piecewise_linear": SCHEDULE_PIECEWISE_LINEAR, "sine": SCHEDULE_SINE}
 
 # Indices into ForceData.term_evaluations, and the names force_terms_present reports.
-TERM_NAMES = ("gravity", "field", "point_force", "torque", "spring", "drag", "impulse")
-TERM_GRAVITY, TERM_FIELD, TERM_POINT_FORCE, TERM_TORQUE, TERM_SPRING, TERM_DRAG, TERM_IMPULSE = range(7)
+TERM_NAMES = ("gravity", "field", "point_force", "torque", "spring", "drag", "impulse", "contact")
+TERM_GRAVITY, TERM_FIELD, TERM_POINT_FORCE, TERM_TORQUE, TERM_SPRING, TERM_DRAG, TERM_IMPULSE, TERM_CONTACT = range(8)
 
 
 class ScheduleTable(NamedTuple):
@@ -133,6 +135,8 @@ class ForceTables(NamedTuple):
     has_gravity: False when the scene has no gravity (the term is skipped).
     has_torque: False when no term can produce a torque: integrators may skip the torque kick, and
       the wrench leaves tau untouched (all zeros). Equal to torque_body.any().
+    contact: contact spheres, materials, planes and static bodies (contact/tables.py; 0 spheres: no
+      contact stage).
     torque_body: bool (body_count,): True for a body that some term can give a torque (a field row,
       a point force or spring end off its centre of mass, a pure torque, angular drag). Integrators
       run their torque path (L += h tau, the body-frame torque in Euler's equations) only for these
@@ -151,6 +155,7 @@ class ForceTables(NamedTuple):
     spring: SpringTable
     drag: DragTable
     impulse: ImpulseTable
+    contact: ContactTable
 
 
 class ForceData(NamedTuple):
@@ -158,15 +163,21 @@ class ForceData(NamedTuple):
     allocated once per run (`make_force_data`) and owned by the run's Data.
 
     term_evaluations: int64 (len(TERM_NAMES),), a diagnostic counter (Rapier's stage counters): each
-      evaluation of a term adds the rows (field: particles; impulse: impulses applied) it processed.
+      evaluation of a term adds the rows (field: particles; impulse: impulses applied; contact: contacts
+      found) it processed.
+    contact: the contact stage's grid, per-evaluation arrays and contact history (contact/tables.py).
     """
 
     term_evaluations: np.ndarray
+    contact: ContactWork
 
 
 def make_force_data(forces: ForceTables) -> ForceData:
     """A zeroed ForceData for `forces`."""
-    return ForceData(term_evaluations=np.zeros(len(TERM_NAMES), dtype=np.int64))
+    return ForceData(
+        term_evaluations=np.zeros(len(TERM_NAMES), dtype=np.int64),
+        contact=make_contact_work(forces.contact, forces.torque_body.shape[0]),
+    )
 
 
 # ---- constructors: every table has the same dtypes and layouts whether empty or not ----------------

@@ -1,8 +1,9 @@
 """The total wrench of all force terms on every body: the one function integrators call.
 
 Stages, each a loop over its own table's rows only (0 rows: no work; rows list only touched bodies):
-gravity, per-particle fields, point forces, torques, springs-dampers, drag. Impulses are not forces:
-they are applied between steps by `impulse.apply_impulses`.
+gravity, per-particle fields, point forces, torques, springs-dampers, drag, contact (physics/contact:
+broad phase and contact forces), then static bodies held (their wrench zeroed). Impulses are not
+forces: they are applied between steps by `impulse.apply_impulses`.
 """
 
 from __future__ import annotations
@@ -10,12 +11,14 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from rbcli.physics.contact.force import accumulate_contact, hold_static_bodies
 from rbcli.physics.forces.drag import accumulate_drag, drag_numpy
 from rbcli.physics.forces.field import accumulate_field, field_numpy, field_potential
 from rbcli.physics.forces.gravity import accumulate_gravity, gravity_potential
 from rbcli.physics.forces.point_force import accumulate_point_force, point_force_numpy, point_force_potential
 from rbcli.physics.forces.spring import accumulate_spring, spring_numpy, spring_potential
 from rbcli.physics.forces.tables import (
+    TERM_CONTACT,
     TERM_DRAG,
     TERM_FIELD,
     TERM_GRAVITY,
@@ -51,10 +54,18 @@ def accumulate_wrench(model, forces, force_data, t, x, q, P, L, F, tau) -> None:
         counts[TERM_SPRING] += accumulate_spring(model, forces.spring, x, q, P, L, F, tau)
     if forces.drag.body.shape[0]:
         counts[TERM_DRAG] += accumulate_drag(model, forces.drag, q, P, L, F, tau)
+    if forces.contact.sphere_body.shape[0]:
+        accumulate_contact(model, forces.contact, force_data.contact, t, x, q, P, L, F, tau)
+        counts[TERM_CONTACT] += np.int64(force_data.contact.stats[0])
+    if forces.contact.static_body.shape[0]:
+        hold_static_bodies(forces.contact, F, tau)
 
 
 def wrench_numpy(model, forces: ForceTables, t: float, x, q, P, L) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001
-    """Plain numpy reference of `accumulate_wrench` (tests); model: Model or KernelModel."""
+    """Plain numpy reference of `accumulate_wrench` (tests); model: Model or KernelModel. Contact forces
+    carry history, so they have their own reference (physics/contact/reference.py), not this one."""
+    if forces.contact.sphere_body.shape[0]:
+        raise ValueError("wrench_numpy has no contact forces: compare contact with physics/contact/reference.py")
     F = np.zeros_like(x)
     tau = np.zeros_like(x)
     if forces.has_gravity:

@@ -1,0 +1,146 @@
+"""A scene's contact section and bodies' contact keys compiled into a ContactTable, plus its stable step.
+
+Contact spheres per body (physics/contact/tables.py), placed in the principal frame about the centre
+of mass like every body point (r = E^T (p_user - centre_user)):
+    sphere    one sphere of the shape's radius at the body origin: the exact surface
+    lattice   the lattice particles with fewer than 6 lattice neighbours (the surface shell; interior
+              particles could only touch anything after a deep, already failed, penetration)
+    particles every particle with its own radius
+Materials: the body's keys over `contact.material` over the defaults (restitution 0.5, friction 0.5,
+stiffness from the body's weight, physics/contact/parameters.py).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from rbcli.physics.contact.parameters import (
+    DEFAULT_FRICTION,
+    DEFAULT_RESTITUTION,
+    damping_ratio_for_restitution,
+    default_body_stiffness,
+    stable_step,
+    support_count,
+)
+from rbcli.physics.contact.tables import ContactTable, contact_table
+from rbcli.physics.model import Model
+from rbcli.physics.rotation import quat_to_matrix
+from rbcli.scene.spec import BodySpec, MaterialSpec, SceneSpec
+
+
+@dataclass(frozen=True)
+class ContactSummary:
+    """What compiling the contacts found, for warnings, sub-steps and `rbsim info`."""
+
+    sphere_count: int
+    plane_count: int
+    static_count: int
+    stable_step: float  # [s] dt_crit of the stiffest, lightest contact (inf: nothing can collide)
+    limiting_body: str  # the body that sets it
+    stiffness: float  # [N/m] that body's per-sphere stiffness
+
+
+def lattice_surface(points: np.ndarray, spacing: float) -> np.ndarray:
+    """Indices of the lattice points that miss at least one of their 6 neighbours at `spacing`."""
+    cells = np.rint((points - points.min(axis=0)) / spacing).astype(np.int64)
+    span = cells.max(axis=0) + 3  # room for the +-1 neighbours without wrapping
+    cells += 1
+
+    def key(c: np.ndarray) -> np.ndarray:
+        return (c[:, 2] * span[1] + c[:, 1]) * span[0] + c[:, 0]
+
+    present = np.sort(key(cells))
+    surface = np.zeros(len(points), dtype=bool)
+    for axis in range(3):
+        for step in (-1, 1):
+            shifted = cells.copy()
+            shifted[:, axis] += step
+            k = key(shifted)
+            at = np.clip(np.searchsorted(present, k), 0, len(present) - 1)
+            surface |= present[at] != k
+    return np.flatnonzero(surface)
+
+
+def _spheres(body: BodySpec, model: Model, b: int, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(offsets in the principal frame (k, 3), radii (k,)) of body b's contact spheres."""
+    E = quat_to_matrix(model.body_frame_q[b])  # user-from-principal
+    if body.contact_geometry == "sphere":
+        return ((np.zeros(3) - centre) @ E)[None, :], np.array([body.contact_size])
+    start, count = int(model.body_particle_start[b]), int(model.body_particle_count[b])
+    offsets = model.particle_offset[start : start + count]
+    radii = np.asarray(body.particle_radius, dtype=float)
+    if body.contact_geometry == "lattice":
+        keep = lattice_surface(np.asarray(body.particle_position, dtype=float), body.contact_size)
+        return offsets[keep], radii[keep]
+    return offsets, radii
+
+
+def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> tuple[ContactTable, ContactSummary]:
+    """The ContactTable of a scene with a `contact:` section (spec.contact is not None)."""
+    contact = spec.contact
+    assert contact is not None
+    n = model.body_count
+    base = contact.material.over(MaterialSpec(None, DEFAULT_RESTITUTION, DEFAULT_FRICTION))
+    g = float(np.linalg.norm(spec.gravity)) if spec.gravity is not None else 0.0
+    sphere_body, offsets, radii = [], [], []
+    stiffness = np.zeros(n)
+    zeta = np.zeros(n)
+    friction = np.zeros(n)
+    support = np.ones(n)
+    min_radius = np.full(n, np.inf)
+    ratio_cache: dict[float, float] = {}
+    for b, body in enumerate(spec.bodies):
+        material = body.material.over(base)
+        assert material.restitution is not None and material.friction is not None
+        e = material.restitution
+        zeta[b] = ratio_cache.setdefault(e, damping_ratio_for_restitution(e))
+        friction[b] = material.friction
+        if not body.collide:
+            continue
+        off, rad = _spheres(body, model, b, centres_user[b])
+        sphere_body.append(np.full(len(rad), b))
+        offsets.append(off)
+        radii.append(rad)
+        min_radius[b] = float(rad.min())
+        support[b] = float(support_count(np.array([len(rad)]), np.array([len(rad) == 1]))[0])
+        if material.stiffness is not None:
+            stiffness[b] = material.stiffness
+        else:
+            stiffness[b] = float(default_body_stiffness(model.body_mass[b : b + 1], min_radius[b : b + 1], g)[0])
+            stiffness[b] /= support[b]
+    colliding = np.isfinite(min_radius)
+    stiffness[~colliding] = 1.0  # never used: such a body has no spheres; keeps the pair formula finite
+    static = np.array([b.static for b in spec.bodies], dtype=bool)
+    inv_mass = np.where(static, 0.0, 1.0 / model.body_mass)
+    planes = contact.planes
+    plane_zeta = [ratio_cache.setdefault(e, damping_ratio_for_restitution(e))
+                  for e in (p.material.over(base).restitution or DEFAULT_RESTITUTION for p in planes)]  # fmt: skip
+    table = contact_table(
+        sphere_body=np.concatenate(sphere_body) if sphere_body else [],
+        sphere_offset=np.concatenate(offsets) if offsets else np.zeros((0, 3)),
+        sphere_radius=np.concatenate(radii) if radii else [],
+        body_inv_mass=inv_mass,
+        body_stiffness=stiffness,
+        body_damping_ratio=zeta,
+        body_friction=friction,
+        static_body=np.flatnonzero(static),
+        plane_point=[p.point for p in planes] or np.zeros((0, 3)),
+        plane_normal=[p.normal for p in planes] or np.zeros((0, 3)),
+        plane_damping_ratio=plane_zeta,
+        plane_friction=[p.material.over(base).friction for p in planes],
+    )
+    movable = colliding & ~static
+    dt_crit, worst = stable_step(model.body_mass, stiffness * support, np.where(colliding, zeta, 0.0), movable,
+                                 planes=bool(planes))  # fmt: skip
+    summary = ContactSummary(
+        sphere_count=int(table.sphere_radius.shape[0]),
+        plane_count=len(planes),
+        static_count=int(static.sum()),
+        stable_step=dt_crit,
+        limiting_body=model.body_names[worst] if worst >= 0 else "",
+        stiffness=float(stiffness[worst]) if worst >= 0 else math.nan,
+    )
+    return table, summary

@@ -1,0 +1,119 @@
+"""The scene's `contact:` section and the bodies' contact keys, validated into ContactSpec / MaterialSpec.
+
+The schema has checked types and ranges; this adds what it cannot say: a plane normal of zero length,
+a container with min >= max, a restitution below what a dashpot reaches, a static body given a
+velocity, a particle body without radii (a contact sphere needs one). Every problem is located.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from rbcli.physics.contact.parameters import LOWEST_RESTITUTION
+from rbcli.scene.issues import IssueCollector
+from rbcli.scene.spec import BodySpec, ContactSpec, MaterialSpec, PlaneSpec
+from rbcli.scene.yaml_located import YamlPath
+
+
+def material_from_mapping(value: dict[str, Any] | None, path: YamlPath, issues: IssueCollector) -> MaterialSpec:
+    """A MaterialSpec from a `material:` mapping (missing keys: None, inherited)."""
+    if not value:
+        return MaterialSpec()
+    stiffness = value.get("stiffness")
+    restitution = value.get("restitution")
+    if restitution is not None and restitution < LOWEST_RESTITUTION:
+        issues.error(
+            (*path, "restitution"),
+            f"restitution {restitution:g} is below {LOWEST_RESTITUTION:g}: a spring-dashpot contact that dead "
+            "needs a damping ratio above 5 and steps far below the contact period",
+            f"a restitution in [{LOWEST_RESTITUTION:g}, 1]",
+        )
+        restitution = None
+    return MaterialSpec(
+        stiffness=None if stiffness in (None, "auto") else float(stiffness),
+        restitution=None if restitution is None else float(restitution),
+        friction=None if value.get("friction") is None else float(value["friction"]),
+    )
+
+
+def _vector(value: Any) -> np.ndarray:
+    out = np.asarray(value, dtype=float).reshape(3)
+    out.flags.writeable = False
+    return out
+
+
+def _plane(point: Any, normal: Any, material: MaterialSpec, path: YamlPath, issues: IssueCollector) -> PlaneSpec | None:
+    n = np.asarray(normal, dtype=float)
+    length = float(np.linalg.norm(n))
+    if not length > 0.0 or not np.isfinite(length):
+        issues.error((*path, "normal"), "a plane normal of zero length has no direction", "a non-zero vector")
+        return None
+    return PlaneSpec(_vector(point), _vector(n / length), material, issues.locate(path))
+
+
+def contact_from_mapping(section: dict[str, Any], issues: IssueCollector) -> ContactSpec | None:
+    """ContactSpec of the `contact:` mapping; None when it has errors (they are in `issues`)."""
+    path: YamlPath = ("contact",)
+    before = issues.error_count
+    planes: list[PlaneSpec | None] = []
+    ground = section.get("ground")
+    if ground is not None:
+        entry = ground if isinstance(ground, dict) else {"height": ground}
+        material = material_from_mapping({k: entry[k] for k in ("restitution", "friction") if k in entry},
+                                         (*path, "ground"), issues)  # fmt: skip
+        planes.append(_plane([0.0, 0.0, float(entry.get("height", 0.0))], [0.0, 0.0, 1.0], material,
+                             (*path, "ground"), issues))  # fmt: skip
+    for i, entry in enumerate(section.get("planes", [])):
+        material = material_from_mapping({k: entry[k] for k in ("restitution", "friction") if k in entry},
+                                         (*path, "planes", i), issues)  # fmt: skip
+        planes.append(
+            _plane(entry.get("point", [0.0, 0.0, 0.0]), entry["normal"], material, (*path, "planes", i), issues)
+        )
+    box = section.get("container")
+    if box is not None:
+        lo, hi = np.asarray(box["min"], dtype=float), np.asarray(box["max"], dtype=float)
+        cpath = (*path, "container")
+        if not np.all(lo < hi):
+            issues.error((*cpath, "max"), f"container max {hi.tolist()} is not above min {lo.tolist()} on every axis",
+                         "max > min in x, y and z")  # fmt: skip
+        else:
+            material = material_from_mapping(
+                {k: box[k] for k in ("restitution", "friction") if k in box}, cpath, issues
+            )
+            walls = [(lo, (0, 0, 1)), (lo, (1, 0, 0)), (hi, (-1, 0, 0)), (lo, (0, 1, 0)), (hi, (0, -1, 0))]
+            if box.get("lid", False):
+                walls.append((hi, (0, 0, -1)))
+            planes.extend(_plane(point, normal, material, cpath, issues) for point, normal in walls)
+    material = material_from_mapping(section.get("material"), (*path, "material"), issues)
+    substeps = section.get("substeps", 1)
+    if issues.error_count > before:
+        return None
+    return ContactSpec(
+        planes=tuple(p for p in planes if p is not None),
+        material=material,
+        substeps=None if substeps == "auto" else int(substeps),
+        location=issues.locate(path, key=True),
+    )
+
+
+def check_contact_bodies(bodies: list[BodySpec], entries: list[Any], issues: IssueCollector) -> None:
+    """Errors for bodies that cannot take part in contact as written (located at their entry)."""
+    for body in bodies:
+        if body.location is None:
+            continue
+        if body.static and (body.velocity is not None or body.momentum is not None
+                            or body.angular_velocity is not None or body.angular_momentum is not None):  # fmt: skip
+            issues.issues.append(_located(body, "a static body never moves, so it cannot have a velocity or momentum",
+                                          "static: true without velocity, momentum or angular terms"))  # fmt: skip
+        if body.collide and body.contact_geometry == "particles" and body.particle_radius is None:
+            issues.issues.append(_located(body, "contact needs a radius for each particle (particles.radius)",
+                                          "particles.radius, a shape, or collide: false"))  # fmt: skip
+    _ = entries
+
+
+def _located(body: BodySpec, message: str, expected: str):  # noqa: ANN202
+    from rbcli.scene.spec import SceneIssue
+
+    return SceneIssue(body.location, f"body '{body.name}': {message}", expected)
