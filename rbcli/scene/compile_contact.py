@@ -105,7 +105,7 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
         offsets.append(off)
         radii.append(rad)
         min_radius[b] = float(rad.min())
-        support[b] = float(support_count(np.array([len(rad)]), np.array([len(rad) == 1]))[0])
+        support[b] = support_count(off, rad, E=quat_to_matrix(model.body_frame_q[b]))
         if material.stiffness is not None:
             stiffness[b] = material.stiffness
         else:
@@ -114,7 +114,7 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
     colliding = np.isfinite(min_radius)
     stiffness[~colliding] = 1.0  # never used: such a body has no spheres; keeps the pair formula finite
     static = np.array([b.static for b in spec.bodies], dtype=bool)
-    inv_mass = np.where(static, 0.0, 1.0 / model.body_mass)
+    inv_mass = np.where(static, 0.0, support / model.body_mass)
     planes = contact.planes
     plane_zeta = [ratio_cache.setdefault(e, damping_ratio_for_restitution(e))
                   for e in (p.material.over(base).restitution or DEFAULT_RESTITUTION for p in planes)]  # fmt: skip
@@ -122,7 +122,7 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
         sphere_body=np.concatenate(sphere_body) if sphere_body else [],
         sphere_offset=np.concatenate(offsets) if offsets else np.zeros((0, 3)),
         sphere_radius=np.concatenate(radii) if radii else [],
-        body_inv_mass=inv_mass,
+        body_inv_contact_mass=inv_mass,
         body_stiffness=stiffness,
         body_damping_ratio=zeta,
         body_friction=friction,

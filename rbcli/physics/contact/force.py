@@ -8,6 +8,7 @@ the overlap, and the relative velocity at c, v = v_a + w_a x (c - x_a) - (v_b + 
 split into v_n = v . n and v_t = v - v_n n:
 
     normal      f_n = max(0, k d - c_n v_n),        c_n = 2 zeta sqrt(k m_eff),  m_eff = 1 / (1/m_a + 1/m_b)
+                (m: the mass one contact sphere of the body carries, M / support: tables.py)
     tangential  f_t = -k_t xi - c_t v_t,             k_t = tangential_ratio k,    c_t = 2 zeta sqrt(k_t m_eff)
                 |f_t| <= mu f_n  (Coulomb: beyond it f_t is scaled back and xi set to match, i.e. sliding)
 
@@ -65,6 +66,8 @@ def commit_contacts(model, contact, work, x, q, P, L) -> None:  # noqa: ANN001
     """
     s_last = work.clock[2]
     rest = work.clock[1] - s_last
+    if rest != 0.0:  # the end-of-step velocities (the evaluation's are no longer needed)
+        _body_velocities(model, work, x, q, P, L)
     for i in range(work.hist_count.shape[0]):
         count = work.trial_count[i]
         work.hist_count[i] = count
@@ -73,11 +76,16 @@ def commit_contacts(model, contact, work, x, q, P, L) -> None:  # noqa: ANN001
         ba = contact.sphere_body[i]
         for k in range(count):
             partner = work.trial_partner[i, k]
+            if rest == 0.0:  # evaluated at the end of the step (rk4's last stage): nothing to advance
+                work.hist_partner[i, k] = partner
+                for j in range(3):
+                    work.hist_xi[i, k, j] = work.trial_xi[i, k, j]
+                continue
             c0, c1, c2 = work.trial_point[i, k, 0], work.trial_point[i, k, 1], work.trial_point[i, k, 2]
             n0, n1, n2 = work.trial_normal[i, k, 0], work.trial_normal[i, k, 1], work.trial_normal[i, k, 2]
-            v0, v1, v2 = _end_velocity(model, x, q, P, L, ba, c0, c1, c2)
+            v0, v1, v2 = _velocity_at(work, x, ba, c0, c1, c2)
             if partner >= 0:
-                w0, w1, w2 = _end_velocity(model, x, q, P, L, contact.sphere_body[partner], c0, c1, c2)
+                w0, w1, w2 = _velocity_at(work, x, contact.sphere_body[partner], c0, c1, c2)
                 v0, v1, v2 = v0 - w0, v1 - w1, v2 - w2
             vn = v0 * n0 + v1 * n1 + v2 * n2
             e0 = work.trial_xi[i, k, 0] + rest * (v0 - vn * n0)
@@ -92,22 +100,6 @@ def commit_contacts(model, contact, work, x, q, P, L) -> None:  # noqa: ANN001
             work.hist_xi[i, k, 0], work.hist_xi[i, k, 1], work.hist_xi[i, k, 2] = e0, e1, e2
 
 
-@numba.njit(cache=True, inline="always")
-def _end_velocity(model, x, q, P, L, b, c0, c1, c2):  # noqa: ANN001, ANN202
-    """Velocity [m/s] of body b's material point at world c, from the state arrays."""
-    inv_m = 1.0 / model.body_mass[b]
-    qw, qx, qy, qz = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
-    m0, m1, m2 = rotate_inverse(qw, qx, qy, qz, L[b, 0], L[b, 1], L[b, 2])
-    inv = model.body_inertia_inv
-    w0, w1, w2 = rotate(qw, qx, qy, qz, m0 * inv[b, 0], m1 * inv[b, 1], m2 * inv[b, 2])
-    r0, r1, r2 = c0 - x[b, 0], c1 - x[b, 1], c2 - x[b, 2]
-    return (
-        P[b, 0] * inv_m + w1 * r2 - w2 * r1,
-        P[b, 1] * inv_m + w2 * r0 - w0 * r2,
-        P[b, 2] * inv_m + w0 * r1 - w1 * r0,
-    )
-
-
 @numba.njit(**STEP_KERNEL)
 def hold_static_bodies(contact, F, tau) -> None:  # noqa: ANN001
     """Static bodies feel nothing: their wrench is set to zero after every other force stage."""
@@ -120,7 +112,7 @@ def hold_static_bodies(contact, F, tau) -> None:  # noqa: ANN001
 @numba.njit(**STEP_KERNEL)
 def accumulate_contact(model, contact, work, t, x, q, P, L, F, tau) -> None:  # noqa: ANN001
     """Add every contact's force and torque to F and tau (world frame, about each centre of mass)."""
-    _body_velocities(model, contact, work, x, q, P, L)
+    _body_velocities(model, work, x, q, P, L)
     _sphere_positions(contact, work, x, q)
     grid = build_grid(contact, work)
     work.trial_count[:] = 0
@@ -131,6 +123,7 @@ def accumulate_contact(model, contact, work, t, x, q, P, L, F, tau) -> None:  # 
     work.clock[2] = s
     _plane_contacts(contact, work, x, s, h, F, tau)
     cell, order, start = work.sphere_cell, work.sorted_sphere, work.bucket_start
+    dense = grid[0]
     candidates = 0
     for a in range(order.shape[0]):
         i = order[a]
@@ -138,7 +131,7 @@ def accumulate_contact(model, contact, work, t, x, q, P, L, F, tau) -> None:  # 
         own = work.sphere_bucket[i]
         for e in range(a + 1, start[own + 1]):  # later spheres of the same bucket, same cell
             j = order[e]
-            if cell[j, 0] == ci and cell[j, 1] == cj and cell[j, 2] == ck:
+            if dense or (cell[j, 0] == ci and cell[j, 1] == cj and cell[j, 2] == ck):
                 candidates += 1
                 _pair(contact, work, x, s, h, i, j, F, tau)
         for n in range(HALF_SHELL.shape[0]):
@@ -148,14 +141,14 @@ def accumulate_contact(model, contact, work, t, x, q, P, L, F, tau) -> None:  # 
                 continue
             for e in range(start[b], start[b + 1]):
                 j = order[e]
-                if cell[j, 0] == ni and cell[j, 1] == nj and cell[j, 2] == nk:
+                if dense or (cell[j, 0] == ni and cell[j, 1] == nj and cell[j, 2] == nk):  # dense: one cell per bucket
                     candidates += 1
                     _pair(contact, work, x, s, h, i, j, F, tau)
     work.counters[COUNT_CANDIDATES] += candidates
 
 
 @numba.njit(cache=True, inline="always")
-def _body_velocities(model, contact, work, x, q, P, L) -> None:  # noqa: ANN001
+def _body_velocities(model, work, x, q, P, L) -> None:  # noqa: ANN001
     """v = P / M and w = R I^-1 R^T L of every body (static bodies: 0)."""
     v, w = work.body_velocity, work.body_omega
     for b in range(v.shape[0]):
@@ -188,7 +181,7 @@ def _plane_contacts(contact, work, x, s, h, F, tau) -> None:  # noqa: ANN001
     planes = contact.plane_point.shape[0]
     for i in range(pos.shape[0]):
         b = contact.sphere_body[i]
-        if contact.body_inv_mass[b] == 0.0:
+        if contact.body_inv_contact_mass[b] == 0.0:
             continue
         r = contact.sphere_radius[i]
         for p in range(planes):
@@ -213,20 +206,20 @@ def _plane_contacts(contact, work, x, s, h, F, tau) -> None:  # noqa: ANN001
 @numba.njit(cache=True, inline="always")
 def _pair(contact, work, x, s, h, i, j, F, tau) -> None:  # noqa: ANN001
     """The contact, if any, of spheres i and j (found by the broad phase)."""
-    bi, bj = contact.sphere_body[i], contact.sphere_body[j]
-    if bi == bj:
-        return
-    inv_i, inv_j = contact.body_inv_mass[bi], contact.body_inv_mass[bj]
-    if inv_i == 0.0 and inv_j == 0.0:
-        return
-    if j < i:  # the owner is the lower index: one history per pair whichever sphere found it
-        i, j, bi, bj = j, i, bj, bi
     pos = work.sphere_position
     d0, d1, d2 = pos[i, 0] - pos[j, 0], pos[i, 1] - pos[j, 1], pos[i, 2] - pos[j, 2]
     reach = contact.sphere_radius[i] + contact.sphere_radius[j]
     dist2 = d0 * d0 + d1 * d1 + d2 * d2
-    if dist2 >= reach * reach or dist2 == 0.0:  # coincident centres: no defined normal, skipped
+    if dist2 >= reach * reach or dist2 == 0.0:  # most candidates end here; coincident centres: no normal
         return
+    bi, bj = contact.sphere_body[i], contact.sphere_body[j]
+    if bi == bj:
+        return
+    if contact.body_inv_contact_mass[bi] == 0.0 and contact.body_inv_contact_mass[bj] == 0.0:
+        return
+    if j < i:  # the owner is the lower index: one history per pair whichever sphere found it
+        i, j, bi, bj = j, i, bj, bi
+        d0, d1, d2 = -d0, -d1, -d2
     dist = math.sqrt(dist2)
     overlap = reach - dist
     n0, n1, n2 = d0 / dist, d1 / dist, d2 / dist
@@ -287,8 +280,8 @@ def _resolve(  # noqa: ANN202
     tau,  # noqa: ANN001
 ):
     """Force of one contact (module docstring) on body ba (owner) and bb (partner; -1: a plane)."""
-    inv_a = contact.body_inv_mass[ba]
-    inv_b = contact.body_inv_mass[bb] if bb >= 0 else 0.0
+    inv_a = contact.body_inv_contact_mass[ba]
+    inv_b = contact.body_inv_contact_mass[bb] if bb >= 0 else 0.0
     m_eff = 1.0 / (inv_a + inv_b)
     va0, va1, va2 = _velocity_at(work, x, ba, c0, c1, c2)
     if bb >= 0:
@@ -296,7 +289,8 @@ def _resolve(  # noqa: ANN202
         va0, va1, va2 = va0 - vb0, va1 - vb1, va2 - vb2
     vn = va0 * n0 + va1 * n1 + va2 * n2
     t0, t1, t2 = va0 - vn * n0, va1 - vn * n1, va2 - vn * n2
-    fn = k * overlap - 2.0 * zeta * math.sqrt(k * m_eff) * vn
+    cn = 2.0 * zeta * math.sqrt(k * m_eff)
+    fn = k * overlap - cn * vn
     if fn < 0.0:  # a dashpot pulling the surfaces together is not a contact force
         fn = 0.0
     energy = 0.5 * k * overlap * overlap
@@ -316,7 +310,7 @@ def _resolve(  # noqa: ANN202
                     x0, x1, x2 = x0 * scale, x1 * scale, x2 * scale
                 break
         kt = contact.tangential_ratio * k
-        ct = 2.0 * zeta * math.sqrt(kt * m_eff)
+        ct = cn * math.sqrt(contact.tangential_ratio)  # 2 zeta sqrt(k_t m_eff)
         u0, u1, u2 = x0 + s * t0, x1 + s * t1, x2 + s * t2  # elongation now
         g0, g1, g2 = -kt * u0 - ct * t0, -kt * u1 - ct * t1, -kt * u2 - ct * t2
         ft2 = g0 * g0 + g1 * g1 + g2 * g2

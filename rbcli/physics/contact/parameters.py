@@ -3,8 +3,8 @@ restitution, and the stable step of a contact (numpy, used when compiling a scen
 
 Default stiffness. A body of mass M resting under gravity g on its contact spheres of radius r should
 sink by a small, fixed fraction of r: k_body = M g / (PENETRATION_AT_REST r). Shared over the spheres
-that carry it at rest (one for a sphere-shaped body; about a sixth of a lattice body's surface spheres,
-one face, for the others), each sphere gets k = k_body / support. The default depends on the body, not
+that carry it when it lies on its largest flat side (`support_count`: one for a sphere-shaped body,
+the spheres of its largest face for a box), each sphere gets k = k_body / support. The default depends on the body, not
 on dt: a run at a larger dt does not silently soften its contacts; it warns or sub-steps instead.
 Without gravity g = REFERENCE_GRAVITY sets the scale. The 1,000-sphere pile of the collisions issue
 (r = 5 cm, 0.52 kg) gets k = 4.1e4 N/m, the value measured there to settle cleanly at dt = 2 ms.
@@ -108,10 +108,22 @@ def default_body_stiffness(mass: np.ndarray, radius: np.ndarray, gravity: float)
     return np.asarray(mass, dtype=float) * g / (PENETRATION_AT_REST * np.asarray(radius, dtype=float))
 
 
-def support_count(sphere_count: np.ndarray, single_sphere: np.ndarray) -> np.ndarray:
-    """How many contact spheres carry a body at rest: 1 for a one-sphere body, else a sixth of its
-    surface spheres (one face of a box-like body), at least 1."""
-    return np.where(single_sphere, 1.0, np.maximum(1.0, np.asarray(sphere_count, dtype=float) / 6.0))
+def support_count(offsets: np.ndarray, radii: np.ndarray, E: np.ndarray | None = None) -> int:
+    """How many contact spheres can carry the body against a plane at once: the most spheres in one
+    outermost layer (within half the smallest radius of the extreme) over the 6 directions of the
+    principal axes and, given E (user-from-principal rotation), the 6 of the user's axes (a sampled
+    shape's lattice axes). 1 for a one-sphere body; 32 for the 0.2 x 0.1 face of a box at spacing 0.025."""
+    offsets = np.asarray(offsets, dtype=float)
+    if len(offsets) <= 1:
+        return 1
+    axes = [np.eye(3)] + ([np.asarray(E)] if E is not None else [])  # rows: directions in the principal frame
+    tolerance = 0.5 * float(np.min(radii))
+    best = 1
+    for basis in axes:
+        for direction in (*basis, *(-basis)):
+            reach = offsets @ direction + radii
+            best = max(best, int(np.count_nonzero(reach >= reach.max() - tolerance)))
+    return best
 
 
 def stable_step(

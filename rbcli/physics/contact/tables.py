@@ -48,7 +48,11 @@ class ContactTable(NamedTuple):
     sphere_body: np.ndarray  # int64 (sphere_count,), body of each contact sphere, spheres grouped by body
     sphere_offset: np.ndarray  # [m] (sphere_count, 3), principal frame, about the body's centre of mass
     sphere_radius: np.ndarray  # [m] (sphere_count,)
-    body_inv_mass: np.ndarray  # [1/kg] (body_count,), 0 for a static body
+    # [1/kg] (body_count,): support / M, the inverse of the mass one contact sphere carries when the body
+    # rests on its `support` spheres (parameters.support_count); 0 for a static body. The dashpot of a
+    # contact uses it, so a body resting on n spheres has the damping ratio its material asks for
+    # (with the whole mass per sphere, n contacts would damp like sqrt(n) zeta: overdamped, unstable)
+    body_inv_contact_mass: np.ndarray
     body_stiffness: np.ndarray  # k [N/m] (body_count,) per contact sphere
     body_damping_ratio: np.ndarray  # zeta [1] (body_count,)
     body_friction: np.ndarray  # mu [1] (body_count,)
@@ -108,7 +112,7 @@ def contact_table(
     sphere_body=(),  # noqa: ANN001
     sphere_offset=(),  # noqa: ANN001
     sphere_radius=(),  # noqa: ANN001
-    body_inv_mass=(),  # noqa: ANN001
+    body_inv_contact_mass=(),  # noqa: ANN001
     body_stiffness=(),  # noqa: ANN001
     body_damping_ratio=(),  # noqa: ANN001
     body_friction=(),  # noqa: ANN001
@@ -128,7 +132,7 @@ def contact_table(
         sphere_body=_ro(sphere_body, np.int64),
         sphere_offset=_ro(sphere_offset, np.float64, 3),
         sphere_radius=radius,
-        body_inv_mass=_ro(body_inv_mass, np.float64),
+        body_inv_contact_mass=_ro(body_inv_contact_mass, np.float64),
         body_stiffness=_ro(body_stiffness, np.float64),
         body_damping_ratio=_ro(body_damping_ratio, np.float64),
         body_friction=_ro(body_friction, np.float64),

@@ -1,0 +1,273 @@
+"""The sphere pile of the collisions issue (18): rbsim's contact against MuJoCo, in one process.
+
+    python benchmarks/bench_contact.py [--quick] [--no-mujoco] [--big]
+
+1,000 spheres (radius 0.05 m, density 1000 kg/m^3) on a jittered 10 x 10 x 10 lattice (spacing 0.12 m,
+lowest centres at z = 0.3 m, jitter +-0.01 m in x and y, numpy seed 0) dropped into a box (ground z = 0,
+walls at |x|, |y| = 0.7 m), gravity -9.81, dt = 2e-3, 1,000 steps. Rows:
+  rbsim, each sphere one particle (one contact sphere), split2 and semi-implicit, through the public
+    `rbcli.Simulation.step` (what a user calls; no recording);
+  rbsim, each sphere a 13-particle cloud (a centre sphere and 12 at the vertices of an icosahedron);
+  MuJoCo (the installed version): Euler, CG solver with its default iterations, tolerance and cone,
+    one sphere geom per free body, the floor a plane and the walls box geoms;
+  --big: the same lattice 47 x 47 x 46 (101,614 spheres, walls moved out to fit), 200 steps: the
+    per-sphere rate against the 1,000-sphere rate (a grid walk out of cache would show here).
+Stability checks of each rbsim row (the issue's): finite states; total energy (kinetic + gravity + the
+contact springs') never more than 1 % above its start; no sphere below z = -r or outside the box; at
+the end, the deepest overlap under 5 % of the radius and the kinetic energy under 1 % of its peak.
+Sphere-steps per second = spheres x steps / wall seconds of the stepping alone (compile excluded);
+contact pairs per second counts the contacts evaluated. `bench_speed.py --sections contact` runs this.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import rbcli  # noqa: E402
+from rbcli.physics.contact.tables import COUNT_CONTACTS, STAT_ENERGY, STAT_MAX_PENETRATION  # noqa: E402
+from rbcli.scene.compile import compile_scene  # noqa: E402
+from rbcli.scene.spec import BodySpec, ContactSpec, PlaneSpec, RecordSpec, SceneSpec, SimulationSpec  # noqa: E402
+
+RADIUS = 0.05
+DENSITY = 1000.0
+MASS = DENSITY * 4.0 / 3.0 * math.pi * RADIUS**3
+SPACING = 0.12
+DT = 2e-3
+GRAVITY = np.array([0.0, 0.0, -9.81])
+TARGET_RATIO = 30.0  # x MuJoCo CG, sphere-steps/s
+TARGET_CLOUD_RATE = 1.5e5  # body-steps/s of the 13-particle row
+TARGET_SCALING = 1.5  # the 10^3-sphere rate / the 10^5-sphere rate, per sphere
+
+
+def lattice(shape: tuple[int, int, int], seed: int = 0) -> np.ndarray:
+    """Jittered lattice centres [m], x fastest, centred in x and y, lowest layer at z = 0.3."""
+    nx, ny, nz = shape
+    rng = np.random.default_rng(seed)
+    k, j, i = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
+    x = (i.ravel() - (nx - 1) / 2) * SPACING + rng.uniform(-0.01, 0.01, i.size)
+    y = (j.ravel() - (ny - 1) / 2) * SPACING + rng.uniform(-0.01, 0.01, i.size)
+    z = 0.3 + k.ravel() * SPACING
+    return np.stack([x, y, z], axis=1)
+
+
+def icosahedron() -> np.ndarray:
+    phi = (1 + 5**0.5) / 2
+    v = np.array([(0, s1, s2 * phi) for s1 in (-1, 1) for s2 in (-1, 1)], dtype=float)
+    v = np.concatenate([v, v[:, [1, 2, 0]], v[:, [2, 0, 1]]])
+    return v / np.linalg.norm(v[0])
+
+
+def pile(shape: tuple[int, int, int] = (10, 10, 10), *, cloud: bool = False, integrator: str = "split2",
+         steps: int = 1000) -> tuple[SceneSpec, float]:  # fmt: skip
+    """The pile scene and its wall half-width [m]."""
+    centres = lattice(shape)
+    half = max(0.7, max(shape[0], shape[1]) * SPACING / 2 + 0.1)
+    if cloud:  # 13 spheres inside the 5 cm ball: a 3 cm centre and 12 of 2 cm at 3 cm from it
+        points = np.concatenate([np.zeros((1, 3)), 0.03 * icosahedron()])
+        radii = np.array([0.03] + [0.02] * 12)
+    else:
+        points, radii = np.zeros((1, 3)), np.array([RADIUS])
+    masses = np.full(len(points), MASS / len(points))
+    identity = np.array([1.0, 0.0, 0.0, 0.0])
+    bodies = tuple(
+        BodySpec(
+            name=f"s{n}",
+            particle_position=points,
+            particle_mass=masses,
+            particle_radius=radii,
+            position=centres[n],
+            orientation_wxyz=identity,
+        )  # fmt: skip
+        for n in range(len(centres))
+    )
+    walls = [((0, 0, 0), (0, 0, 1)), ((-half, 0, 0), (1, 0, 0)), ((half, 0, 0), (-1, 0, 0)),
+             ((0, -half, 0), (0, 1, 0)), ((0, half, 0), (0, -1, 0))]  # fmt: skip
+    contact = ContactSpec(planes=tuple(PlaneSpec(np.array(p, float), np.array(n, float)) for p, n in walls))
+    sim = SimulationSpec(dt=DT, duration=steps * DT, integrator=integrator, record=RecordSpec(steps))
+    spec = SceneSpec(name="pile", simulation=sim, bodies=bodies, gravity=GRAVITY, contact=contact)
+    return spec, half
+
+
+@dataclass
+class PileResult:
+    label: str
+    spheres: int
+    steps: int
+    seconds: float
+    contacts: int
+    checks: dict[str, tuple[float, bool]]
+
+    @property
+    def rate(self) -> float:
+        return self.spheres * self.steps / self.seconds
+
+
+def run_pile(label: str, spec: SceneSpec, half: float, steps: int, check_every: int = 50) -> PileResult:
+    """Step the pile through rbcli.Simulation, timing only the stepping, checking stability between blocks."""
+    sim = rbcli.Simulation(compile_scene(spec))
+    sim.step(1)  # compile or load the kernels
+    sim.reset()
+    m = sim.model.body_mass
+    r = float(sim.forces.contact.sphere_radius.max())
+
+    def energies() -> tuple[float, float]:
+        s = sim.data.state
+        v = s.P / m[:, None]
+        kinetic = 0.5 * float((m[:, None] * v * v).sum()) + 0.5 * float((sim.state.omega * s.L).sum())
+        total = kinetic + float((m * -GRAVITY[2] * s.x[:, 2]).sum()) + float(sim.data.force.contact.stats[STAT_ENERGY])
+        return kinetic, total
+
+    _, start = energies()
+    peak_kinetic, worst_energy, lowest, outside = 0.0, -np.inf, np.inf, 0.0
+    seconds = 0.0
+    done = 0
+    while done < steps:
+        block = min(check_every, steps - done)
+        began = time.perf_counter()
+        sim.step(block)
+        seconds += time.perf_counter() - began
+        done += block
+        kinetic, total = energies()
+        peak_kinetic = max(peak_kinetic, kinetic)
+        worst_energy = max(worst_energy, total)
+        x = sim.data.state.x
+        lowest = min(lowest, float(x[:, 2].min()))
+        outside = max(outside, float(np.abs(x[:, :2]).max()) - half)
+    s = sim.data.state
+    finite = bool(np.isfinite(s.x).all() and np.isfinite(s.P).all() and np.isfinite(s.L).all())
+    penetration = float(sim.data.force.contact.stats[STAT_MAX_PENETRATION]) / r
+    gain = (worst_energy - start) / abs(start)
+    checks = {
+        "finite": (float(finite), finite),
+        "energy gain": (gain, gain <= 0.01),
+        "lowest z / r": (lowest / r, lowest > -r),
+        "outside the walls [m]": (outside, outside <= 0.0),
+        "overlap at end / r": (penetration, penetration < 0.05),
+        "KE end / peak": (kinetic / peak_kinetic, kinetic < 0.01 * peak_kinetic),
+    }
+    contacts = int(sim.data.force.contact.counters[COUNT_CONTACTS])
+    return PileResult(label, sim.model.body_count, steps, seconds, contacts, checks)
+
+
+def mujoco_pile(steps: int, shape: tuple[int, int, int] = (10, 10, 10)) -> tuple[float, str]:
+    """Sphere-steps/s of MuJoCo on the same pile (Euler, CG, its defaults) and its version."""
+    import mujoco
+
+    centres = lattice(shape)
+    half = 0.7
+    bodies = "".join(
+        f'<body pos="{float(c[0])!r} {float(c[1])!r} {float(c[2])!r}"><freejoint/><geom type="sphere" size="{RADIUS}" '
+        f'density="{DENSITY}"/></body>'
+        for c in centres
+    )
+    walls = (
+        f'<geom type="plane" size="0 0 1"/>'
+        f'<geom type="box" pos="{half + 0.1} 0 1" size="0.1 {half + 0.2} 1"/>'
+        f'<geom type="box" pos="{-half - 0.1} 0 1" size="0.1 {half + 0.2} 1"/>'
+        f'<geom type="box" pos="0 {half + 0.1} 1" size="{half + 0.2} 0.1 1"/>'
+        f'<geom type="box" pos="0 {-half - 0.1} 1" size="{half + 0.2} 0.1 1"/>'
+    )
+    xml = (
+        f'<mujoco><option timestep="{DT}" integrator="Euler" solver="CG" gravity="0 0 -9.81"/>'
+        f'<size memory="256M"/><worldbody>{walls}{bodies}</worldbody></mujoco>'
+    )
+    model = mujoco.MjModel.from_xml_string(xml)
+    data = mujoco.MjData(model)
+    mujoco.mj_step(model, data, nstep=5)
+    mujoco.mj_resetData(model, data)
+    began = time.perf_counter()
+    mujoco.mj_step(model, data, nstep=steps)
+    seconds = time.perf_counter() - began
+    return len(centres) * steps / seconds, mujoco.__version__
+
+
+def report(
+    results: list[PileResult], mujoco_rate: float | None, mujoco_version: str, big: PileResult | None
+) -> list[str]:
+    lines = ["### Contact: the 1,000-sphere pile (collisions issue)", ""]
+    if mujoco_rate is not None:
+        lines.append(f"- MuJoCo {mujoco_version} (Euler, CG, defaults): {mujoco_rate:.3g} sphere-steps/s")
+    lines += [
+        "",
+        "| row | spheres | sphere-steps/s | x MuJoCo CG | contact pairs/s | checks |",
+        "|---|---:|---:|---:|---:|---|",
+    ]
+    for r in results:
+        ratio = f"{r.rate / mujoco_rate:.1f}x" if mujoco_rate else "n/a"
+        failed = [name for name, (_, passed) in r.checks.items() if not passed]
+        summary = "all met" if not failed else "**missed: " + ", ".join(failed) + "**"
+        lines.append(
+            f"| {r.label} | {r.spheres:,} | {r.rate:.3g} | {ratio} | {r.contacts / r.seconds:.3g} | {summary} |"
+        )
+    lines.append("")
+    for r in results:
+        values = ", ".join(f"{name} {value:.3g}" for name, (value, _) in r.checks.items())
+        lines.append(f"- {r.label}: {values}")
+    if big is not None:
+        small = results[0]
+        per_small, per_big = small.rate, big.rate
+        lines.append(f"- {big.spheres:,} spheres, {big.steps} steps: {per_big:.3g} sphere-steps/s, "
+                     f"{per_small / per_big:.2f}x slower per sphere than 1,000 "
+                     f"(target <= {TARGET_SCALING})")  # fmt: skip
+    if mujoco_rate is not None:
+        best = results[0].rate / mujoco_rate
+        lines.append(
+            f"- target >= {TARGET_RATIO:g}x MuJoCo CG: {'met' if best >= TARGET_RATIO else '**missed**'} ({best:.1f}x)"
+        )
+    clouds = [r for r in results if "cloud" in r.label]
+    if clouds:
+        rate = clouds[0].rate
+        lines.append(f"- 13-particle row >= {TARGET_CLOUD_RATE:.2g} body-steps/s: "
+                     f"{'met' if rate >= TARGET_CLOUD_RATE else '**missed**'} ({rate:.3g})")  # fmt: skip
+    return lines
+
+
+def pile_section(quick: bool, with_mujoco: bool, big: bool) -> list[str]:
+    steps = 200 if quick else 1000
+    results = []
+    for label, cloud, integrator in (("1 particle, split2", False, "split2"), ("1 particle, semi-implicit", False,
+                                     "semi-implicit"), ("13-particle cloud, split2", True, "split2")):  # fmt: skip
+        print(f"pile: {label} ...", flush=True)
+        spec, half = pile(cloud=cloud, integrator=integrator, steps=steps)
+        results.append(run_pile(label, spec, half, steps))
+    mujoco_rate, version = None, ""
+    if with_mujoco:
+        try:
+            print("pile: MuJoCo ...", flush=True)
+            mujoco_rate, version = mujoco_pile(steps)
+        except ImportError:
+            print("MuJoCo is not installed: no ratio", flush=True)
+    big_result = None
+    if big:
+        print("pile: 101,614 spheres ...", flush=True)
+        spec, half = pile((47, 47, 46), steps=200)
+        big_result = run_pile("1 particle, split2, 10^5", spec, half, 200)
+    return report(results, mujoco_rate, version, big_result)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="200 steps instead of 1,000 (stability checks then see a pile still falling)",
+    )
+    parser.add_argument("--no-mujoco", action="store_true")
+    parser.add_argument("--big", action="store_true", help="also the 10^5-sphere pile (200 steps)")
+    args = parser.parse_args()
+    for line in pile_section(args.quick, not args.no_mujoco, args.big):
+        print(line)
+
+
+if __name__ == "__main__":
+    main()

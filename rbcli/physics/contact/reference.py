@@ -1,0 +1,87 @@
+"""Plain numpy reference of the contact force stage, by brute force over all pairs (tests).
+
+It evaluates every contact as a fresh one (no history: xi = 0) at the start of a step (s = 0), which is
+what the compiled stage computes on an empty history with its clock at t; comparing the two checks the
+broad phase (a pair it missed or counted twice changes the sums) and the force law together.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rbcli.physics.contact.tables import ContactTable
+from rbcli.physics.rotation import quat_rotate, quat_rotate_inverse
+
+
+def sphere_positions_numpy(contact: ContactTable, x: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """World centres of the contact spheres, (sphere_count, 3)."""
+    b = contact.sphere_body
+    return x[b] + quat_rotate(q[b], contact.sphere_offset)
+
+
+def contact_wrench_numpy(model, contact: ContactTable, x, q, P, L) -> tuple[np.ndarray, np.ndarray, int]:  # noqa: ANN001
+    """(F, tau, contacts) of every sphere-sphere and sphere-plane overlap, fresh contacts, O(n^2)."""
+    F, tau = np.zeros_like(x), np.zeros_like(x)
+    v = P / model.body_mass[:, None]
+    omega = quat_rotate(q, quat_rotate_inverse(q, L) / model.body_inertia)
+    pos = sphere_positions_numpy(contact, x, q)
+    r = contact.sphere_radius
+    body = contact.sphere_body
+    count = 0
+
+    def velocity(b: int, c: np.ndarray) -> np.ndarray:
+        return v[b] + np.cross(omega[b], c - x[b])
+
+    def apply(a: int, b: int, n: np.ndarray, overlap: float, c: np.ndarray, k: float, zeta: float, mu: float) -> None:
+        inv_b = contact.body_inv_contact_mass[b] if b >= 0 else 0.0
+        m_eff = 1.0 / (contact.body_inv_contact_mass[a] + inv_b)
+        rel = velocity(a, c) - (velocity(b, c) if b >= 0 else 0.0)
+        vn = rel @ n
+        vt = rel - vn * n
+        fn = max(0.0, k * overlap - 2.0 * zeta * np.sqrt(k * m_eff) * vn)
+        f = fn * n
+        if mu > 0.0:
+            kt = contact.tangential_ratio * k
+            ft = -2.0 * zeta * np.sqrt(kt * m_eff) * vt  # xi = 0 at s = 0: only the tangential damper
+            norm = np.linalg.norm(ft)
+            if norm > mu * fn:
+                ft *= mu * fn / norm
+            f = f + ft
+        for body_index, sign in ((a, 1.0), (b, -1.0)):
+            if body_index >= 0:
+                F[body_index] += sign * f
+                tau[body_index] += np.cross(c - x[body_index], sign * f)
+
+    for i in range(len(r)):
+        a = body[i]
+        if contact.body_inv_contact_mass[a] == 0.0:
+            continue
+        for p in range(contact.plane_point.shape[0]):
+            n = contact.plane_normal[p]
+            overlap = r[i] - (pos[i] - contact.plane_point[p]) @ n
+            if overlap > 0.0:
+                count += 1
+                zeta = min(contact.body_damping_ratio[a], contact.plane_damping_ratio[p])
+                mu = np.sqrt(contact.body_friction[a] * contact.plane_friction[p])
+                apply(a, -1, n, overlap, pos[i] - (r[i] - 0.5 * overlap) * n, contact.body_stiffness[a], zeta, mu)
+    for i in range(len(r)):
+        for j in range(i + 1, len(r)):
+            a, b = body[i], body[j]
+            if a == b or (contact.body_inv_contact_mass[a] == 0.0 and contact.body_inv_contact_mass[b] == 0.0):
+                continue
+            d = pos[i] - pos[j]
+            dist = float(np.linalg.norm(d))
+            overlap = r[i] + r[j] - dist
+            if overlap <= 0.0 or dist == 0.0:
+                continue
+            count += 1
+            n = d / dist
+            c = pos[j] + (r[j] - 0.5 * overlap) * n
+            ka, kb = contact.body_stiffness[a], contact.body_stiffness[b]
+            zeta = min(contact.body_damping_ratio[a], contact.body_damping_ratio[b])
+            mu = np.sqrt(contact.body_friction[a] * contact.body_friction[b])
+            apply(a, b, n, overlap, c, 2.0 * ka * kb / (ka + kb), zeta, mu)
+    for b in contact.static_body:
+        F[b] = 0.0
+        tau[b] = 0.0
+    return F, tau, count
