@@ -114,7 +114,8 @@ def run(
                 f"; adaptive: {summary.steps_accepted} steps accepted, {summary.steps_rejected} rejected"
                 if summary.steps_accepted is not None
                 else ""
-            ),
+            )
+            + (f"; {compiled.contact.describe(settings.substeps)}" if compiled.contact is not None else ""),
             markup=False,
         )
     if summary.status == "diverged":

@@ -42,6 +42,10 @@ def validate(
         particles = sum(len(b.particle_mass) for b in spec.bodies)
         bodies = len(spec.bodies)
         typer.echo(f"{file}: ok ({bodies} bod{'y' if bodies == 1 else 'ies'}, {particles} particles)")
+        contact = getattr(spec.compiled_model, "contact", None)
+        if contact is not None:
+            substeps = spec.contact.substeps if spec.contact is not None else None
+            typer.echo(f"  {contact.describe(substeps)}" + ("; sub-steps: auto" if substeps is None else ""))
         if verbose:
             for body in spec.bodies:
                 props = mass_properties(body.particle_position, body.particle_mass, body.particle_radius)

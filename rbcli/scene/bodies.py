@@ -100,7 +100,8 @@ class BodyResolver:
         return dataclasses.replace(proto, name=entry["name"], position=_vec(position))
 
     def grid(self, entry: dict[str, Any], path: YamlPath) -> list[BodySpec]:
-        """`{grid: {name, count, spacing, origin?, template}}`: bodies at origin + [i, j, k] * spacing."""
+        """`{grid: {name, count, spacing, origin?, jitter?, seed?, template}}`: bodies at origin + [i, j, k] *
+        spacing, each moved by a uniform random offset within +-jitter (seeded)."""
         gen, gpath = entry["grid"], (*path, "grid")
         counts = [int(c) for c in gen["count"]]
         total = counts[0] * counts[1] * counts[2]
@@ -118,6 +119,10 @@ class BodyResolver:
         index = np.stack([i.ravel(), j.ravel(), k.ravel()], axis=1)  # n = i + nx (j + ny k): i fastest
         with np.errstate(over="ignore", invalid="ignore"):
             positions = origin + index * spacing
+            if "jitter" in gen:
+                jitter = np.broadcast_to(np.asarray(gen["jitter"], dtype=float), (3,))
+                rng = np.random.default_rng(int(gen.get("seed", 0)))
+                positions = positions + rng.uniform(-1.0, 1.0, positions.shape) * jitter
         if not np.all(np.isfinite(positions)):
             self.issues.error(gpath, "grid positions overflow", "origin and spacing of sensible size", key=True)
             return []

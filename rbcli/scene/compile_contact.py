@@ -42,6 +42,18 @@ class ContactSummary:
     limiting_body: str  # the body that sets it
     stiffness: float  # [N/m] that body's per-sphere stiffness
 
+    def describe(self, substeps: int | None = None) -> str:
+        """One line for `rbsim validate` and the run summary."""
+        planes = f"{self.plane_count} plane" + "s" * (self.plane_count != 1)
+        text = f"contact: {self.sphere_count:,} contact spheres, {planes}"
+        if self.static_count:
+            text += f", {self.static_count} static bod" + ("y" if self.static_count == 1 else "ies")
+        if math.isfinite(self.stable_step):
+            text += f"; stable step {self.stable_step:.3g} s (body '{self.limiting_body}')"
+        if substeps is not None and substeps > 1:
+            text += f"; {substeps} sub-steps per step"
+        return text
+
 
 def lattice_surface(points: np.ndarray, spacing: float) -> np.ndarray:
     """Indices of the lattice points that miss at least one of their 6 neighbours at `spacing`."""
