@@ -118,7 +118,7 @@ def run_pile(label: str, spec: SceneSpec, half: float, steps: int, check_every: 
     sim.step(1)  # compile or load the kernels
     sim.reset()
     m = sim.model.body_mass
-    r = float(sim.forces.contact.sphere_radius.max())
+    r = RADIUS  # the ball's radius, also for the 13-sphere cloud (whose spheres are smaller)
 
     def energies() -> tuple[float, float]:
         s = sim.data.state

@@ -151,13 +151,17 @@ def accumulate_contact(model, contact, work, t, x, q, P, L, F, tau) -> None:  # 
 def _body_velocities(model, work, x, q, P, L) -> None:  # noqa: ANN001
     """v = P / M and w = R I^-1 R^T L of every body (static bodies: 0)."""
     v, w = work.body_velocity, work.body_omega
+    inv = model.body_inertia_inv
     for b in range(v.shape[0]):
         inv_m = 1.0 / model.body_mass[b]
         v[b, 0], v[b, 1], v[b, 2] = P[b, 0] * inv_m, P[b, 1] * inv_m, P[b, 2] * inv_m
+        i0, i1, i2 = inv[b, 0], inv[b, 1], inv[b, 2]
+        if i0 == i1 and i1 == i2:  # a ball: w = L / I in any frame, no rotation needed
+            w[b, 0], w[b, 1], w[b, 2] = L[b, 0] * i0, L[b, 1] * i0, L[b, 2] * i0
+            continue
         qw, qx, qy, qz = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
         m0, m1, m2 = rotate_inverse(qw, qx, qy, qz, L[b, 0], L[b, 1], L[b, 2])
-        inv = model.body_inertia_inv
-        w[b, 0], w[b, 1], w[b, 2] = rotate(qw, qx, qy, qz, m0 * inv[b, 0], m1 * inv[b, 1], m2 * inv[b, 2])
+        w[b, 0], w[b, 1], w[b, 2] = rotate(qw, qx, qy, qz, m0 * i0, m1 * i1, m2 * i2)
 
 
 @numba.njit(cache=True, inline="always")
@@ -198,7 +202,7 @@ def _plane_contacts(contact, work, x, s, h, F, tau) -> None:  # noqa: ANN001
             c0, c1, c2 = pos[i, 0] - back * n0, pos[i, 1] - back * n1, pos[i, 2] - back * n2
             k = contact.body_stiffness[b]
             zeta = min(contact.body_damping_ratio[b], contact.plane_damping_ratio[p])
-            mu = math.sqrt(contact.body_friction[b] * contact.plane_friction[p])
+            mu = contact.body_friction_root[b] * contact.plane_friction_root[p]
             _resolve(contact, work, x, s, h, i, PLANE_PARTNER_BASE - p, b, -1, n0, n1, n2, overlap,
                      c0, c1, c2, k, zeta, mu, F, tau)  # fmt: skip
 
@@ -226,9 +230,9 @@ def _pair(contact, work, x, s, h, i, j, F, tau) -> None:  # noqa: ANN001
     forward = contact.sphere_radius[j] - 0.5 * overlap
     c0, c1, c2 = pos[j, 0] + forward * n0, pos[j, 1] + forward * n1, pos[j, 2] + forward * n2
     ka, kb = contact.body_stiffness[bi], contact.body_stiffness[bj]
-    k = 2.0 * ka * kb / (ka + kb)
+    k = ka if ka == kb else 2.0 * ka * kb / (ka + kb)
     zeta = min(contact.body_damping_ratio[bi], contact.body_damping_ratio[bj])
-    mu = math.sqrt(contact.body_friction[bi] * contact.body_friction[bj])
+    mu = contact.body_friction_root[bi] * contact.body_friction_root[bj]
     _resolve(contact, work, x, s, h, i, j, bi, bj, n0, n1, n2, overlap, c0, c1, c2, k, zeta, mu, F, tau)
 
 
@@ -302,8 +306,8 @@ def _resolve(  # noqa: ANN202
             if work.hist_partner[owner, slot] == partner:
                 x0, x1, x2 = work.hist_xi[owner, slot, 0], work.hist_xi[owner, slot, 1], work.hist_xi[owner, slot, 2]
                 length2 = x0 * x0 + x1 * x1 + x2 * x2
-                if length2 > 0.0:
-                    along = x0 * n0 + x1 * n1 + x2 * n2
+                along = x0 * n0 + x1 * n1 + x2 * n2
+                if along * along > 1e-12 * length2:  # else: a normal part < 1e-6 |xi| stays, harmless
                     x0, x1, x2 = x0 - along * n0, x1 - along * n1, x2 - along * n2
                     kept2 = x0 * x0 + x1 * x1 + x2 * x2
                     scale = math.sqrt(length2 / kept2) if kept2 > 0.0 else 0.0
@@ -318,7 +322,8 @@ def _resolve(  # noqa: ANN202
         if ft2 > cap * cap:  # sliding: the force at the Coulomb limit, the spring stretched to match it
             scale = cap / math.sqrt(ft2)
             g0, g1, g2 = g0 * scale, g1 * scale, g2 * scale
-            u0, u1, u2 = -(g0 + ct * t0) / kt, -(g1 + ct * t1) / kt, -(g2 + ct * t2) / kt
+            inv_kt = 1.0 / kt
+            u0, u1, u2 = -(g0 + ct * t0) * inv_kt, -(g1 + ct * t1) * inv_kt, -(g2 + ct * t2) * inv_kt
         energy += 0.5 * kt * (u0 * u0 + u1 * u1 + u2 * u2)
         f0, f1, f2 = f0 + g0, f1 + g1, f2 + g2
         slot = work.trial_count[owner]

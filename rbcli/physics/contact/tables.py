@@ -61,6 +61,8 @@ class ContactTable(NamedTuple):
     plane_normal: np.ndarray  # (plane_count, 3), world, unit, pointing out of the solid
     plane_damping_ratio: np.ndarray  # (plane_count,)
     plane_friction: np.ndarray  # (plane_count,)
+    body_friction_root: np.ndarray  # sqrt(mu) per body: a pair's sqrt(mu_a mu_b) is one product
+    plane_friction_root: np.ndarray  # sqrt(mu) per plane
     cell_size: float  # [m] broad-phase grid cell: the largest sphere diameter
     tangential_ratio: float  # k_t / k_n of every contact
     bucket_count: int  # size of the broad phase's bucket table (see broad_phase.py)
@@ -141,6 +143,8 @@ def contact_table(
         plane_normal=_ro(plane_normal, np.float64, 3),
         plane_damping_ratio=_ro(plane_damping_ratio, np.float64),
         plane_friction=_ro(plane_friction, np.float64),
+        body_friction_root=_ro(np.sqrt(np.asarray(body_friction, dtype=np.float64)), np.float64),
+        plane_friction_root=_ro(np.sqrt(np.asarray(plane_friction, dtype=np.float64)), np.float64),
         cell_size=float(2.0 * radius.max()) if spheres else 1.0,
         tangential_ratio=float(tangential_ratio),
         bucket_count=int(buckets),
