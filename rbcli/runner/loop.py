@@ -18,6 +18,7 @@ import numpy as np
 from rbcli._version import __version__
 from rbcli.physics.energy import INVARIANT_NAMES
 from rbcli.record.frame import RunHeader, RunSummary, Sink
+from rbcli.runner.divergence import JUMP_FACTOR, EnergyGuard, explain, likely_cause
 from rbcli.runner.recorder import Recorder
 from rbcli.scene.compile import CompiledScene
 
@@ -126,6 +127,7 @@ def run_simulation(
     every = record_every
     start, total = state.step, state.step + steps
     recorder = Recorder(compiled, sinks, capacity, threaded=threaded)
+    guard = EnergyGuard(compiled)
     recorder.open(run_header(compiled, steps=steps, record_every=every))
     buf = recorder.buffer()
 
@@ -162,10 +164,19 @@ def run_simulation(
                     raise RuntimeError(f"internal error: frame buffer full at step {state.step} (please report)")
                 if code == STATUS_DIVERGED:
                     status = "diverged"
+                    t = state.step * settings.dt
+                    why = explain(sim.compiled, state.x, state.q, state.P, state.L, t)
+                    message = f"diverged at step {state.step}: {why}"
+                    break
+                jumped = guard.check(state.q, state.P, state.L)
+                if jumped is not None:
+                    status = "diverged"
+                    name = sim.compiled.model.body_names[jumped]
+                    energy = guard.previous[jumped] if guard.previous is not None else float("nan")
                     message = (
-                        f"diverged at step {state.step} (t = {state.step * settings.dt:.6g} s): the state became "
-                        f"non-finite or exceeded 1e100 with integrator {settings.integrator!r} at dt = "
-                        f"{settings.dt:g} s; try a smaller dt or a more stable integrator"
+                        f"diverged at step {state.step}: body '{name}': kinetic energy grew more than "
+                        f"{JUMP_FACTOR:.0e}-fold since the last check, to {energy:.3g} J at "
+                        f"t = {state.step * settings.dt:.6g} s; likely cause: {likely_cause(sim.compiled, jumped)}"
                     )
                     break
                 if code == STATUS_STEP_TOO_SMALL:

@@ -25,6 +25,8 @@ import queue
 import threading
 from collections.abc import Sequence
 
+import numpy as np
+
 from rbcli.physics.step import FrameBuffers, empty_buffers
 from rbcli.record.frame import RunHeader, RunSummary, Sink
 from rbcli.runner.blocks import make_block
@@ -101,9 +103,12 @@ class Recorder:
 
     def _write(self, buffers: FrameBuffers, frames: int) -> None:
         b = buffers
-        block = make_block(self._compiled, b.step[:frames], b.x[:frames], b.q[:frames], b.P[:frames], b.L[:frames])
-        for sink in self._sinks:
-            sink.write(block)
+        # the last frames before a divergence hold huge numbers whose squares overflow to inf in the
+        # invariants: that is what the log should show, without numpy warnings on the terminal
+        with np.errstate(over="ignore", invalid="ignore"):
+            block = make_block(self._compiled, b.step[:frames], b.x[:frames], b.q[:frames], b.P[:frames], b.L[:frames])
+            for sink in self._sinks:
+                sink.write(block)
         self.frames_written += frames
 
     def _work(self) -> None:
