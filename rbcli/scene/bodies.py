@@ -470,6 +470,24 @@ class BodyResolver:
                     )
                     ok = False
                     continue
+                if not (np.all(np.isnan(mass)) or (np.all(np.isfinite(mass)) and np.all(mass > 0.0))):
+                    # e.g. density 1e-323 kg/m^3 x a cell volume rounds to exactly 0: massless particles
+                    if "mass" in part:
+                        where, source = (*ppath, "mass"), f"mass {float(part['mass']):g} kg over {len(mass)} particles"
+                    elif "density" in part:
+                        where, source = (*ppath, "density"), f"density {float(part['density']):g} kg/m^3"
+                    else:  # the body's density, applied to this part: located at the part
+                        where, source = ppath, f"the body's density {float(entry['density']):g} kg/m^3"
+                    what = "round to 0" if float(mass[0]) == 0.0 else "overflow"
+                    self.issues.error(
+                        where,
+                        f"{source} gives this part particle masses of {float(mass[0]):g} kg at spacing {spacing:g} m, "
+                        f"which {what} in float64",
+                        "a density or mass of physical magnitude",
+                        key=where != ppath,
+                    )
+                    ok = False
+                    continue
             offset = np.asarray(part.get("offset", [0.0, 0.0, 0.0]), dtype=float)
             positions.append(points @ quat_to_matrix(q).T + offset)
             masses.append(mass)
@@ -486,8 +504,18 @@ class BodyResolver:
                 )
                 return None
             n_unspecified = sum(len(masses[j]) for j in unspecified)
+            share = np.float64(entry["mass"]) / n_unspecified
+            if not (np.isfinite(share) and share > 0.0):
+                self.issues.error(
+                    (*path, "mass"),
+                    f"body mass {float(entry['mass']):g} kg over {n_unspecified} particles gives particle masses "
+                    f"of {float(share):g} kg, which {'round to 0' if share == 0.0 else 'overflow'} in float64",
+                    "a mass of physical magnitude",
+                    key=True,
+                )
+                return None
             for j in unspecified:
-                masses[j] = np.full(len(masses[j]), float(entry["mass"]) / n_unspecified)
+                masses[j] = np.full(len(masses[j]), float(share))
         return ParticleCloud(
             np.concatenate(positions), np.concatenate(masses), np.concatenate(radii) if has_radius else None
         )
