@@ -2,7 +2,8 @@
 
 Public API: `load_scene`, `simulate`, `Simulation` (step, read and write the state, reset, run),
 `BodyState`, `prepare`, `run_to_file`, `Trajectory` (`to_npz`, `from_npz`, `to_csv`), `read_recording`
-(a .mcap or .rrd back as a Trajectory), `SimulationDiverged`, `__version__`. Units are SI throughout
+(a .mcap or .rrd back as a Trajectory), `SimulationDiverged`, `sweep` (a scene over many parameter values,
+on Dask: a pyarrow table), `__version__`. Units are SI throughout
 (m, kg, s, rad); quaternions are (w, x, y, z), world-from-body.
 Attributes are imported lazily so that `rbsim --help` and `rbsim validate` stay light.
 """
@@ -24,12 +25,14 @@ __all__ = [
     "Trajectory",
     "read_recording",
     "SimulationDiverged",
+    "sweep",
 ]
 
 if TYPE_CHECKING:
     from rbcli.api import BodyState, Simulation, SimulationDiverged, load_scene, prepare, run_to_file, simulate
     from rbcli.record.memory_sink import Trajectory
     from rbcli.record.read import read_trajectory as read_recording
+    from rbcli.sweeps.run import sweep
 
 
 def __getattr__(name: str) -> Any:
@@ -41,6 +44,10 @@ def __getattr__(name: str) -> Any:
         from rbcli.record.read import read_trajectory
 
         return read_trajectory
+    if name == "sweep":  # sweeps/: Dask and pyarrow are imported only when a sweep runs
+        from rbcli.sweeps.run import sweep
+
+        return sweep
     if name in __all__:
         from rbcli import api
 

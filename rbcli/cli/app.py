@@ -21,6 +21,7 @@ from rbcli.cli import replay as _replay
 from rbcli.cli import run as _run
 from rbcli.cli import schema as _schema
 from rbcli.cli import study as _study
+from rbcli.cli import sweep as _sweep
 from rbcli.cli import validate as _validate
 
 app = typer.Typer(
@@ -54,6 +55,7 @@ app.command("info")(_info.info)
 app.command("integrators")(_integrators.integrators)
 app.command("schema")(_schema.schema)
 app.command("study")(_study.study)
+app.command("sweep")(_sweep.sweep)
 
 
 # Commands that end the process without the interpreter's teardown (`_exit_now`): after a run has

@@ -1,4 +1,5 @@
-"""`rbsim validate`: check scene files and print every issue as `file:line:col: error: message — expected ...`.
+"""`rbsim validate`: check scene files (and sweep files, docs/sweeps.md) and print every issue as
+`file:line:col: error: message — expected ...`.
 
 Nothing is simulated or written. Exit status: 0 when every file is valid (warnings allowed), 1 when any
 file has errors or cannot be read, 2 for usage errors (Typer's own).
@@ -21,6 +22,7 @@ def validate(
     """Check scene files against the scene format and physics sanity rules; simulate nothing."""
     from rbcli.scene.load import analyse_scene
     from rbcli.scene.shapes import mass_properties
+    from rbcli.sweeps.load import is_sweep_file
 
     failed = 0
     for file in files:
@@ -28,6 +30,9 @@ def validate(
             what = "is a directory, not a scene file" if file.is_dir() else "does not exist"
             typer.echo(f"{file}: error: scene file {what} — expected a path to a YAML scene file")
             failed += 1
+            continue
+        if is_sweep_file(file):
+            failed += 0 if _validate_sweep(file) else 1
             continue
         spec, issues = analyse_scene(file)
         for issue in issues:
@@ -58,6 +63,20 @@ def validate(
         typer.echo(f"{len(files) - failed} of {len(files)} scene files valid")
     if failed:
         raise typer.Exit(1)
+
+
+def _validate_sweep(file: Path) -> bool:
+    """Print a sweep file's issues (its base scene's too) and a summary line; True when it is valid."""
+    from rbcli.sweeps.load import analyse_sweep
+
+    sweep, issues = analyse_sweep(file)
+    for issue in issues:
+        typer.echo(str(issue) if issue.location is not None else f"{file}: {issue.severity}: {issue.message}")
+    if sweep is None:
+        return False
+    axes = f"{len(sweep.axes)} ax{'is' if len(sweep.axes) == 1 else 'es'}"
+    typer.echo(f"{file}: ok (sweep: {sweep.variant_count} variants of {sweep.scene_path}, {axes})")
+    return True
 
 
 def _vector(v) -> str:

@@ -15,7 +15,7 @@ from rbcli.scene.load import check_scene
 from rbcli.scene.schema_path import scene_schema, scene_schema_path
 
 REPO = Path(__file__).resolve().parents[2]
-SCENE_FILES = sorted((REPO / "scenes").rglob("*.yaml"))
+SCENE_FILES = sorted(p for p in (REPO / "scenes").rglob("*.yaml") if not p.name.endswith(".sweep.yaml"))
 NUMERIC = {"number", "integer"}
 
 

@@ -1,0 +1,177 @@
+"""Running batches of variants on Dask (`dask.distributed`): the only module of rbcli that imports Dask.
+
+By default a `LocalCluster` sized to the machine: one single-threaded worker process per CPU this process
+may use (the step kernels are serial and hold one core each; processes, not threads, so that the Python
+around the kernels runs in parallel too). With a scheduler address (`--scheduler tcp://host:8786`) the
+same batches go to an existing cluster, whose workers must have rbcli installed and see the base scene's
+folder (mesh files) and, for logs, the output folder at the same paths.
+
+Dask's own guarantees carry the "nothing lost" promise: a task of a worker that dies is run again on
+another worker (the scheduler's `allowed-failures`, default 3, then KilledWorker: that batch's variants
+become rows with status "error" and the message). Rows come back to the client, which writes each batch's
+part as it arrives (table.write_part): a part is never written by a worker.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import logging
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from rbcli.sweeps.batches import batch_size, chunks
+from rbcli.sweeps.execute import STATUS_ERROR, SweepJob, run_batch, warm_up
+
+Variant = tuple[int, tuple[Any, ...]]
+Rows = list[dict[str, Any]]
+
+
+@dataclass
+class ClusterInfo:
+    """What the sweep ran on: workers (processes), slots (threads in all), the dashboard (None without
+    bokeh), the seconds to start or reach the cluster and to warm every worker's kernels."""
+
+    workers: int
+    slots: int
+    dashboard: str | None
+    startup_s: float
+    warmup_s: float
+    batch: int = 0
+
+
+def default_workers() -> int:
+    """One worker per CPU this process may run on."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def run_on_dask(
+    job: SweepJob,
+    pending: list[Variant],
+    on_rows: Callable[[Rows], None],
+    *,
+    scheduler: Any = None,
+    workers: int | None = None,
+    batch: int | None = None,
+    on_ready: Callable[[ClusterInfo], None] | None = None,
+) -> ClusterInfo:
+    """Run every pending variant in batches; `on_rows` gets each batch's rows as it finishes (in the
+    client's thread). scheduler: None (a LocalCluster of `workers`), an address, or a distributed.Client."""
+    from distributed import Client, LocalCluster
+
+    started = time.perf_counter()
+    cluster = None
+    client: Any
+    if isinstance(scheduler, Client):
+        client, own_client = scheduler, False
+    elif scheduler:
+        client, own_client = Client(scheduler, timeout="30s"), True
+    else:
+        bokeh = importlib.util.find_spec("bokeh") is not None
+        cluster = LocalCluster(
+            n_workers=workers or default_workers(),
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=":0" if bokeh else None,  # any free port: 8787 may be another cluster's
+            silence_logs=logging.ERROR,
+        )
+        client, own_client = Client(cluster), True
+    futures: list[Any] = []
+    try:
+        if cluster is None:
+            client.wait_for_workers(1, timeout=60)
+        slots_by_worker = client.nthreads()
+        info = ClusterInfo(
+            workers=len(slots_by_worker),
+            slots=sum(slots_by_worker.values()),
+            dashboard=_dashboard(client),
+            startup_s=time.perf_counter() - started,
+            warmup_s=0.0,
+        )
+        if pending:
+            info.warmup_s = _warm_workers(client, job, pending[0][1], list(slots_by_worker))
+        if on_ready is not None:
+            on_ready(info)
+        _run_batches(client, job, pending, on_rows, info, batch, futures)
+        return info
+    finally:
+        if futures:
+            client.cancel(futures)
+        if own_client:
+            client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def _dashboard(client: Any) -> str | None:
+    if importlib.util.find_spec("bokeh") is None:
+        return None
+    try:
+        return str(client.dashboard_link)
+    except Exception:  # noqa: BLE001 - a cluster without a dashboard
+        return None
+
+
+def _warm_workers(client: Any, job: SweepJob, values: tuple[Any, ...], addresses: list[str]) -> float:
+    """Load the first variant's kernels on every worker (in parallel), so no timed batch pays for it."""
+    started = time.perf_counter()
+    warm = [
+        client.submit(warm_up, job, values, workers=[address], allow_other_workers=False, pure=False)
+        for address in addresses
+    ]
+    client.gather(warm, errors="skip")
+    return time.perf_counter() - started
+
+
+def _run_batches(
+    client: Any,
+    job: SweepJob,
+    pending: list[Variant],
+    on_rows: Callable[[Rows], None],
+    info: ClusterInfo,
+    batch: int | None,
+    futures: list[Any],
+) -> None:
+    from distributed import as_completed
+
+    shared = client.scatter(job, broadcast=True)  # sent once per worker, not once per task
+    groups: dict[Any, list[Variant]] = {}  # each task's variants, for the failed rows should it fail
+
+    def submit(group: list[Variant]) -> Any:
+        future = client.submit(run_batch, shared, group, pure=False, retries=1)
+        groups[future.key] = group
+        futures.append(future)
+        return future
+
+    if batch is not None:
+        info.batch = batch
+        queue = as_completed([submit(group) for group in chunks(pending, batch)])
+        rest: list[Variant] = []
+    else:  # one variant per slot first; their time sizes the rest
+        first = min(len(pending), info.slots)
+        queue = as_completed([submit([v]) for v in pending[:first]])
+        rest = pending[first:]
+    for future in queue:
+        rows = _rows_of(future, groups.pop(future.key))
+        on_rows(rows)
+        if rest:
+            seconds = sum(float(r.get("wall_s") or 0.0) for r in rows) / max(1, len(rows))
+            info.batch = batch_size(seconds, len(rest), info.slots)
+            queue.update([submit(group) for group in chunks(rest, info.batch)])
+            rest = []
+        futures.remove(future)
+
+
+def _rows_of(future: Any, group: list[Variant]) -> Rows:
+    """The batch's rows, or for a task that failed outright (KilledWorker: it took several workers down
+    with it), a failed row per variant saying so."""
+    try:
+        return list(future.result())
+    except Exception as exc:  # noqa: BLE001 - never the sweep's end: these variants are reported failed
+        message = f"the task failed on the cluster: {type(exc).__name__}: {exc}"
+        return [{"variant": index, "status": STATUS_ERROR, "message": message} for index, _ in group]

@@ -1,0 +1,243 @@
+"""One variant, start to end: its scene text, the scene loader, a `Simulation` run, and a row of metrics.
+
+This is what a Dask worker runs (`run_batch`), and what the serial path runs in the client's process;
+nothing here imports Dask. A variant that the loader rejects, that diverges or that raises gives a row
+too, with its status and message: a sweep never loses the other variants to one bad one.
+
+Kernels: numba keeps each compiled kernel in the worker's process once loaded (from the disk cache, or
+compiled on first use), keyed by the integrator and the force types present; every later variant of the
+same shape on that worker reuses it, so only the first variant a worker runs pays the load.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import os
+import re
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rbcli.sweeps.paths import ScenePath
+
+# Row statuses: a run's own ("completed", "diverged"), a variant the scene loader rejects, and any other
+# exception while building or running it.
+STATUS_COMPLETED = "completed"
+STATUS_DIVERGED = "diverged"
+STATUS_INVALID = "invalid"
+STATUS_ERROR = "error"
+# The row of a variant: (column, type) in table order; "vectors" is a list per body of 3 or 4 floats.
+RESULT_COLUMNS = (
+    ("variant", "int64"),
+    ("status", "string"),
+    ("message", "string"),
+    ("steps", "int64"),
+    ("t_end", "float64"),
+    ("dt", "float64"),
+    ("integrator", "string"),
+    ("body_count", "int64"),
+    ("energy_initial", "float64"),
+    ("energy_final", "float64"),
+    ("energy_drift", "float64"),
+    ("momentum_drift", "float64"),
+    ("angular_momentum_drift", "float64"),
+    ("quaternion_norm_defect_max", "float64"),
+    ("rotation_error_max", "float64"),
+    ("rotation_error_final", "float64"),
+    ("position_error_max", "float64"),
+    ("position_error_final", "float64"),
+    ("x_final", "vectors"),
+    ("q_final", "vectors"),
+    ("v_final", "vectors"),
+    ("omega_final", "vectors"),
+    ("L_final", "vectors"),
+    ("wall_s", "float64"),
+    ("log", "string"),
+)
+# The invariants a variant's metrics need; logs add the scene's own streams.
+METRIC_STREAMS = ("bodies", "invariants")
+
+
+@dataclass(frozen=True)
+class SweepJob:
+    """What every variant of a sweep needs, sent to each worker once.
+
+    scene_data: the base scene's parsed YAML, scene_text its text; scene_file and scene_dir: where it came
+    from (messages, the recorded scene path; mesh files resolve against scene_dir, which must exist on every
+    worker).
+    paths: each axis's scene path. frames: recorded frames per variant (None: the scene's cadence).
+    log_dir: where each variant writes variant-<n>.mcap (None: no logs), as seen by the workers.
+    """
+
+    scene_data: dict[str, Any]
+    scene_text: str
+    scene_file: str
+    scene_dir: str
+    paths: tuple[ScenePath, ...]
+    frames: int | None = 101
+    log_dir: str | None = None
+
+
+def run_batch(job: SweepJob, variants: list[tuple[int, tuple[Any, ...]]]) -> list[dict[str, Any]]:
+    """The rows of a batch of (variant number, axis values), in order. The Dask task."""
+    return [run_variant(job, index, values) for index, values in variants]
+
+
+def warm_up(job: SweepJob, values: tuple[Any, ...]) -> float:
+    """Load (or compile) the kernels a variant needs in this process, running none of its steps; returns
+    the seconds it took (the benchmark reports worker warm-up apart from the sweep)."""
+    from rbcli.runner.simulation import Simulation
+    from rbcli.scene.compile import compile_scene
+    from rbcli.scene.load import load_scene_text
+    from rbcli.scene.spec import SceneError
+    from rbcli.sweeps.load import variant_text
+
+    started = time.perf_counter()
+    with contextlib.suppress(SceneError):  # the variant's own row will say what is wrong with it
+        text = variant_text(job.scene_data, tuple(zip(job.paths, values, strict=True)))
+        spec = load_scene_text(text, job.scene_file, job.scene_dir)
+        Simulation(compile_scene(spec)).step(0)
+    return time.perf_counter() - started
+
+
+def run_variant(job: SweepJob, index: int, values: tuple[Any, ...]) -> dict[str, Any]:
+    """Build, load and run one variant; its row (see `table.RESULT_SCHEMA` for the columns)."""
+    from rbcli.scene.spec import SceneError
+    from rbcli.sweeps.load import variant_text
+
+    started = time.perf_counter()
+    row: dict[str, Any] = {"variant": index, "status": STATUS_ERROR, "message": ""}
+    text = ""
+    try:
+        text = variant_text(job.scene_data, tuple(zip(job.paths, values, strict=True)))
+        row.update(_run(job, index, text))
+    except SceneError as exc:
+        errors = [str(issue) for issue in exc.issues if issue.severity == "error"]
+        row.update(status=STATUS_INVALID, message="; ".join(errors) or str(exc))
+    except Exception as exc:  # noqa: BLE001 - any failure is this variant's row, not the sweep's end
+        row.update(status=STATUS_ERROR, message=f"{type(exc).__name__}: {exc}")
+    if row["message"] and job.scene_file in row["message"]:
+        row["message"] = _relocated(row["message"], job, text)
+    row["wall_s"] = time.perf_counter() - started
+    return row
+
+
+def _relocated(message: str, job: SweepJob, text: str) -> str:
+    """`scene.yaml:44:3` in a message about the variant's text (its YAML as the sweep wrote it) turned into
+    the place of the same scene value in the base scene file, where the user can find it."""
+    from rbcli.scene.yaml_located import parse_located_yaml
+
+    try:
+        variant = parse_located_yaml(text, job.scene_file)
+    except Exception:  # noqa: BLE001 - a message is better unmapped than lost
+        return message
+    at: dict[tuple[int, int], tuple[tuple[str | int, ...], bool]] = {}
+    for is_key, table in ((False, variant.value_locations), (True, variant.key_locations)):
+        for path, loc in table.items():
+            known = at.get((loc.line, loc.column))
+            if known is None or len(path) < len(known[0]):  # the outermost value starting there: the entry
+                at[(loc.line, loc.column)] = (path, is_key)
+    base = _base_document(job.scene_text, job.scene_file)
+
+    def base_place(match: re.Match[str]) -> str:
+        found = at.get((int(match[1]), int(match[2])))
+        return match[0] if found is None else str(base.locate(found[0], key=found[1]))
+
+    return re.sub(re.escape(job.scene_file) + r":(\d+):(\d+)", base_place, message)
+
+
+@functools.lru_cache(maxsize=4)
+def _base_document(text: str, file: str) -> Any:
+    from rbcli.scene.yaml_located import parse_located_yaml
+
+    return parse_located_yaml(text, file)
+
+
+def _run(job: SweepJob, index: int, text: str) -> dict[str, Any]:
+    from rbcli.analysis.errors import (
+        admits_exact_solution,
+        conserved_quantities,
+        exact_reference,
+        invariant_drifts,
+        run_errors,
+    )
+    from rbcli.record.memory_sink import SinkMemory
+    from rbcli.runner.simulation import Simulation
+    from rbcli.scene.compile import compile_scene
+    from rbcli.scene.load import load_scene_text
+
+    spec = load_scene_text(text, job.scene_file, job.scene_dir)
+    compiled = compile_scene(spec)
+    settings = compiled.settings
+    every = settings.record_every if job.frames is None else max(1, settings.steps // (job.frames - 1))
+    streams = METRIC_STREAMS if job.log_dir is None else tuple(dict.fromkeys((*settings.streams, *METRIC_STREAMS)))
+    compiled = replace(compiled, settings=replace(settings, record_every=every, streams=streams))
+    sim = Simulation(compiled)
+    memory = SinkMemory()
+    with _log_sink(job, index, compiled.settings.compression) as (sinks, log):
+        summary = sim.run(sinks=[memory, *sinks], threaded=False)
+    if summary.status == "interrupted":  # Ctrl-C in a serial sweep: this variant did not finish
+        raise KeyboardInterrupt
+    traj = memory.trajectory()
+    inv = traj.invariants
+    energy, momentum, angular = invariant_drifts(traj, conserved_quantities(compiled))
+    state = sim.state
+    row: dict[str, Any] = {
+        "status": summary.status,
+        "message": summary.message,
+        "steps": int(summary.steps),
+        "t_end": float(summary.t_end),
+        "dt": float(compiled.settings.dt),
+        "integrator": compiled.settings.integrator,
+        "body_count": int(compiled.model.body_count),
+        "energy_initial": float(inv["energy_total"][0]),
+        "energy_final": float(inv["energy_total"][-1]),
+        "energy_drift": energy,
+        "momentum_drift": momentum,
+        "angular_momentum_drift": angular,
+        "quaternion_norm_defect_max": float(np.max(inv["quaternion_norm_defect"])),
+        "x_final": state.x.tolist(),
+        "q_final": state.q.tolist(),
+        "v_final": state.v.tolist(),
+        "omega_final": state.omega.tolist(),
+        "L_final": state.L.tolist(),
+        "log": log,
+    }
+    if admits_exact_solution(compiled) and traj.t.size:
+        rot_max, pos_max, rot_final, pos_final = run_errors(traj, exact_reference(compiled, traj.t))
+        row.update(
+            rotation_error_max=rot_max,
+            position_error_max=pos_max,
+            rotation_error_final=rot_final,
+            position_error_final=pos_final,
+        )
+    return row
+
+
+@contextlib.contextmanager
+def _log_sink(job: SweepJob, index: int, compression: str):  # noqa: ANN202 - a context of (sinks, path)
+    """The variant's log as an extra sink (none without a log folder), written as a partial file and
+    renamed into place when the run ends (record/output_file.py), so a log is complete or absent."""
+    if job.log_dir is None:
+        yield [], None
+        return
+    from rbcli.record.output_file import OutputFile, partial_path
+    from rbcli.record.sinks import open_file_sink
+
+    target = Path(job.log_dir) / f"variant-{index:06d}.mcap"
+    with contextlib.suppress(FileNotFoundError):  # a lost worker's half-written try of this variant
+        os.unlink(partial_path(os.path.realpath(target)))
+    out = OutputFile(target)
+    partial = out.open()
+    sink = None
+    try:
+        sink = open_file_sink(partial, compression=compression)
+        yield [sink], str(target)
+    except BaseException:
+        out.abandon(keep=False)
+        raise
+    out.commit()

@@ -1,0 +1,139 @@
+"""The results table: one row per variant, its parameters beside its metrics, in Parquet (pyarrow).
+
+Columns, in order:
+- `variant` (int64): the variant's number (spec.py fixes the numbering);
+- one column per axis, named by the axis (its `name`, else its path), holding the value set there;
+- `status` ("completed", "diverged", "invalid": the scene loader rejected the combination, "error": it
+  raised), `message`;
+- `steps`, `t_end` [s], `dt` [s], `integrator`, `body_count`;
+- `energy_initial`, `energy_final` [J]; `energy_drift`, `momentum_drift`, `angular_momentum_drift`
+  (relative, max over the recorded frames; null where the scene does not conserve the quantity, as
+  `rbsim study`); `quaternion_norm_defect_max`;
+- `rotation_error_max`, `rotation_error_final` [rad], `position_error_max`, `position_error_final` [m]
+  against the exact solution (null where the scene has none);
+- `x_final`, `q_final` (w, x, y, z), `v_final`, `omega_final`, `L_final`: the final state of every body
+  in the user's frames (body_count lists of 3 or 4);
+- `wall_s` [s]: the variant's wall time (load, run, metrics), the one column that differs between runs;
+- `log`: the variant's recording, when logs are on.
+
+The sweep itself (file, scene and its sha256, seed, samples, axes, fingerprint) is in the schema's
+metadata under `rbsim_sweep` (JSON).
+
+Parts: the client writes each finished batch as `parts/part-<first>-<n>-<token>.parquet`, written to a
+temporary name and renamed into place, so a part is complete or absent whatever stops the sweep. The
+finished variants are those in the parts; `merge` joins them (one row per variant: a variant found twice,
+after a worker was lost while its batch's part was being written, keeps its first row).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import uuid
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from rbcli.sweeps.execute import RESULT_COLUMNS
+from rbcli.sweeps.spec import SweepSpec
+
+RESULTS_FILE = "results.parquet"
+PARTS_DIR = "parts"
+MANIFEST_FILE = "sweep.json"
+METADATA_KEY = b"rbsim_sweep"
+
+_TYPES = {
+    "int64": pa.int64(),
+    "float64": pa.float64(),
+    "string": pa.string(),
+    "vectors": pa.list_(pa.list_(pa.float64())),
+}
+RESULT_SCHEMA = pa.schema([(name, _TYPES[kind]) for name, kind in RESULT_COLUMNS])
+# Columns whose values differ from run to run of the same variant (everything else is bitwise the same).
+VOLATILE_COLUMNS = ("wall_s",)
+
+
+def rows_table(rows: Sequence[dict[str, Any]]) -> pa.Table:
+    """Result rows (dicts from execute.run_variant) as a table of RESULT_SCHEMA; missing keys are null."""
+    columns = {f.name: [row.get(f.name) for row in rows] for f in RESULT_SCHEMA}
+    return pa.table(columns, schema=RESULT_SCHEMA)
+
+
+def parameter_table(spec: SweepSpec, variants: Iterable[int]) -> pa.Table:
+    """The axis values of the given variants, one column per axis. A column whose values pyarrow cannot
+    give one type (numbers beside strings, say) holds each value as JSON text."""
+    indices = list(variants)
+    values = [spec.variant_values(i) for i in indices]
+    columns: dict[str, pa.Array] = {"variant": pa.array(indices, pa.int64())}
+    for k, axis in enumerate(spec.axes):
+        column = [v[k] for v in values]
+        try:
+            columns[axis.column] = pa.array(column)
+        except (pa.ArrowInvalid, pa.ArrowTypeError):
+            columns[axis.column] = pa.array([json.dumps(v) for v in column], pa.string())
+    return pa.table(columns)
+
+
+def write_part(folder: Path, rows: Sequence[dict[str, Any]]) -> Path:
+    """One finished batch as a part file, renamed into place once complete."""
+    parts = folder / PARTS_DIR
+    parts.mkdir(parents=True, exist_ok=True)
+    first = min(int(row["variant"]) for row in rows)
+    target = parts / f"part-{first:07d}-{len(rows)}-{uuid.uuid4().hex[:8]}.parquet"
+    _write_atomic(rows_table(rows), target)
+    return target
+
+
+def read_parts(folder: Path) -> pa.Table:
+    """Every finished row in the folder's parts (unsorted; may hold a variant twice, see the docstring)."""
+    files = sorted((folder / PARTS_DIR).glob("part-*.parquet")) if (folder / PARTS_DIR).is_dir() else []
+    tables = [pq.read_table(f, schema=RESULT_SCHEMA) for f in files]
+    return pa.concat_tables(tables) if tables else RESULT_SCHEMA.empty_table()
+
+
+def finished_variants(folder: Path) -> set[int]:
+    """The variants that have a row in the folder's parts."""
+    return set(read_parts(folder).column("variant").to_pylist())
+
+
+def merge(spec: SweepSpec, results: pa.Table, *, complete: bool) -> pa.Table:
+    """Parameters joined to results, one row per variant, in variant order; the sweep in the metadata."""
+    variants = results.column("variant").to_pylist()
+    first: dict[int, int] = {}
+    for position, variant in enumerate(variants):
+        first.setdefault(int(variant), position)
+    order = sorted(first)
+    results = results.take(pa.array([first[v] for v in order], pa.int64()))
+    params = parameter_table(spec, order)
+    table = params
+    for name in RESULT_SCHEMA.names[1:]:
+        table = table.append_column(RESULT_SCHEMA.field(name), results.column(name))
+    meta = dict(spec.metadata(), complete=complete, finished=len(order))
+    return table.replace_schema_metadata({METADATA_KEY: json.dumps(meta).encode()})
+
+
+def write_results(table: pa.Table, target: Path) -> None:
+    """The merged table as `target`, renamed into place once complete."""
+    _write_atomic(table, target)
+
+
+def sweep_metadata(table_or_path: pa.Table | str | Path) -> dict[str, Any]:
+    """The `rbsim_sweep` metadata of a results table (or file); {} when it has none."""
+    schema = table_or_path.schema if isinstance(table_or_path, pa.Table) else pq.read_schema(table_or_path)
+    raw = (schema.metadata or {}).get(METADATA_KEY)
+    return json.loads(raw) if raw else {}
+
+
+def _write_atomic(table: pa.Table, target: Path) -> None:
+    temporary = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+    try:
+        pq.write_table(table, temporary)
+        with open(temporary, "rb+") as handle:
+            os.fsync(handle.fileno())  # the data before the name: after a crash the part is whole or absent
+        os.replace(temporary, target)
+    except BaseException:
+        temporary.unlink(missing_ok=True)
+        raise

@@ -1,0 +1,60 @@
+"""Sweeps for the tests: a small spring scene (a plate hung from a spring, under gravity; torques, so the
+orientation matters) whose stiffness and integrator the sweeps vary, and helpers to run one variant the
+long way: its scene edited by hand and run by `rbcli.Simulation`, without the sweep code."""
+
+from __future__ import annotations
+
+import numpy as np
+import yaml
+
+import rbcli
+from rbcli.scene.load import load_scene_text
+
+# 200 steps. k = 1e6 N/m on 3 kg at dt = 0.01 s: omega dt = 5.8, far past split2's and rk4's stability
+# limits (2 and 2.8), so the state grows ~30-fold a step and passes 1e100 well before the end.
+SPRING_SCENE = """\
+name: spring-plate
+simulation: {dt: 0.01, duration: 2.0, integrator: split2}
+gravity: [0, 0, -9.81]
+bodies:
+  - name: plate
+    particles:
+      positions: [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0]]
+      masses: [1.0, 1.0, 0.5, 0.5]
+    position: [0.0, -0.5, 0.7]
+    velocity: [0.5, 0.0, 0.0]
+    angular_momentum: [0.5, 0.6, 12.0]
+forces:
+  - {type: spring, body: plate, point: [0, 0.5, 0], anchor: [0, 0, 2], stiffness: 100, rest_length: 1.0, damping: 0}
+"""
+DIVERGING_STIFFNESS = 1.0e6
+
+SPRING_SWEEP = """\
+name: spring-sweep
+scene: spring.yaml
+axes:
+  - path: forces[0].stiffness
+    values: [50, 100.0, 1.0e6]
+  - path: simulation.integrator
+    values: [split2, rk4]
+"""
+
+STATE_COLUMNS = ("x_final", "q_final", "v_final", "omega_final", "L_final")
+
+
+def reference_state(stiffness: float, integrator: str) -> dict[str, np.ndarray]:
+    """The final state of one (non-diverging) variant, built by editing the scene's YAML by hand and
+    stepping a Simulation: the sweep's path setting, batching and metrics play no part."""
+    data = yaml.safe_load(SPRING_SCENE)
+    data["forces"][0]["stiffness"] = stiffness
+    data["simulation"]["integrator"] = integrator
+    sim = rbcli.Simulation(load_scene_text(yaml.safe_dump(data)))
+    sim.step(sim.settings.steps)
+    state = sim.state
+    return {"x_final": state.x, "q_final": state.q, "v_final": state.v, "omega_final": state.omega,
+                         "L_final": state.L}  # fmt: skip
+
+
+def rows_without_wall_time(table) -> list[dict]:  # noqa: ANN001 - a pyarrow Table
+    """The rows of a results table, minus the one column that differs between runs of a variant."""
+    return table.drop_columns(["wall_s"]).to_pylist()
