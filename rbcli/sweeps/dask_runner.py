@@ -72,12 +72,11 @@ def run_on_dask(
     elif scheduler:
         client, own_client = Client(scheduler, timeout="30s"), True
     else:
-        bokeh = importlib.util.find_spec("bokeh") is not None
         cluster = LocalCluster(
             n_workers=workers or default_workers(),
             threads_per_worker=1,
             processes=True,
-            dashboard_address=":0" if bokeh else None,  # any free port: 8787 may be another cluster's
+            dashboard_address=":0",  # any free port: 8787 may be another cluster's (the dashboard needs bokeh)
             silence_logs=logging.ERROR,
         )
         client, own_client = Client(cluster), True

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from sweep_cases import DIVERGING_STIFFNESS, SPRING_SCENE, STATE_COLUMNS, reference_state
+from sweep_cases import DIVERGING_STIFFNESS, SPRING_SCENE, STATE_COLUMNS, reference_state, rows_without_wall_time
 from typer.testing import CliRunner
 
 import rbcli
@@ -105,6 +105,20 @@ def test_a_combination_the_loader_rejects_is_a_failed_row(tmp_path):
     line = SPRING_SCENE.splitlines()[1]
     assert "dt = 1 s is longer than duration = 0.5 s" in message
     assert f"free.yaml:2:{line.index('0.01') + 1}: error" in message, message  # at dt in the base scene
+
+
+def test_logs_are_each_variants_recording_and_change_no_row(spring_sweep, tmp_path):
+    spec = load_sweep(spring_sweep)
+    plain = run_sweep(spec, scheduler="serial", output=tmp_path / "plain")
+    logged = run_sweep(spec, scheduler="serial", output=tmp_path / "logged", logs=True)
+    without_log = [rows_without_wall_time(run.table.drop_columns(["log"])) for run in (plain, logged)]
+    assert without_log[0] == without_log[1]
+    row = logged.table.to_pylist()[2]
+    assert row["log"] == str((tmp_path / "logged" / "logs" / "variant-000002.mcap").resolve())
+    recorded = rbcli.read_recording(row["log"])
+    assert recorded.t.size == 101 and recorded.status == "completed"
+    assert recorded.x[-1].tobytes() == np.array(row["x_final"]).tobytes()
+    assert plain.table.column("log").null_count == 6
 
 
 def test_sweep_command_and_info_on_the_table(spring_sweep, tmp_path):
