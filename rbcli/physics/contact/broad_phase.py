@@ -92,6 +92,11 @@ def build_grid(contact, work):  # noqa: ANN001, ANN201
         b = bucket[i]
         start[b] -= 1
         order[start[b]] = i
+    sp, sc, radius = work.sorted_position, work.sorted_cell, contact.sphere_radius
+    for a in range(count):  # bucket-ordered copies for the walk: neighbours are near in memory
+        i = order[a]
+        sp[a, 0], sp[a, 1], sp[a, 2], sp[a, 3] = pos[i, 0], pos[i, 1], pos[i, 2], radius[i]
+        sc[a, 0], sc[a, 1], sc[a, 2] = cell[i, 0], cell[i, 1], cell[i, 2]
     return grid
 
 

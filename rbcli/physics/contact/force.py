@@ -122,28 +122,37 @@ def accumulate_contact(model, contact, work, t, x, q, P, L, F, tau) -> None:  # 
     h = work.clock[1]
     work.clock[2] = s
     _plane_contacts(contact, work, x, s, h, F, tau)
-    cell, order, start = work.sphere_cell, work.sorted_sphere, work.bucket_start
+    # the walk reads the bucket-ordered copies (sorted_*: build_grid), so the distance checks of the
+    # candidates touch neighbouring memory; sphere and body arrays are read only for real overlaps
+    cell, sp, order, start = work.sorted_cell, work.sorted_position, work.sorted_sphere, work.bucket_start
     dense = grid[0]
     candidates = 0
     for a in range(order.shape[0]):
-        i = order[a]
-        ci, cj, ck = cell[i, 0], cell[i, 1], cell[i, 2]
-        own = work.sphere_bucket[i]
+        ci, cj, ck = cell[a, 0], cell[a, 1], cell[a, 2]
+        p0, p1, p2, ra = sp[a, 0], sp[a, 1], sp[a, 2], sp[a, 3]
+        own = work.sphere_bucket[order[a]]
         for e in range(a + 1, start[own + 1]):  # later spheres of the same bucket, same cell
-            j = order[e]
-            if dense or (cell[j, 0] == ci and cell[j, 1] == cj and cell[j, 2] == ck):
+            if dense or (cell[e, 0] == ci and cell[e, 1] == cj and cell[e, 2] == ck):
                 candidates += 1
-                _pair(contact, work, x, s, h, i, j, F, tau)
+                d0, d1, d2 = p0 - sp[e, 0], p1 - sp[e, 1], p2 - sp[e, 2]
+                reach = ra + sp[e, 3]
+                dist2 = d0 * d0 + d1 * d1 + d2 * d2
+                if dist2 < reach * reach and dist2 > 0.0:  # coincident centres: no normal, skipped
+                    _pair(contact, work, x, s, h, order[a], order[e], d0, d1, d2, dist2, reach, F, tau)
         for n in range(HALF_SHELL.shape[0]):
             ni, nj, nk = ci + HALF_SHELL[n, 0], cj + HALF_SHELL[n, 1], ck + HALF_SHELL[n, 2]
             b = bucket_of(ni, nj, nk, grid)
             if b < 0:
                 continue
             for e in range(start[b], start[b + 1]):
-                j = order[e]
-                if dense or (cell[j, 0] == ni and cell[j, 1] == nj and cell[j, 2] == nk):  # dense: one cell per bucket
+                # dense: a bucket is one cell; hashed: other cells may share it
+                if dense or (cell[e, 0] == ni and cell[e, 1] == nj and cell[e, 2] == nk):
                     candidates += 1
-                    _pair(contact, work, x, s, h, i, j, F, tau)
+                    d0, d1, d2 = p0 - sp[e, 0], p1 - sp[e, 1], p2 - sp[e, 2]
+                    reach = ra + sp[e, 3]
+                    dist2 = d0 * d0 + d1 * d1 + d2 * d2
+                    if dist2 < reach * reach and dist2 > 0.0:
+                        _pair(contact, work, x, s, h, order[a], order[e], d0, d1, d2, dist2, reach, F, tau)
     work.counters[COUNT_CANDIDATES] += candidates
 
 
@@ -208,14 +217,9 @@ def _plane_contacts(contact, work, x, s, h, F, tau) -> None:  # noqa: ANN001
 
 
 @numba.njit(cache=True, inline="always")
-def _pair(contact, work, x, s, h, i, j, F, tau) -> None:  # noqa: ANN001
-    """The contact, if any, of spheres i and j (found by the broad phase)."""
+def _pair(contact, work, x, s, h, i, j, d0, d1, d2, dist2, reach, F, tau) -> None:  # noqa: ANN001
+    """The contact of spheres i and j, overlapping (d = p_i - p_j, |d|^2 = dist2 < reach^2)."""
     pos = work.sphere_position
-    d0, d1, d2 = pos[i, 0] - pos[j, 0], pos[i, 1] - pos[j, 1], pos[i, 2] - pos[j, 2]
-    reach = contact.sphere_radius[i] + contact.sphere_radius[j]
-    dist2 = d0 * d0 + d1 * d1 + d2 * d2
-    if dist2 >= reach * reach or dist2 == 0.0:  # most candidates end here; coincident centres: no normal
-        return
     bi, bj = contact.sphere_body[i], contact.sphere_body[j]
     if bi == bj:
         return

@@ -90,6 +90,8 @@ class ContactWork(NamedTuple):
     sphere_bucket: np.ndarray  # int64 (sphere_count,)
     bucket_start: np.ndarray  # int64 (bucket_count + 1,)
     sorted_sphere: np.ndarray  # int64 (sphere_count,), spheres ordered by bucket
+    sorted_position: np.ndarray  # (sphere_count, 4): x, y, z [m] and radius [m] in that order
+    sorted_cell: np.ndarray  # int64 (sphere_count, 3): cells in that order
     hist_count: np.ndarray  # int64 (sphere_count,)
     hist_partner: np.ndarray  # int64 (sphere_count, HISTORY_SLOTS)
     hist_xi: np.ndarray  # [m] (sphere_count, HISTORY_SLOTS, 3)
@@ -165,6 +167,8 @@ def make_contact_work(contact: ContactTable, body_count: int) -> ContactWork:
         sphere_bucket=np.zeros(s, dtype=np.int64),
         bucket_start=np.zeros(contact.bucket_count + 1, dtype=np.int64),
         sorted_sphere=np.zeros(s, dtype=np.int64),
+        sorted_position=np.zeros((s, 4)),
+        sorted_cell=np.zeros((s, 3), dtype=np.int64),
         hist_count=np.zeros(s, dtype=np.int64),
         hist_partner=np.zeros((s, k), dtype=np.int64),
         hist_xi=np.zeros((s, k, 3)),
