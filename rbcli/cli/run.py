@@ -18,6 +18,9 @@ EXIT_DIVERGED = 3
 EXIT_INTERRUPTED = 130  # 128 + the signal's number: 130 SIGINT, 143 SIGTERM, 129 SIGHUP
 _STOP_SIGNALS = ("SIGTERM", "SIGHUP")  # handled as Ctrl-C is; SIGINT is the run loop's own
 COMPRESSIONS = ("zstd", "lz4", "none")  # as schemas/scene.schema.json's record.compression
+# Planned work above which `run` asks for --allow-large: 1e10 body-steps is hours on one core at the
+# rates of docs/performance.md; a mistyped --dt or --duration (1e-300, 1e9) plans far more.
+MAX_BODY_STEPS = 10**10
 
 
 def run(
@@ -32,14 +35,17 @@ def run(
     dt: float | None = typer.Option(None, "--dt", help="Override the time step [s]."),
     duration: float | None = typer.Option(None, "--duration", help="Override the duration [s]."),
     integrator: str | None = typer.Option(None, "--integrator", help="Override the integrator (see docs)."),
-    record_every: int | None = typer.Option(None, "--record-every", min=1, help="Record every N-th step."),
+    record_every: int | None = typer.Option(None, "--record-every", help="Record every N-th step (N >= 1)."),
     tolerance: float | None = typer.Option(
-        None, "--tolerance", min=0.0, help="Adaptive stepping with this error budget (dopri5); dt = output spacing."
+        None, "--tolerance", help="Adaptive stepping with this error budget (dopri5); dt = output spacing."
     ),
     compression: str | None = typer.Option(
         None,
         "--compression",
         help="MCAP chunk compression: zstd (default, smallest), lz4 (a little faster) or none (fastest, ~35% larger).",
+    ),
+    allow_large: bool = typer.Option(
+        False, "--allow-large", help=f"Run even when the run plans more than {MAX_BODY_STEPS:.0e} body-steps."
     ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar or summary."),
 ) -> None:
@@ -77,13 +83,22 @@ def run(
         scene_output = compiled.spec.simulation.output
         target = output or (Path(scene_output) if scene_output else default_output_path(compiled.spec.name))
         # before any work: a folder, an unknown format, an unwritable place, another run on it, a too-full disk
-        check_output(target, expected_bytes=expected_run_bytes(compiled, target))
+        try:
+            check_output(target, expected_bytes=expected_run_bytes(compiled, target))
+        except OutputError as exc:
+            if not allow_large:  # too much work is the first thing to say (a too-full disk often follows from it)
+                _check_planned_work(compiled, dt=dt, duration=duration, also=str(exc))
+            raise
+        if not allow_large:
+            _check_planned_work(compiled, dt=dt, duration=duration)
     except SceneError as exc:
         for issue in exc.issues:
             err.print(str(issue), markup=False)
         raise typer.Exit(EXIT_INVALID) from None
     except (KeyError, ValueError) as exc:
-        err.print(f"[red]error:[/] {escape(str(exc.args[0] if exc.args else exc))}")
+        given = {"dt": dt, "duration": duration, "integrator": integrator, "record_every": record_every}
+        message = _name_the_option(str(exc.args[0] if exc.args else exc), {**given, "tolerance": tolerance})
+        err.print(f"[red]error:[/] {escape(message)}")
         raise typer.Exit(EXIT_INVALID) from None
 
     for warning in compiled.warnings:
@@ -126,6 +141,32 @@ def run(
     if summary.status == "interrupted":
         err.print(f"[yellow]{escape(summary.message)}[/]; the log up to that point is complete: {escape(str(target))}")
         raise typer.Exit(128 + received[-1] if received else EXIT_INTERRUPTED)
+
+
+def _name_the_option(message: str, given: dict[str, object]) -> str:
+    """An override's error as the option that gave it: run_settings says `dt=nan: why`; `--dt nan: why`."""
+    for key, value in given.items():
+        if value is not None and message.startswith(f"{key}="):
+            shown = f"{value:g}" if isinstance(value, float) else str(value)
+            return f"--{key.replace('_', '-')} {shown}: {message.split(': ', 1)[-1]}"
+    return message
+
+
+def _check_planned_work(compiled, *, dt: float | None, duration: float | None, also: str = "") -> None:  # noqa: ANN001
+    """ValueError when the run plans more than MAX_BODY_STEPS body-steps (steps x sub-steps x bodies),
+    naming the options that set the step count; `also`: another refusal to add to the same line."""
+    settings, bodies = compiled.settings, compiled.model.body_count
+    planned = settings.steps * settings.substeps * bodies
+    if planned <= MAX_BODY_STEPS:
+        return
+    options = [f"--{name} {value:g}" for name, value in (("dt", dt), ("duration", duration)) if value is not None]
+    source = " and ".join(options) if options else "the scene's dt and duration"
+    raise ValueError(
+        f"{source}: the run plans {settings.steps:.3g} steps x {bodies:,} bod{'y' if bodies == 1 else 'ies'}"
+        + (f" x {settings.substeps} sub-steps" if settings.substeps > 1 else "")
+        + f" = {planned:.3g} body-steps, more than the {MAX_BODY_STEPS:.0e} rbsim runs without asking; "
+        "check the units of dt and duration, or pass --allow-large to run it anyway" + (f"; {also}" if also else "")
+    )
 
 
 @contextlib.contextmanager

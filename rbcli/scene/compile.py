@@ -131,13 +131,69 @@ def run_settings(
     contact: ContactSummary | None = None,
 ) -> RunSettings:
     """The scene's run settings with the given overrides applied: the one place overrides meet the scene.
-    contact: the compiled contacts' summary, whose stable step sets `contact.substeps: auto`."""
+    contact: the compiled contacts' summary, whose stable step sets `contact.substeps: auto`.
+
+    Every value, given or the scene's, passes the checks the scene loader makes (load.py `_simulation`):
+    dt and duration positive and finite, duration / dt a finite number of at least one step, a known
+    integrator, a positive finite tolerance, record_every a whole number >= 1. A failing override raises
+    ValueError whose message starts with `<keyword>=<value>: ` (`dt=nan: ...`), so a command line can name
+    its option instead; a failing scene value (a SceneSpec built in code) starts with `simulation.<key>=`.
+    """
     sim = spec.simulation
+
+    def refuse(key: str, value: object, reason: str) -> ValueError:
+        given = dict(dt=dt, duration=duration, integrator=integrator, record_every=record_every, tolerance=tolerance)
+        name = key if given.get(key) is not None else f"simulation.{key}"
+        return ValueError(f"{name}={value!r}: {reason}")
+
+    def number(key: str, value: object) -> float:
+        """A positive, finite float (bool and non-numbers refused)."""
+        try:
+            x = float(value) if not isinstance(value, bool | str) else math.nan  # type: ignore[arg-type]
+        except (TypeError, ValueError):
+            x = math.nan
+        if not (math.isfinite(x) and x > 0.0):
+            unit = "" if key == "tolerance" else " of seconds"
+            raise refuse(key, value, f"must be a positive, finite number{unit}")
+        return x
+
+    dt_value = number("dt", dt if dt is not None else sim.dt)
+    duration_value = number("duration", duration if duration is not None else sim.duration)
+    with np.errstate(all="ignore"):
+        planned = float(np.float64(duration_value) / np.float64(dt_value))
+    blame = "dt" if dt is not None or duration is None else "duration"
+    if not math.isfinite(planned):
+        raise refuse(blame, dt_value if blame == "dt" else duration_value, "duration / dt overflows float64")
+    if planned < 1.0 - 1e-9:
+        raise refuse(
+            blame,
+            dt_value if blame == "dt" else duration_value,
+            f"dt = {dt_value:g} s is longer than duration = {duration_value:g} s (at least one step is needed)",
+        )
+    every = record_every if record_every is not None else sim.record.every
+    try:
+        whole = not isinstance(every, bool | str) and int(every) == every >= 1
+    except (TypeError, ValueError, OverflowError):
+        whole = False
+    if not whole:
+        raise refuse("record_every", every, "must be a whole number of steps, at least 1")
+    name = integrator if integrator is not None else sim.integrator
+    from rbcli.physics.integrators import integrator_names
+
+    known = integrator_names()
+    if name not in known:
+        from rbcli.scene.issues import did_you_mean
+
+        hint = did_you_mean(str(name), known)
+        guess = f" (did you mean {hint!r}?)" if hint else ""
+        raise refuse("integrator", name, f"unknown integrator{guess}; one of {', '.join(known)}")
+    if tolerance is not None or sim.tolerance is not None:
+        number("tolerance", tolerance if tolerance is not None else sim.tolerance)
     settings = RunSettings(
-        dt=float(dt if dt is not None else sim.dt),
-        steps=step_count(duration if duration is not None else sim.duration, dt if dt is not None else sim.dt),
-        integrator=integrator or sim.integrator,
-        record_every=int(record_every or sim.record.every),
+        dt=dt_value,
+        steps=step_count(duration_value, dt_value),
+        integrator=name,
+        record_every=int(every),
         streams=tuple(sim.record.streams),
         seed=sim.seed,
         compression=compression or sim.record.compression,
@@ -155,8 +211,6 @@ def run_settings(
                 "adaptive stepping (a tolerance) does not run contact yet: contact forces are not smooth, so "
                 "give a fixed dt (and contact.substeps: auto)"
             )
-    if settings.dt <= 0 or not math.isfinite(settings.dt):
-        raise SceneError([SceneIssue(None, f"dt must be a positive number of seconds, got {settings.dt}")])
     if settings.tolerance is not None:
         from rbcli.physics.integrators import get_integrator
 
