@@ -8,15 +8,16 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from types import FrameType
 
 import typer
 
 EXIT_INVALID = 1
 EXIT_DIVERGED = 3
 EXIT_INTERRUPTED = 130  # 128 + the signal's number: 130 SIGINT, 143 SIGTERM, 129 SIGHUP
-_STOP_SIGNALS = ("SIGTERM", "SIGHUP")  # handled as Ctrl-C is; SIGINT is the run loop's own
+_STOP_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")  # each ends a run at a step boundary (_stop_signals)
 COMPRESSIONS = ("zstd", "lz4", "none")  # as schemas/scene.schema.json's record.compression
 # Planned work above which `run` asks for --allow-large: 1e10 body-steps is hours on one core at the
 # rates of docs/performance.md; a mistyped --dt or --duration (1e-300, 1e9) plans far more.
@@ -59,7 +60,6 @@ def run(
         check_output,
         default_output_path,
         expected_run_bytes,
-        partial_path,
     )
     from rbcli.scene.spec import SceneError
 
@@ -104,18 +104,28 @@ def run(
     for warning in compiled.warnings:
         err.print(str(warning), markup=False)
     _warm_up_kernels(compiled, err, quiet)
+    with _stop_signals() as stops:  # the whole rest of the command: a late signal never cuts the log short
+        _run_and_report(compiled, target, err, quiet, stops)
+
+
+def _run_and_report(compiled, target: Path, err, quiet: bool, stops: _Stops) -> None:  # noqa: ANN001
+    """Run to `target`, then say how the run ended (one line for an interruption: where the log is and up
+    to which step and time it holds); raises typer.Exit with the exit status."""
+    from rich.markup import escape
+
+    from rbcli.record.output_file import OutputError, partial_path
+
     try:
-        with _terminate_as_interrupt() as received:
-            summary, wall = _run_with_progress(compiled, target, err, quiet)
+        summary, wall = _run_with_progress(compiled, target, err, quiet, stops)
     except OutputError as exc:  # the output was taken or went away after the check
         err.print(f"[red]error:[/] {escape(str(exc))}")
         raise typer.Exit(EXIT_INVALID) from None
-    except (OSError, ValueError, KeyboardInterrupt) as exc:  # the disk or a sink failed; Ctrl-C before the loop
+    except (OSError, ValueError, KeyboardInterrupt) as exc:  # the disk or a sink failed
         kept = partial_path(os.path.realpath(target))
         note = f"the log up to the stop is in {kept}" if kept.is_file() else f"{target} is unchanged"
         if isinstance(exc, KeyboardInterrupt):
             err.print(f"[yellow]interrupted[/]; {escape(note)}")
-            raise typer.Exit(128 + received[-1] if received else EXIT_INTERRUPTED) from None
+            raise typer.Exit(stops.exit_status()) from None
         err.print(f"[red]error:[/] {escape(f'{type(exc).__name__}: {exc}; {note}')}")
         raise typer.Exit(EXIT_INVALID) from None
     settings = compiled.settings
@@ -139,8 +149,12 @@ def run(
         )
         raise typer.Exit(EXIT_DIVERGED)
     if summary.status == "interrupted":
-        err.print(f"[yellow]{escape(summary.message)}[/]; the log up to that point is complete: {escape(str(target))}")
-        raise typer.Exit(128 + received[-1] if received else EXIT_INTERRUPTED)
+        # a Ctrl-C in the loop goes to the loop's own handler, so only SIGINT is missing from `received`
+        by = f" by {signal.Signals(stops.received[0]).name}" if stops.received else " by SIGINT"
+        err.print(
+            f"[yellow]{escape(summary.message)}{by}[/]; the log up to that point is complete: {escape(str(target))}"
+        )
+        raise typer.Exit(stops.exit_status())
 
 
 def _name_the_option(message: str, given: dict[str, object]) -> str:
@@ -169,31 +183,53 @@ def _check_planned_work(compiled, *, dt: float | None, duration: float | None, a
     )
 
 
+class _Stops:
+    """The stop signals a run received, and how they reach the run loop (see `_stop_signals`)."""
+
+    def __init__(self) -> None:
+        self.received: list[int] = []
+        self.handler: Callable[[int, FrameType | None], None] | None = None
+
+    def forward(self) -> None:
+        """Set the run loop's stop flag when the loop runs (its SIGINT handler is installed)."""
+        loop = signal.getsignal(signal.SIGINT)
+        if loop is not self.handler and callable(loop):
+            loop(signal.SIGINT, None)
+
+    def exit_status(self) -> int:
+        """128 + the first stop signal (130 SIGINT, 143 SIGTERM, 129 SIGHUP); 130 for Ctrl-C in the loop."""
+        return 128 + self.received[0] if self.received else EXIT_INTERRUPTED
+
+
 @contextlib.contextmanager
-def _terminate_as_interrupt() -> Iterator[list[int]]:
-    """SIGTERM (kill, a job scheduler's stop) and SIGHUP (a closed terminal) end the run as Ctrl-C does:
-    at the end of a chunk, with the log up to there complete and renamed into place. Yields the list of
-    signal numbers received, so the exit status can be 128 + that signal (143, 129)."""
-    received: list[int] = []
+def _stop_signals() -> Iterator[_Stops]:
+    """SIGINT (Ctrl-C), SIGTERM (kill, a job scheduler's or container's stop) and SIGHUP (a closed
+    terminal) end the run at the end of a chunk, with the log up to there complete and renamed into place.
+
+    - While the run loop runs, a signal sets its stop flag (the loop's own SIGINT handler).
+    - Before the loop (opening the output and the sinks), the stop waits for the end of the first chunk
+      (the progress callback forwards it), so a signal never lands half-way through opening a file.
+    - After the loop (finalising: the last blocks, the MCAP summary and index, the rename), a further
+      signal is recorded and ignored: it cannot cut the log short. Once a stop signal arrived, the stop
+      signals stay ignored when the block ends, until the process exits (SIGKILL still ends it).
+    A handler never raises, so no signal interrupts a file write half-way."""
+    stops = _Stops()
     if threading.current_thread() is not threading.main_thread():
-        yield received
+        yield stops
         return
 
-    def forward(signum, frame) -> None:  # noqa: ANN001
-        received.append(int(signum))
-        handler = signal.getsignal(signal.SIGINT)  # the run loop's flag while it runs
-        if callable(handler):
-            handler(signal.SIGINT, frame)
-        else:
-            raise KeyboardInterrupt
+    def handle(signum: int, frame: FrameType | None) -> None:
+        stops.received.append(int(signum))
+        stops.forward()
 
-    names = [name for name in _STOP_SIGNALS if hasattr(signal, name)]
-    previous = {name: signal.signal(getattr(signal, name), forward) for name in names}
+    stops.handler = handle
+    numbers = [getattr(signal, name) for name in _STOP_SIGNALS if hasattr(signal, name)]
+    previous = {number: signal.signal(number, handle) for number in numbers}
     try:
-        yield received
+        yield stops
     finally:
-        for name, handler in previous.items():
-            signal.signal(getattr(signal, name), handler)
+        for number, handler in previous.items():
+            signal.signal(number, signal.SIG_IGN if stops.received else handler)
 
 
 def _warm_up_kernels(compiled, err, quiet: bool) -> None:  # noqa: ANN001
@@ -208,12 +244,17 @@ def _warm_up_kernels(compiled, err, quiet: bool) -> None:  # noqa: ANN001
         timer.cancel()
 
 
-def _run_with_progress(compiled, target: Path, err, quiet: bool):  # noqa: ANN001, ANN202
+def _run_with_progress(compiled, target: Path, err, quiet: bool, stops: _Stops):  # noqa: ANN001, ANN202
     from rbcli.api import run_to_file
 
     started = time.perf_counter()
     if quiet or not sys.stderr.isatty():
-        summary = run_to_file(compiled, target)
+
+        def forward_stop(done: int, total: int) -> None:
+            if stops.received:  # a signal that came before the loop ran: stop after this chunk
+                stops.forward()
+
+        summary = run_to_file(compiled, target, progress=forward_stop)
         return summary, time.perf_counter() - started
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn  # only for the bar
 
@@ -223,6 +264,8 @@ def _run_with_progress(compiled, target: Path, err, quiet: bool):  # noqa: ANN00
         dt = compiled.settings.dt
 
         def progress(done: int, total: int) -> None:
+            if stops.received:
+                stops.forward()
             bar.update(task, completed=done, t=done * dt)
 
         summary = run_to_file(compiled, target, progress=progress)
