@@ -88,19 +88,15 @@ def run_batch(job: SweepJob, variants: list[tuple[int, tuple[Any, ...]]]) -> lis
 
 
 def warm_up(job: SweepJob, values: tuple[Any, ...]) -> float:
-    """Load (or compile) the kernels a variant needs in this process, running none of its steps; returns
-    the seconds it took (the benchmark reports worker warm-up apart from the sweep)."""
-    from rbcli.runner.simulation import Simulation
-    from rbcli.scene.compile import compile_scene
-    from rbcli.scene.load import load_scene_text
-    from rbcli.scene.spec import SceneError
+    """Load (or compile) every kernel a variant needs in this process (the steps', the recorder's, the
+    exact solution's) by running it for two steps without a log; returns the seconds it took (reported
+    apart from the sweep, as the cluster's start-up is)."""
     from rbcli.sweeps.load import variant_text
 
     started = time.perf_counter()
-    with contextlib.suppress(SceneError):  # the variant's own row will say what is wrong with it
+    with contextlib.suppress(Exception):  # the variant's own row will say what is wrong with it
         text = variant_text(job.scene_data, tuple(zip(job.paths, values, strict=True)))
-        spec = load_scene_text(text, job.scene_file, job.scene_dir)
-        Simulation(compile_scene(spec)).step(0)
+        _run(replace(job, log_dir=None), -1, text, steps=2)
     return time.perf_counter() - started
 
 
@@ -157,7 +153,8 @@ def _base_document(text: str, file: str) -> Any:
     return parse_located_yaml(text, file)
 
 
-def _run(job: SweepJob, index: int, text: str) -> dict[str, Any]:
+def _run(job: SweepJob, index: int, text: str, steps: int | None = None) -> dict[str, Any]:
+    """The variant's row (steps: run only this many, the warm-up's)."""
     from rbcli.analysis.errors import (
         admits_exact_solution,
         conserved_quantities,
@@ -171,7 +168,7 @@ def _run(job: SweepJob, index: int, text: str) -> dict[str, Any]:
     from rbcli.scene.load import load_scene_text
 
     spec = load_scene_text(text, job.scene_file, job.scene_dir)
-    compiled = compile_scene(spec)
+    compiled = compile_scene(spec, duration=None if steps is None else steps * spec.simulation.dt)
     settings = compiled.settings
     every = settings.record_every if job.frames is None else max(1, settings.steps // (job.frames - 1))
     streams = METRIC_STREAMS if job.log_dir is None else tuple(dict.fromkeys((*settings.streams, *METRIC_STREAMS)))

@@ -50,7 +50,7 @@ class SweepRun:
     resumed: int  # finished before this run (skipped)
     ran: int
     failed: int  # rows of this run whose status is not "completed"
-    wall_s: float  # from the first variant submitted to the last row (start-up and warm-up not included)
+    wall_s: float  # from the first variant started to the last row (cluster start-up, kernel warm-up excluded)
     cluster: ClusterInfo | None = None
     complete: bool = True
 
@@ -152,6 +152,8 @@ def run_sweep(
     started = time.perf_counter()
     try:
         if scheduler == SERIAL:
+            if pending:  # as each Dask worker is warmed before the timing starts
+                warm_up(job, pending[0][1])
             if on_start is not None:
                 on_start(total, len(done), None)
             started = time.perf_counter()
@@ -191,7 +193,6 @@ def _run_serial(job: SweepJob, pending: list[tuple[int, tuple[Any, ...]]], keep:
     """Every pending variant in this process, in order; one part per batch (sized as Dask's would be)."""
     if not pending:
         return
-    warm_up(job, pending[0][1])
     rest = pending
     if batch is None:
         first = run_batch(job, rest[:1])
