@@ -45,6 +45,9 @@ from mcap_protobuf.schema import build_file_descriptor_set
 from rbcli.record.frame import FrameBlock, RunHeader, RunSummary
 from rbcli.record.mcap_writer import COMPRESSIONS, MAX_ID, ZSTD_LEVEL, McapChunkWriter
 
+# A run's file is fsynced after a chunk when the last fsync is this old [s] (docs/robustness.md "Crashes").
+FSYNC_SECONDS = 1.0
+
 TOPIC_STATE = "/rbsim/state"
 TOPIC_TF = "/tf"
 TOPIC_INVARIANTS = "/rbsim/invariants"
@@ -363,6 +366,11 @@ class SinkMcap:
 
     compression: "zstd" (default, at mcap_writer.ZSTD_LEVEL), "lz4" or "none"; chunk_size: uncompressed
     bytes per chunk. The file is written by `mcap_writer.McapChunkWriter` (why: its docstring).
+
+    What a killed run leaves: a chunk is closed when it reaches chunk_size and at the end of every block
+    the runner hands over (and after `open`'s records), each written chunk is flushed to the operating
+    system at once and the file fsynced at most every FSYNC_SECONDS; so the file holds every block written
+    before the kill but the one being written (`read_mcap_prefix` and `rbsim recover` read it back).
     """
 
     def __init__(self, path: str | Path, *, compression: str = "zstd", chunk_size: int = 4 * 1024 * 1024) -> None:
@@ -381,7 +389,11 @@ class SinkMcap:
         self._header = header
         self._file = open(self.path, "wb")  # closed in close()
         w = self._writer = McapChunkWriter(
-            self._file, compression=self._compression, chunk_size=self._chunk_size, background=True
+            self._file,
+            compression=self._compression,
+            chunk_size=self._chunk_size,
+            background=True,
+            fsync_seconds=FSYNC_SECONDS,
         )
         level = f" level {ZSTD_LEVEL}" if self._compression == "zstd" else ""
         library = f"rbsim/{header.rbsim_version} (rbcli.record.mcap_writer, {self._compression}{level})"
@@ -409,6 +421,7 @@ class SinkMcap:
                 self._add(self._channel(particle_topic(name), PointCloud), 0, cloud)
             else:
                 self._add(shared, 0, cloud, sequence=i)  # the body index orders the shared channel's messages
+        w.flush_chunk()  # schemas, channels and clouds on disk before the first frame
 
     def _channel(self, topic: str, schema: Any, metadata: dict[str, str] | None = None) -> int:
         """Register a protobuf schema (a generated class or a FileDescriptorProto) and a channel on it."""
@@ -444,6 +457,7 @@ class SinkMcap:
             if particles is not None and self._ch_particles is not None:
                 cloud = _point_cloud(particles[k], WORLD_FRAME, ns[k]).SerializeToString()
                 self._add(self._ch_particles, ns[k], cloud, seq)
+        self._writer.flush_chunk()  # no frame waits in the open chunk for the next block
         self.frames_written += k_count
 
     def close(self, summary: RunSummary) -> None:

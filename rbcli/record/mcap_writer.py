@@ -23,6 +23,14 @@ encoding. The bytes are the same either way (each chunk is still compressed alon
 MAX_PENDING chunks wait, so memory stays bounded, and a worker's error is raised in the caller at its
 next call.
 
+Durability (what a killed or crashed run leaves, docs/robustness.md "Crashes"): every file task ends by
+flushing the stream to the operating system, so a process killed (SIGKILL, a crash) loses nothing that a
+task wrote, and each chunk is self-contained, so a non-seeking reader recovers every chunk written before
+the cut (`mcap_sink.read_mcap_prefix`). With `fsync_seconds` set (SinkMcap: FSYNC_SECONDS), the file is
+also fsynced after a task when the last fsync is that old, so a power cut or kernel crash loses at most
+that much wall time of written chunks. `flush_chunk()` closes the open chunk early (SinkMcap does so at the
+end of every block of frames, so no frame waits in the open chunk for the next block).
+
 Chunks carry the CRC-32 of their uncompressed records; the data-section CRC is 0 ("not computed"), as
 the library writes it by default. The tests read every file back with the `mcap` library's readers
 (indexed and linear, CRCs validated) and compare it with the library Writer's file of the same messages.
@@ -30,7 +38,9 @@ the library writes it by default. The tests read every file back with the `mcap`
 
 from __future__ import annotations
 
+import os
 import struct
+import time
 import zlib
 from collections import defaultdict, deque
 from collections.abc import Callable
@@ -98,7 +108,9 @@ class McapChunkWriter:
     """Writes an MCAP file to a binary stream; the calls mirror `mcap.writer.Writer`'s.
 
     compression: "zstd" (at ZSTD_LEVEL), "lz4" or "none"; chunk_size: uncompressed bytes per chunk;
-    background: do the file work in a worker thread (see the module docstring).
+    background: do the file work in a worker thread; fsync_seconds: fsync the file after a file task
+    when the last fsync is at least this old (None: never; the stream is flushed after every task
+    either way). See the module docstring.
     """
 
     def __init__(
@@ -108,6 +120,7 @@ class McapChunkWriter:
         compression: str = "zstd",
         chunk_size: int = 4 * 1024 * 1024,
         background: bool = False,
+        fsync_seconds: float | None = None,
     ) -> None:
         if compression not in COMPRESSIONS:
             raise ValueError(f"compression {compression!r}: expected one of {', '.join(COMPRESSIONS)}")
@@ -131,6 +144,8 @@ class McapChunkWriter:
         self._chunk_start, self._chunk_end = _NO_TIME, -1
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="rbsim-mcap") if background else None
         self._pending: deque[Future[None]] = deque()
+        self._fsync_seconds = fsync_seconds
+        self._synced_at = time.monotonic()
 
     # --- the file ------------------------------------------------------------------------------------
 
@@ -142,11 +157,27 @@ class McapChunkWriter:
     def _task(self, fn: Callable[..., None], *args: Any) -> None:
         """Run a file task now, or queue it for the worker (waiting while MAX_PENDING are queued)."""
         if self._pool is None:
-            fn(*args)
+            self._run_task(fn, *args)
             return
         while self._pending and (self._pending[0].done() or len(self._pending) >= MAX_PENDING):
             self._pending.popleft().result()  # raises a failed task's error here
-        self._pending.append(self._pool.submit(fn, *args))
+        self._pending.append(self._pool.submit(self._run_task, fn, *args))
+
+    def _run_task(self, fn: Callable[..., None], *args: Any) -> None:
+        """A file task, then its bytes handed to the operating system (and fsynced when due)."""
+        fn(*args)
+        flush = getattr(self._stream, "flush", None)
+        if flush is not None:
+            flush()
+        if self._fsync_seconds is not None and time.monotonic() - self._synced_at >= self._fsync_seconds:
+            fileno = getattr(self._stream, "fileno", None)
+            if fileno is not None:
+                os.fsync(fileno())
+            self._synced_at = time.monotonic()
+
+    def flush_chunk(self) -> None:
+        """Close the open chunk now (it is written by a file task like a full one)."""
+        self._finish_chunk()
 
     def _drain(self) -> None:
         """Wait for every queued file task; raise the first failure."""

@@ -25,6 +25,9 @@ JUMP_FACTOR = 1e6
 # the floor, per kg of the scene: 1e6 J/kg is a speed of 1.4 km/s, beyond any scene rbsim is built for
 # (bodies at rest or kicked by an impulse grow from ~0 without tripping the guard)
 FLOOR_PER_KG = 1e6
+# the guard compares the recorded frames at multiples of this many steps (rounded up to whole
+# recording intervals): a fixed grid, so a run stops at the same step however its chunks fall
+GUARD_STEPS = 1000
 FAST_SPIN = 0.5  # |omega| dt above which explicit Euler's energy gain per step is large
 EXPLICIT_EULER = ("euler-matrix", "euler-quat")
 
@@ -104,8 +107,8 @@ def likely_cause(compiled: CompiledScene, body: int) -> str:
 
 class EnergyGuard:
     """Stops a run whose bodies' kinetic energies jump by more than JUMP_FACTOR between two checks and
-    above the floor (FLOOR_PER_KG x the body's mass), checked at chunk boundaries (O(bodies) numpy,
-    negligible beside a chunk)."""
+    above the floor (FLOOR_PER_KG x the body's mass); the runner checks recorded frames every
+    GUARD_STEPS steps (O(bodies) numpy per check, negligible beside the steps between)."""
 
     def __init__(self, compiled: CompiledScene) -> None:
         self.compiled = compiled

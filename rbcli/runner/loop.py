@@ -18,7 +18,7 @@ import numpy as np
 from rbcli._version import __version__
 from rbcli.physics.energy import INVARIANT_NAMES
 from rbcli.record.frame import RunHeader, RunSummary, Sink
-from rbcli.runner.divergence import JUMP_FACTOR, EnergyGuard, explain, likely_cause
+from rbcli.runner.divergence import GUARD_STEPS, JUMP_FACTOR, EnergyGuard, explain, likely_cause
 from rbcli.runner.recorder import Recorder
 from rbcli.scene.compile import CompiledScene
 
@@ -128,6 +128,7 @@ def run_simulation(
     start, total = state.step, state.step + steps
     recorder = Recorder(compiled, sinks, capacity, threaded=threaded)
     guard = EnergyGuard(compiled)
+    guard_every = every * max(1, -(-GUARD_STEPS // every))  # a multiple of every near GUARD_STEPS
     recorder.open(run_header(compiled, steps=steps, record_every=every))
     buf = recorder.buffer()
 
@@ -145,6 +146,7 @@ def run_simulation(
         return 0
 
     status, message = "completed", ""
+    stopped_at: int | None = None  # the step the guard stopped at (the state itself ran on to the chunk's end)
     try:
         frames = record_current(0)  # the current state is the first frame
         chunk_steps = max(1, min(steps, 64))
@@ -157,6 +159,7 @@ def run_simulation(
                     todo = min(max(every, todo - todo % every), total - state.step)
                 if frames == capacity:  # a chunk needs room for at least one frame
                     frames = hand_over(frames)
+                before = frames
                 done, frames, code = sim.advance(todo, every, buf, frames)
                 state.step += int(done)
                 elapsed = time.perf_counter() - started
@@ -168,15 +171,26 @@ def run_simulation(
                     why = explain(sim.compiled, state.x, state.q, state.P, state.L, t)
                     message = f"diverged at step {state.step}: {why}"
                     break
-                jumped = guard.check(state.q, state.P, state.L)
-                if jumped is not None:
+                # the energy guard looks at recorded frames on a fixed grid of steps, so where a run is
+                # stopped does not depend on the wall-clock-sized chunks (same scene, same log)
+                jump = None
+                for row in range(before, frames):
+                    if buf.step[row] % guard_every == 0:
+                        body = guard.check(buf.q[row], buf.P[row], buf.L[row])
+                        if body is not None:
+                            jump = (row, body)
+                            break
+                if jump is not None:
+                    row, body = jump
+                    frames = row  # the log ends at the last frame before the jump
                     status = "diverged"
-                    name = sim.compiled.model.body_names[jumped]
-                    energy = guard.previous[jumped] if guard.previous is not None else float("nan")
+                    name = sim.compiled.model.body_names[body]
+                    energy = guard.previous[body] if guard.previous is not None else float("nan")
+                    at = stopped_at = int(buf.step[row])
                     message = (
-                        f"diverged at step {state.step}: body '{name}': kinetic energy grew more than "
-                        f"{JUMP_FACTOR:.0e}-fold since the last check, to {energy:.3g} J at "
-                        f"t = {state.step * settings.dt:.6g} s; likely cause: {likely_cause(sim.compiled, jumped)}"
+                        f"diverged at step {at}: body '{name}': kinetic energy grew more than "
+                        f"{JUMP_FACTOR:.0e}-fold in {guard_every} steps, to {energy:.3g} J at "
+                        f"t = {at * settings.dt:.6g} s; likely cause: {likely_cause(sim.compiled, body)}"
                     )
                     break
                 if code == STATUS_STEP_TOO_SMALL:
@@ -219,8 +233,9 @@ def run_simulation(
             pass
         raise
     counts = sim.data.adaptive_counters
+    end = state.step if stopped_at is None else stopped_at
     summary = RunSummary(
-        status, state.step, recorder.frames_written, state.step * settings.dt, message,
+        status, end, recorder.frames_written, end * settings.dt, message,
         steps_accepted=None if counts is None else int(counts[0]),
         steps_rejected=None if counts is None else int(counts[1]),
     )  # fmt: skip

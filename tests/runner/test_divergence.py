@@ -88,3 +88,32 @@ def test_energy_guard_trips_on_a_jump_above_the_floor_only():
     assert 0.5 * speed**2 > max(JUMP_FACTOR * 0.5 * 50.0**2, FLOOR_PER_KG)
     s.P[1] = [0.0, 0.0, mass[1] * speed]
     assert guard.check(s.q, s.P, s.L) == 1
+
+
+RUNAWAY = """name: runaway
+simulation: {dt: 0.001, duration: 10, integrator: split2}
+bodies:
+  - {name: ball, particles: {positions: [[0, 0, 0]], masses: [1.0], radius: [0.05]}, position: [1, 0, 0]}
+forces:
+  - {type: field, per: mass, bodies: all, value: [0, 0, 0], gradient: [[100, 0, 0], [0, 0, 0], [0, 0, 0]]}
+"""
+
+
+def test_energy_guard_stops_at_the_same_step_however_the_chunks_fall(monkeypatch):
+    """x'' = 100 x grows as e^{10 t}: far from overflow (1e100 at t = 23 s) the guard stops it when its
+    kinetic energy has grown 1e6-fold above 1e6 J/kg; the step is on the guard's fixed grid, whatever the
+    (wall-clock-sized) chunks, and the log ends just before it."""
+    import rbcli.runner.loop as loop
+    from rbcli.record.memory_sink import SinkMemory
+
+    results = []
+    for chunk_seconds in (3e-4, 10.0):  # chunks of a few hundred steps vs everything in a few chunks
+        monkeypatch.setattr(loop, "CHUNK_SECONDS", chunk_seconds)
+        sink = SinkMemory()
+        summary = loop.run(rbcli.prepare(load_scene_text(RUNAWAY)), [sink])
+        trajectory = sink.trajectory()
+        results.append((summary.status, summary.steps, trajectory.step[-1], summary.message))
+    assert results[0] == results[1], results
+    status, steps, last, message = results[0]
+    assert status == "diverged" and steps % 1000 == 0 and last == steps - 1
+    assert "body 'ball': kinetic energy grew" in message
