@@ -17,6 +17,7 @@ import typer
 from rbcli._version import __version__
 from rbcli.cli import info as _info
 from rbcli.cli import integrators as _integrators
+from rbcli.cli import recover as _recover
 from rbcli.cli import replay as _replay
 from rbcli.cli import run as _run
 from rbcli.cli import schema as _schema
@@ -52,6 +53,7 @@ app.command("run")(_run.run)
 app.command("validate")(_validate.validate)
 app.command("replay")(_replay.replay)
 app.command("info")(_info.info)
+app.command("recover")(_recover.recover)
 app.command("integrators")(_integrators.integrators)
 app.command("schema")(_schema.schema)
 app.command("study")(_study.study)

@@ -187,6 +187,23 @@ def _check_partial(path: Path, shown: str) -> None:
         os.close(fd)  # drops the lock
 
 
+def being_written(path: str | Path) -> bool:
+    """True when a running rbsim run holds the lock on `path` (a partial file it is still writing)."""
+    if fcntl is None:  # pragma: no cover
+        return False
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_CLOEXEC", 0))
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    finally:
+        os.close(fd)  # drops a lock taken here
+    return False
+
+
 def _leftover_message(partial: Path, shown: str) -> str:
     return (
         f"output {shown!r}: {str(partial)!r} is left from an earlier run that did not finish (killed or "

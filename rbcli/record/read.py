@@ -13,6 +13,7 @@ from __future__ import annotations
 import errno
 import json
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -197,7 +198,8 @@ def read_trajectory(path: str | Path) -> Trajectory:
     Neither gives back `particle_position` (None; world particles are x + R(q) offset, from
     `header.body_particle_offset`), nor, for an adaptive run, the accepted/rejected step counts. A file
     without the run's summary record reads as far as it goes, with `summary` None and `status` "unknown";
-    an .mcap cut off before its summary section (a killed process) is not readable (ValueError).
+    an .mcap cut off before its summary section (a killed process) is not readable (ValueError):
+    `rbsim recover` rewrites what it holds as a complete file (`record.mcap_sink.recover_mcap`).
     Invariants appear only if the "invariants" stream was recorded.
 
     Raises FileNotFoundError for a missing file and ValueError (the file named) for another extension
@@ -327,8 +329,9 @@ class RunInfo:
             f"scene        {self.scene_name}",
             f"bodies       {len(self.body_names)}: {shown}",
             f"integrator   {self.integrator}, dt = {self.dt:g} s",
-            f"duration     {self.t_end:g} s of {self.duration:g} s simulated; {self.steps} steps, "
-            f"{self.frames} frames recorded (every {self.record_every})",
+            f"duration     {self.t_end:g} s of {self.duration:g} s simulated; "
+            + (f"{self.steps} steps, " if self.steps >= 0 else "steps unknown, ")
+            + f"{self.frames} frames recorded (every {self.record_every})",
             f"status       {self.status}" + (f": {self.message}" if self.message else ""),
             f"written by   rbsim {self.rbsim_version}",
         ]
@@ -343,33 +346,177 @@ class RunInfo:
 
 
 def summarize(path: str | Path) -> RunInfo:
-    """The `rbsim info` summary of a .mcap or .rrd; reads metadata and invariants, not body states."""
+    """The `rbsim info` summary of a .mcap or .rrd; reads metadata and invariants, not body states.
+
+    A file cut short (the partial a killed run leaves: no MCAP summary and index, an .rrd without its
+    end marker) is summarised from what it holds, with status "truncated" and how far it goes."""
     fmt = recording_format(path)
     if fmt == "mcap":
         from rbcli.record.mcap_sink import METADATA_RUN, METADATA_SUMMARY, read_mcap_contents, read_mcap_invariants
 
-        contents = read_mcap_contents(path)
+        try:
+            contents = read_mcap_contents(path)
+        except ValueError as exc:  # no summary or index: read it front to back
+            return _summarize_mcap_prefix(path, exc)
         meta, ending = contents.metadata.get(METADATA_RUN, {}), contents.metadata.get(METADATA_SUMMARY, {})
         t, _, invariants = read_mcap_invariants(path)
         frames = contents.message_counts.get("/rbsim/state", 0)
     else:
+        cut = rrd_cut(path)
+        if cut is not None:
+            return _summarize_rrd_prefix(path, *cut)
         run = read_rrd(path, bodies=False)
         meta, ending, t, invariants = run.metadata, run.summary, run.t, run.invariants
         frames = int(ending.get("frames_written", len(t)))
+    return _run_info(path, fmt, meta, ending, t, invariants, frames)
+
+
+def _run_info(
+    path: str | Path,
+    fmt: str,
+    meta: dict[str, str],
+    ending: dict[str, str],
+    t: np.ndarray,
+    invariants: dict[str, np.ndarray],
+    frames: int,
+) -> RunInfo:
+    dt = float(meta.get("dt", "nan"))
+    t_end = float(ending.get("t_end", t[-1] if len(t) else "nan"))
+    # without the run's summary record, the steps follow from the last recorded time (t = step dt)
+    steps = int(ending["steps"]) if "steps" in ending else (round(t_end / dt) if math.isfinite(t_end / dt) else -1)
     return RunInfo(
         path=Path(path),
         format=fmt,
         scene_name=meta.get("scene_name", "?"),
         body_names=tuple(_json_list(meta.get("body_names"))),
         integrator=meta.get("integrator", "?"),
-        dt=float(meta.get("dt", "nan")),
+        dt=dt,
         duration=float(meta.get("duration", "nan")),
         record_every=int(meta.get("record_every", "1")),
         frames=frames,
-        steps=int(ending.get("steps", "-1")),
-        t_end=float(ending.get("t_end", t[-1] if len(t) else "nan")),
+        steps=steps,
+        t_end=t_end,
         status=ending.get("status", "unknown (no summary record: was the recording cut short?)"),
         message=ending.get("message", ""),
         rbsim_version=meta.get("rbsim_version", "?"),
         drifts=[invariant_drift(n, s) for n, s in invariants.items()],
     )
+
+
+def _truncated_note(path: str | Path, frames: int, steps: int | None, t_end: float | None, recover: bool) -> str:
+    if not frames or t_end is None:
+        held = "no complete frame is readable"
+    else:
+        upto = f"step {steps} (t = {t_end:.6g} s)" if steps is not None else f"t = {t_end:.6g} s"
+        held = f"{frames} complete frames up to {upto} are readable"
+    tail = f"; `rbsim recover {path} -o FIXED.mcap` writes them as a complete file" if recover and frames else ""
+    return f"{held}{tail}"
+
+
+def _summarize_mcap_prefix(path: str | Path, error: Exception) -> RunInfo:
+    """A .mcap without a readable summary, read front to back (record.mcap_sink.read_mcap_prefix)."""
+    from rbcli.record.mcap_sink import METADATA_RUN, METADATA_SUMMARY, read_mcap_prefix
+
+    try:
+        prefix = read_mcap_prefix(path)
+    except ValueError:  # not an MCAP file at all: the indexed reader's error says more
+        raise error from None
+    meta = prefix.metadata.get(METADATA_RUN, {})
+    ending = dict(prefix.metadata.get(METADATA_SUMMARY, {}))
+    t = prefix.invariant_time
+    what = "truncated" if not prefix.complete else "unindexed"
+    why = (
+        f"{prefix.problem} (a run killed or crashed before writing its summary and index)"
+        if not prefix.complete
+        else f"its summary section is unreadable ({error})"
+    )
+    ending.update(
+        status=what,
+        message=f"{why}; " + _truncated_note(path, prefix.frames, prefix.last_step, prefix.last_time, True),
+    )
+    if prefix.last_step is not None and prefix.last_time is not None:
+        ending.update(steps=str(prefix.last_step), t_end=repr(prefix.last_time))
+    else:
+        ending.update(steps="0", t_end="0.0")
+    return _run_info(path, "mcap", meta, ending, t, prefix.invariants, prefix.frames)
+
+
+# An .rrd file: a 12-byte header (b"RRF2", version, options), then messages of a u64 kind and a u64
+# payload length, little-endian; kind 0 ends the stream (its payload is the footer, rerun's manifest),
+# written when the recording stream is closed. A killed run's file has no end and is often cut inside
+# a message, which rerun's reader refuses ("Message payload ... exceeds file size").
+_RRD_HEADER = 12
+_RRD_MESSAGE_HEAD = 16
+
+
+def rrd_cut(path: str | Path) -> tuple[int, int, str] | None:
+    """None for an .rrd that ends as rerun ends its files; else (bytes in the file, bytes of whole
+    messages, why it is cut) for one cut short (a killed run). ValueError when it is not an .rrd."""
+    import struct
+
+    with open(path, "rb") as f:
+        size = os.fstat(f.fileno()).st_size
+        if f.read(4) != b"RRF2":
+            raise ValueError("not an .rrd file (it does not start with 'RRF2')")
+        position = _RRD_HEADER
+        f.seek(position)
+        while True:
+            head = f.read(_RRD_MESSAGE_HEAD)
+            if len(head) < _RRD_MESSAGE_HEAD:
+                return size, position, f"the file ends after {position:,} bytes without rerun's end marker"
+            kind, length = struct.unpack("<QQ", head)
+            if kind == 0:
+                return None  # the end marker: a complete file
+            if position + _RRD_MESSAGE_HEAD + length > size:
+                return (
+                    size,
+                    position,
+                    (
+                        f"the message at byte {position:,} is cut short: it needs "
+                        f"{_RRD_MESSAGE_HEAD + length:,} bytes, the file ends {size - position:,} bytes into it"
+                    ),
+                )
+            position += _RRD_MESSAGE_HEAD + length
+            f.seek(position)
+
+
+def _summarize_rrd_prefix(path: str | Path, size: int, readable: int, problem: str) -> RunInfo:
+    """An .rrd cut short: its whole messages copied to a temporary file that rerun's reader takes."""
+    import shutil
+    import tempfile
+    import warnings
+
+    with tempfile.TemporaryDirectory(prefix="rbsim-info-") as folder:
+        copy = Path(folder) / "prefix.rrd"
+        with open(path, "rb") as src, open(copy, "wb") as dst:
+            remaining = readable
+            while remaining > 0:
+                block = src.read(min(remaining, 1 << 22))
+                if not block:
+                    break
+                dst.write(block)
+                remaining -= len(block)
+        with warnings.catch_warnings():  # "RRD file has no footer/manifest": expected here
+            warnings.simplefilter("ignore")
+            run = read_rrd(copy, bodies=False)
+            frames = len(run.t)
+            if not run.invariants:  # no invariants stream: count the frames from the bodies
+                try:
+                    frames = read_rrd(copy).frames
+                except ValueError:  # a cut in the middle of a frame's bodies
+                    frames = 0
+        shutil.rmtree(folder, ignore_errors=True)
+    meta = run.metadata
+    ending = dict(run.summary)
+    dt = float(meta.get("dt", "nan"))
+    t_end = float(run.t[-1]) if len(run.t) else None
+    steps = round(t_end / dt) if t_end is not None and math.isfinite(t_end / dt) else None
+    note = _truncated_note(path, frames, steps, t_end, False)
+    ending.update(
+        status="truncated",
+        message=f"{problem} ({readable:,} of {size:,} bytes are whole messages; a run killed or crashed before "
+        f"closing its file); {note}",
+    )
+    if steps is not None and t_end is not None:
+        ending.update(steps=str(steps), t_end=repr(t_end))
+    return _run_info(path, "rrd", meta, ending, run.t, run.invariants, frames)
