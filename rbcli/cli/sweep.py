@@ -1,8 +1,9 @@
 """`rbsim sweep SWEEP.yaml`: run every variant of a sweep on Dask and gather one Parquet table.
 
 Exit status: 0 when every variant has a row (variants that diverged or failed are rows too, with their
-status and message), 1 for an invalid sweep file or an output folder that cannot take it, 130 when
-interrupted (the finished batches are kept: run the same command again to resume).
+status and message), 1 for an invalid sweep file, an output folder that cannot take it or a scheduler
+that cannot be reached, 130 when interrupted (the finished batches are kept: run the same command again
+to resume).
 """
 
 from __future__ import annotations
@@ -23,19 +24,19 @@ EXIT_INTERRUPTED = 130
 def sweep(
     file: Path = typer.Argument(..., help="Sweep file (YAML): a base scene and the axes to vary (docs/sweeps.md)."),
     scheduler: str | None = typer.Option(
-        None, "--scheduler", help="Address of a running Dask scheduler (tcp://host:8786) [default: a local cluster]."
+        None, "--scheduler", help="Address of a running Dask scheduler (tcp://host:8786) (default: a local cluster)."
     ),
     workers: int | None = typer.Option(
-        None, "--workers", "-w", min=1, help="Worker processes of the local cluster [default: one per CPU]."
+        None, "--workers", "-w", min=1, help="Worker processes of the local cluster (default: one per CPU)."
     ),
     serial: bool = typer.Option(False, "--serial", help="Run the variants one by one in this process (no Dask)."),
     batch: int | None = typer.Option(
-        None, "--batch", min=1, help="Variants per task [default: the file's batch, else about 0.5 s of work]."
+        None, "--batch", min=1, help="Variants per task (default: the file's batch, else about 0.5 s of work)."
     ),
-    output: Path | None = typer.Option(None, "--output", "-o", help="Results folder [default: outputs/<name>]."),
+    output: Path | None = typer.Option(None, "--output", "-o", help="Results folder (default: outputs/<name>)."),
     fresh: bool = typer.Option(False, "--fresh", help="Discard the folder's earlier results instead of resuming."),
     logs: bool | None = typer.Option(
-        None, "--logs/--no-logs", help="Write each variant's recording to <folder>/logs [default: the file's]."
+        None, "--logs/--no-logs", help="Write each variant's recording to <folder>/logs (default: the file's)."
     ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
 ) -> None:
@@ -77,6 +78,12 @@ def sweep(
     except SweepOutputError as exc:
         progress.stop()
         err.print(f"[red]error:[/] {escape(str(exc))}")
+        raise typer.Exit(EXIT_INVALID) from None
+    except (OSError, TimeoutError) as exc:  # no scheduler at that address, or no workers joined it
+        progress.stop()
+        where = f"the Dask scheduler at {scheduler}" if scheduler else "the local Dask cluster"
+        err.print(f"[red]error:[/] cannot run on {escape(where)}: {escape(f'{type(exc).__name__}: {exc}')}")
+        err.print("the variants finished so far are kept; run the same command again to resume", markup=False)
         raise typer.Exit(EXIT_INVALID) from None
     except KeyboardInterrupt:
         progress.stop()
