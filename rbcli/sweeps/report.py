@@ -65,13 +65,15 @@ def describe(table: pa.Table, path: str | Path | None = None) -> str:
     counts = status_counts(table)
     lines.append("status:     " + ", ".join(f"{n} {status}" for status, n in counts.most_common()))
     completed = table.filter(pa.compute.equal(table.column("status"), "completed"))
+    width = max(len(label) for _, label in SUMMARY_METRICS) + 1
+    metrics = []
     for column, label in SUMMARY_METRICS:
-        if column not in completed.column_names:
-            continue
         values = sorted(v for v in completed.column(column).to_pylist() if v is not None)
         if values:
             median = values[len(values) // 2]
-            lines.append(f"{label + ':':<11} min {values[0]:.3g}, median {median:.3g}, max {values[-1]:.3g}")
+            metrics.append(f"  {label + ':':<{width}} {values[0]:.3g}, {median:.3g}, {values[-1]:.3g}")
+    if metrics:
+        lines += ["completed variants (min, median, max):", *metrics]
     extra = [c for c in table.column_names if c not in RESULT_SCHEMA.names and c not in _axis_columns(meta)]
     if extra:
         lines.append("other:      " + ", ".join(extra))

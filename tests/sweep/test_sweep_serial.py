@@ -131,6 +131,7 @@ def test_sweep_command_and_info_on_the_table(spring_sweep, tmp_path):
     assert info.exit_code == 0, info.output
     assert "variants:   6 of 6 finished" in info.output
     assert "status:     4 completed, " in info.output
+    assert "completed variants (min, median, max):" in info.output and "  energy drift: " in info.output
     assert "variant 4 (forces[0].stiffness = 1e+06, simulation.integrator = split2): diverged" in info.output
     broken = tmp_path / "broken.parquet"
     broken.write_bytes(b"not parquet")
