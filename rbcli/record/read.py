@@ -481,10 +481,14 @@ def rrd_cut(path: str | Path) -> tuple[int, int, str] | None:
 
 
 def _summarize_rrd_prefix(path: str | Path, size: int, readable: int, problem: str) -> RunInfo:
-    """An .rrd cut short: its whole messages copied to a temporary file that rerun's reader takes."""
-    import shutil
+    """An .rrd cut short: its whole messages copied to a temporary file that rerun's reader takes. The
+    complete frames are those every body entity that reached the file holds (the step timeline says
+    which step each is); the run's parameters may be missing (rerun writes them when its batcher
+    flushes), and then so are the body names and dt."""
     import tempfile
     import warnings
+
+    from rbcli.record.rerun_sink import read_rrd_file
 
     with tempfile.TemporaryDirectory(prefix="rbsim-info-") as folder:
         copy = Path(folder) / "prefix.rrd"
@@ -498,25 +502,34 @@ def _summarize_rrd_prefix(path: str | Path, size: int, readable: int, problem: s
                 remaining -= len(block)
         with warnings.catch_warnings():  # "RRD file has no footer/manifest": expected here
             warnings.simplefilter("ignore")
-            run = read_rrd(copy, bodies=False)
-            frames = len(run.t)
-            if not run.invariants:  # no invariants stream: count the frames from the bodies
-                try:
-                    frames = read_rrd(copy).frames
-                except ValueError:  # a cut in the middle of a frame's bodies
-                    frames = 0
-        shutil.rmtree(folder, ignore_errors=True)
-    meta = run.metadata
-    ending = dict(run.summary)
+            contents = read_rrd_file(copy)
+    meta = contents.properties.get("rbsim", {})
+    ending = dict(contents.properties.get("rbsim.summary", {}))
+    invariants = contents.invariants
+    inv_time = next(iter(contents.invariant_time.values()), np.zeros(0))
+    if contents.bodies is not None:  # the one-entity layout: every body in each row
+        steps_seen, times = contents.bodies.step, contents.bodies.time
+    elif contents.body_step:  # an entity per body: the frames they all hold
+        common = min(len(s) for s in contents.body_step.values())
+        entity = next(iter(contents.body_step))
+        steps_seen, times = contents.body_step[entity][:common], contents.body_time[entity][:common]
+    else:
+        steps_seen, times = np.zeros(0, dtype=np.int64), inv_time
+    frames = len(times)
+    t_end = float(times[-1]) if frames else None
     dt = float(meta.get("dt", "nan"))
-    t_end = float(run.t[-1]) if len(run.t) else None
-    steps = round(t_end / dt) if t_end is not None and math.isfinite(t_end / dt) else None
+    if len(steps_seen):
+        steps: int | None = int(steps_seen[-1])
+    else:
+        steps = round(t_end / dt) if t_end is not None and math.isfinite(t_end / dt) else None
     note = _truncated_note(path, frames, steps, t_end, False)
     ending.update(
         status="truncated",
         message=f"{problem} ({readable:,} of {size:,} bytes are whole messages; a run killed or crashed before "
         f"closing its file); {note}",
     )
-    if steps is not None and t_end is not None:
-        ending.update(steps=str(steps), t_end=repr(t_end))
-    return _run_info(path, "rrd", meta, ending, run.t, run.invariants, frames)
+    if t_end is not None:
+        ending.update(t_end=repr(t_end))
+    if steps is not None:
+        ending.update(steps=str(steps))
+    return _run_info(path, "rrd", meta, ending, inv_time, invariants, frames)

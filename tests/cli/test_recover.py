@@ -180,3 +180,21 @@ def test_recover_a_complete_file_and_a_partial_onto_its_own_target(tmp_path):
     recorded = rbcli.read_recording(done)
     assert recorded.status == "completed" and recorded.step.tolist() == list(range(51))
     assert partial.exists()  # never removed
+
+
+def test_a_killed_runs_rrd_is_reported_truncated_with_what_it_holds(tmp_path, grid_scene):
+    """rerun's reader refuses an .rrd cut inside a message ("payload exceeds file size") and one without
+    its end marker printed "-1 steps": info now reads the whole messages and says how far they go (from
+    the step timeline of the body transforms: the run's parameters reach an .rrd only when rerun's
+    batcher flushes the logs of SinkRerun.open, often seconds into the run)."""
+    out = tmp_path / "run.rrd"
+    proc = start_run(grid_scene, out, "-q", min_bytes=2_000_000)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=10)
+    result = runner.invoke(app, ["info", str(partial_path(out))])
+    assert result.exit_code == 0, result.output
+    assert "status       truncated: " in result.output and "a run killed or crashed" in result.output
+    assert "-1 steps" not in result.output and "Warning" not in result.output
+    match = re.search(r"; (\d+) steps, (\d+) frames recorded", result.output)
+    assert match and int(match[2]) > 0 and int(match[1]) == int(match[2]) - 1, result.output
+    assert f"{match[2]} complete frames up to step {match[1]}" in result.output
