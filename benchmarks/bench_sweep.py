@@ -113,6 +113,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer variants and steps (a smoke run)")
     parser.add_argument("--repeat", type=int, default=1, help="runs of each configuration, the fastest kept")
+    parser.add_argument("--only", choices=("flip", "pile"), help="run one of the two sweeps")
     args = parser.parse_args()
     flip_scene = REPO / "scenes" / "verification" / "intermediate_axis.yaml"
     pile_scene = REPO / "scenes" / "contact" / "sphere_pile.yaml"
@@ -123,6 +124,8 @@ def main() -> None:
     results = []
     with tempfile.TemporaryDirectory() as folder:
         for name, text in cases.items():
+            if args.only and name != args.only:
+                continue
             results.append(measure(name, text, Path(folder), args.repeat))
     print("| sweep | variants | serial [s] | 1 worker [s] | 2 workers [s] | speed-up (2) | overhead (1) "
           "| overhead / variant [ms] | start-up (2) [s] | warm-up (2) [s] |")  # fmt: skip
