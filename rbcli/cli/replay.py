@@ -2,17 +2,24 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
+import signal
+import socket
 import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
 EXIT_INVALID = 1
-WEB_PORT = 9090
+WEB_PORT = 9090  # the web viewer's HTTP port (rerun's default)
+GRPC_PORT = 9876  # the gRPC server the web viewer reads the recording from (rerun's default)
+_STOP_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
+STOP_GRACE_SECONDS = 5.0  # how long the viewer gets to exit after SIGTERM before SIGKILL
 
 
 def has_display() -> bool:
@@ -28,8 +35,13 @@ def replay(
         bool, typer.Option("--web", help=f"Serve a web viewer on http://127.0.0.1:{WEB_PORT} instead of a window.")
     ] = False,
     save: Annotated[Path | None, typer.Option("--save", help="Write the recording as an .rrd file and exit.")] = None,
+    port: Annotated[int, typer.Option("--port", help="--web: the web viewer's HTTP port.")] = WEB_PORT,
+    grpc_port: Annotated[
+        int, typer.Option("--grpc-port", help="--web: the port of the gRPC server the viewer reads from.")
+    ] = GRPC_PORT,
 ) -> None:
-    """Open FILE in the Rerun viewer shipped with rerun-sdk; --web serves it locally; --save converts."""
+    """Open FILE in the Rerun viewer shipped with rerun-sdk; --web serves it locally (until Ctrl-C, SIGTERM or
+    SIGHUP: the server and its ports are then freed, exit 128 + the signal); --save converts."""
     from rich.console import Console
     from rich.markup import escape
 
@@ -50,17 +62,8 @@ def replay(
     from rbcli.record.rerun_sink import open_viewer_command
 
     if web:
-        err.print(
-            f"serving {file} at http://127.0.0.1:{WEB_PORT} (bound to 127.0.0.1 only); Ctrl-C to stop",
-            markup=False,
-        )
-        try:
-            code = subprocess.call([*open_viewer_command(file, web=True), "--web-viewer-port", str(WEB_PORT)])
-        except KeyboardInterrupt:
-            code = 0
-        if code:
-            err.print(f"[red]error:[/] the Rerun web viewer exited with code {code}")
-            raise typer.Exit(EXIT_INVALID)
+        command = [*open_viewer_command(file, web=True), "--web-viewer-port", str(port), "--port", str(grpc_port)]
+        _serve_web(file, command, (port, grpc_port), err)
         return
 
     if not has_display():
@@ -73,6 +76,122 @@ def replay(
         raise typer.Exit(EXIT_INVALID)
     process = subprocess.Popen(open_viewer_command(file), start_new_session=True)
     err.print(f"opened {file} in the Rerun viewer (pid {process.pid})", markup=False)
+
+
+class _Stop(Exception):
+    """A stop signal reached `rbsim replay --web` (raised by its handler in the main thread)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _serve_web(file: Path, command: list[str], ports: tuple[int, int], err) -> None:  # noqa: ANN001
+    """Run the Rerun web viewer until it exits or a stop signal comes, and leave nothing behind.
+
+    The viewer (`python -m rerun`, which starts the `rerun` binary as its own child) runs in a process
+    group of its own: Ctrl-C in the terminal reaches rbsim only, and rbsim stops the whole group.
+    SIGINT, SIGTERM and SIGHUP end it the same way: SIGTERM to the group, SIGKILL after
+    STOP_GRACE_SECONDS, and rbsim waits until no process of the group is left (so its ports are free),
+    then exits 128 + the signal. Before, SIGTERM killed rbsim alone and the rerun server kept running at
+    100 % of a core, holding both ports. (SIGKILL of rbsim itself cannot be handled.)"""
+    from rich.markup import escape
+
+    web, grpc = ports
+    for number, what in ((web, "--port"), (grpc, "--grpc-port")):
+        if not _port_free(number):
+            err.print(
+                f"[red]error:[/] port {number} on 127.0.0.1 is in use (another `rbsim replay --web`?); "
+                f"stop that server or choose another with {what}"
+            )
+            raise typer.Exit(EXIT_INVALID)
+
+    def stop(signum: int, frame: object) -> None:
+        raise _Stop(signum)
+
+    numbers = [getattr(signal, name) for name in _STOP_SIGNALS if hasattr(signal, name)]
+    previous = {number: signal.signal(number, stop) for number in numbers}
+    process: subprocess.Popen | None = None
+    stopped_by = 0
+    try:
+        try:
+            process = subprocess.Popen(command, start_new_session=True)
+            err.print(
+                f"serving {file} at http://127.0.0.1:{web} (bound to 127.0.0.1 only; recording on port {grpc}); "
+                "Ctrl-C to stop",
+                markup=False,
+            )
+            code = process.wait()
+        except _Stop as exc:
+            stopped_by, code = exc.signum, 0
+        except KeyboardInterrupt:
+            stopped_by, code = signal.SIGINT, 0
+    finally:
+        for number in numbers:  # a further signal must not cut the clean-up short
+            signal.signal(number, signal.SIG_IGN)
+        try:
+            if process is not None:
+                _stop_group(process)
+        finally:
+            for number, handler in previous.items():
+                signal.signal(number, handler)
+    if stopped_by:
+        name = signal.Signals(stopped_by).name
+        err.print(f"stopped the web viewer ({name}); ports {web} and {grpc} are free again", markup=False)
+        raise typer.Exit(128 + int(stopped_by))
+    if code:
+        err.print(f"[red]error:[/] the Rerun web viewer exited with code {escape(str(code))}")
+        raise typer.Exit(EXIT_INVALID)
+
+
+def _port_free(port: int) -> bool:
+    """Whether a server could listen on 127.0.0.1:port now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as servers do: TIME_WAIT is no obstacle
+        try:
+            probe.bind(("127.0.0.1", port))
+        except OSError:
+            return False
+    return True
+
+
+def _stop_group(process: subprocess.Popen) -> None:
+    """SIGTERM to the viewer's process group, SIGKILL after STOP_GRACE_SECONDS, and wait until no
+    process of the group is left (its leader reaped)."""
+    group = process.pid  # start_new_session: the leader's pid is the group's id
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.killpg(group, sig)
+        deadline = time.monotonic() + STOP_GRACE_SECONDS
+        while time.monotonic() < deadline:
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                process.wait(timeout=0.05)
+            if process.returncode is not None and not _group_alive(group):
+                return
+
+
+def _group_alive(group: int) -> bool:
+    """Whether a live process (not a zombie: those hold no ports) is left in the process group."""
+    proc = Path("/proc")
+    if proc.is_dir():
+        for entry in proc.iterdir():
+            if not entry.name.isdigit():
+                continue
+            try:
+                # /proc/<pid>/stat: "pid (comm) state ppid pgrp ..."; comm may hold spaces and parentheses
+                fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+            except (OSError, IndexError):
+                continue
+            if len(fields) > 2 and int(fields[2]) == group and fields[0] != "Z":
+                return True
+        return False
+    try:  # pragma: no cover - no /proc: ask the kernel (zombies count as alive there)
+        os.killpg(group, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
 
 
 def _save(file: Path, save: Path, err) -> None:  # noqa: ANN001 - a rich Console
