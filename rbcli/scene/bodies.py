@@ -246,6 +246,7 @@ class BodyResolver:
         return dict(
             material=material_from_mapping(entry.get("material"), (*path, "material"), self.issues),
             static=bool(entry.get("static", False)),
+            kinematic=bool(entry.get("kinematic", False)),
             collide=bool(entry.get("collide", True)),
             contact_geometry=geometry,
             contact_size=size,

@@ -112,6 +112,14 @@ def compile_model(spec: SceneSpec) -> CompiledModel:
     except ValueError as exc:
         body = next((b for b in spec.bodies if repr(b.name) in str(exc)), None)
         raise SceneError([SceneIssue(body.location if body else None, str(exc))]) from None
+    kinematic = np.array([b.kinematic for b in spec.bodies], dtype=bool)
+    if kinematic.any():
+        # a kinematic body spins uniformly about its given angular velocity: with an isotropic inertia
+        # (the mean principal moment) torque-free rotation is exactly that, for every integrator
+        inertia = model.body_inertia.copy()
+        inertia[kinematic] = inertia[kinematic].mean(axis=1, keepdims=True)
+        inertia.setflags(write=False)
+        model = replace(model, body_inertia=inertia)
     state = initial_state(spec, model)
     body_index = {name: i for i, name in enumerate(model.body_names)}
     contact, summary = compile_contact(spec, model, centres) if spec.contact is not None else (None, None)

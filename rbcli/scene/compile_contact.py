@@ -38,6 +38,7 @@ class ContactSummary:
     sphere_count: int
     plane_count: int
     static_count: int
+    kinematic_count: int
     stable_step: float  # [s] dt_crit of the stiffest, lightest contact (inf: nothing can collide)
     limiting_body: str  # the body that sets it
     stiffness: float  # [N/m] that body's per-sphere stiffness
@@ -48,6 +49,8 @@ class ContactSummary:
         text = f"contact: {self.sphere_count:,} contact spheres, {planes}"
         if self.static_count:
             text += f", {self.static_count} static bod" + ("y" if self.static_count == 1 else "ies")
+        if self.kinematic_count:
+            text += f", {self.kinematic_count} kinematic bod" + ("y" if self.kinematic_count == 1 else "ies")
         if math.isfinite(self.stable_step):
             text += f"; stable step {self.stable_step:.3g} s (body '{self.limiting_body}')"
         if substeps is not None and substeps > 1:
@@ -125,7 +128,8 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
             stiffness[b] /= support[b]
     colliding = np.isfinite(min_radius)
     stiffness[~colliding] = 1.0  # never used: such a body has no spheres; keeps the pair formula finite
-    static = np.array([b.static for b in spec.bodies], dtype=bool)
+    # static and kinematic bodies: infinite mass for contact, their wrench held at zero (they keep P and L)
+    static = np.array([b.static or b.kinematic for b in spec.bodies], dtype=bool)
     inv_mass = np.where(static, 0.0, support / model.body_mass)
     planes = contact.planes
     plane_zeta = [ratio_cache.setdefault(e, damping_ratio_for_restitution(e))
@@ -150,7 +154,8 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
     summary = ContactSummary(
         sphere_count=int(table.sphere_radius.shape[0]),
         plane_count=len(planes),
-        static_count=int(static.sum()),
+        static_count=int(sum(b.static for b in spec.bodies)),
+        kinematic_count=int(sum(b.kinematic for b in spec.bodies)),
         stable_step=dt_crit,
         limiting_body=model.body_names[worst] if worst >= 0 else "",
         stiffness=float(stiffness[worst]) if worst >= 0 else math.nan,

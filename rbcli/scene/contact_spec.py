@@ -107,6 +107,12 @@ def check_contact_bodies(bodies: list[BodySpec], entries: list[Any], issues: Iss
                             or body.angular_velocity is not None or body.angular_momentum is not None):  # fmt: skip
             issues.issues.append(_located(body, "a static body never moves, so it cannot have a velocity or momentum",
                                           "static: true without velocity, momentum or angular terms"))  # fmt: skip
+        if body.static and body.kinematic:
+            message = "a body is static (never moves) or kinematic (moves as given), not both"
+            issues.issues.append(_located(body, message, "static: true or kinematic: true"))
+        if body.kinematic and body.angular_momentum is not None:
+            issues.issues.append(_located(body, "a kinematic body spins at a given angular velocity",
+                                          "angular_velocity instead of angular_momentum"))  # fmt: skip
         if body.collide and body.contact_geometry == "particles" and body.particle_radius is None:
             issues.issues.append(_located(body, "contact needs a radius for each particle (particles.radius)",
                                           "particles.radius, a shape, or collide: false"))  # fmt: skip

@@ -154,6 +154,12 @@ def _analyse(
     _check_unique_names(entries, issues)
     forces = _forces(data, clean, issues)
     contact = None
+    if "contact" not in data:
+        for body in bodies:
+            if (body.static or body.kinematic) and body.location is not None:
+                what = "static" if body.static else "kinematic"
+                issues.issues.append(SceneIssue(body.location, f"body '{body.name}': {what} bodies need contact",
+                                                "a `contact:` section (docs/contact.md)"))  # fmt: skip
     if "contact" in data and clean(("contact",)):
         from rbcli.scene.contact_spec import check_contact_bodies, contact_from_mapping
 

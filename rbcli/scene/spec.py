@@ -142,6 +142,9 @@ class BodySpec:
     # contact (used only when the scene has a `contact:` section)
     material: MaterialSpec = field(default_factory=MaterialSpec)
     static: bool = False  # never moves; other bodies collide with it
+    # moves at its initial velocity and spins at its initial angular velocity whatever hits it (a conveyor,
+    # a turning paddle): infinite mass for contact, no force acts on it
+    kinematic: bool = False
     collide: bool = True  # False: the body passes through everything
     # where its contact spheres come from: "particles" (every particle, with its radius), "sphere" (one
     # sphere of radius contact_size at the body origin: a sphere shape's exact surface), "lattice" (the

@@ -395,3 +395,28 @@ def test_contact_history_is_state_step_splits_and_reset():
     assert split.data.force.contact.hist_count.sum() == 0
     split.step(600)
     assert np.array_equal(whole.data.state.x, split.data.state.x)
+
+
+def test_kinematic_paddle_turns_uniformly_whatever_it_hits():
+    """A kinematic body keeps its velocity and angular velocity exactly (infinite mass for contact, no
+    force acts on it, an isotropic inertia so its torque-free turn is uniform) and pushes what it meets."""
+    paddle = ("  - {name: paddle, shape: {type: box, size: [0.6, 0.05, 0.1]}, spacing: 0.025, density: 500, "
+              "kinematic: true, position: [0, 0, 0.06], angular_velocity: [0, 0, 3], "
+              "velocity: [0.05, 0, 0]}")  # fmt: skip
+    sim = scene([paddle, ball("ball", (0.2, 0.2, 0.04), radius=0.04, mass=0.2)], dt=1e-3, steps=2000,
+                contact="  ground: 0\n  material: {restitution: 0.3, friction: 0.5}\n")  # fmt: skip
+    sim.step(2000)
+    np.testing.assert_allclose(sim.state.omega[0], [0, 0, 3], atol=1e-12)
+    np.testing.assert_allclose(sim.state.v[0], [0.05, 0, 0], atol=1e-15)
+    np.testing.assert_allclose(sim.state.x[0], [0.1, 0, 0.06], atol=1e-12)
+    assert np.linalg.norm(sim.state.v[1]) > 0.3  # the ball was hit
+
+
+def test_static_and_kinematic_bodies_need_contact():
+    text = """name: k
+simulation: {dt: 0.001, steps: 10}
+bodies:
+  - {name: post, particles: {positions: [[0, 0, 0]], masses: [1], radius: [0.1]}, static: true}
+"""
+    with pytest.raises(SceneError, match="static bodies need contact"):
+        load_scene_text(text)
