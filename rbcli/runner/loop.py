@@ -28,6 +28,8 @@ if TYPE_CHECKING:
 # Frame buffers are sized to about this many bytes so memory stays flat however long the run.
 BLOCK_BYTES = 8 * 1024 * 1024
 MAX_BLOCK_FRAMES = 1024
+# frames computed are handed to the recorder at least this often (the loss bound of a killed run)
+HAND_OVER_SECONDS = 1.0
 CHUNK_SECONDS = 0.2
 
 ProgressCallback = Callable[[int, int], None]
@@ -138,11 +140,14 @@ def run_simulation(
             getattr(buf, key)[frames] = getattr(state, key)
         return frames + 1
 
+    handed_at = time.perf_counter()
+
     def hand_over(frames: int) -> int:
-        """Submit a full buffer and take a fresh one; returns the frames now in the buffer (0)."""
-        nonlocal buf
+        """Submit a buffer and take a fresh one; returns the frames now in the buffer (0)."""
+        nonlocal buf, handed_at
         recorder.submit(buf, frames)
         buf = recorder.buffer()
+        handed_at = time.perf_counter()
         return 0
 
     status, message = "completed", ""
@@ -201,7 +206,9 @@ def run_simulation(
                         "loosen the tolerance or check the scene for a singularity"
                     )
                     break
-                if frames == capacity:
+                # a full buffer, or frames waiting for HAND_OVER_SECONDS: a killed run then loses at most
+                # about that much of its log (the MCAP sink closes a chunk per block, docs/robustness.md)
+                if frames == capacity or (frames and time.perf_counter() - handed_at >= HAND_OVER_SECONDS):
                     frames = hand_over(frames)
                 if progress is not None:
                     progress(state.step - start, steps)
