@@ -13,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import os
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -87,9 +88,11 @@ class SweepSpec:
 
     @property
     def fingerprint(self) -> str:
-        """sha256 of what decides the results: the sweep's definition and the base scene's text. Parts of a
-        folder with another fingerprint belong to another sweep and are never merged with these."""
-        key = json.dumps({"definition": self.definition, "scene": self.scene_text}, sort_keys=True)
+        """sha256 of what decides the results: the sweep's definition, the base scene's text and where it is
+        (messages name it). Parts of a folder with another fingerprint belong to another sweep and are never
+        merged with these."""
+        where = os.path.abspath(self.scene_path)
+        key = json.dumps({"definition": self.definition, "scene": self.scene_text, "path": where}, sort_keys=True)
         return hashlib.sha256(key.encode()).hexdigest()
 
     def metadata(self) -> dict[str, Any]:

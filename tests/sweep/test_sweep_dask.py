@@ -74,7 +74,7 @@ def test_a_worker_killed_mid_sweep_loses_nothing(tmp_path, client):
     table = pq.read_table(tmp_path / "dask" / "results.parquet")
     assert table.column("variant").to_pylist() == list(range(8))  # complete, no duplicates
     assert set(table.column("status").to_pylist()) == {"completed"}
-    serial = run_sweep(spec, scheduler="serial")
+    serial = run_sweep(spec, scheduler="serial", use_folder=False)
     assert rows_without_wall_time(on_dask.table) == rows_without_wall_time(serial.table)
 
 
@@ -83,7 +83,7 @@ def test_sweep_command_starts_its_own_cluster(spring_sweep, tmp_path):
     result = runner.invoke(app, ["sweep", str(spring_sweep), "--workers", "2", "-o", str(out)])
     assert result.exit_code == 0, result.output
     assert "Dask: 2 workers (2 slots) ready in" in result.output
-    serial = run_sweep(load_sweep(spring_sweep), scheduler="serial")
+    serial = run_sweep(load_sweep(spring_sweep), scheduler="serial", use_folder=False)
     assert rows_without_wall_time(pq.read_table(out / "results.parquet")) == rows_without_wall_time(serial.table)
 
 
