@@ -107,11 +107,17 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
     support = np.ones(n)
     min_radius = np.full(n, np.inf)
     ratio_cache: dict[float, float] = {}
+
+    def damping_ratio(e: float) -> float:  # a bisection per distinct restitution, not per body
+        if e not in ratio_cache:
+            ratio_cache[e] = damping_ratio_for_restitution(e)
+        return ratio_cache[e]
+
     for b, body in enumerate(spec.bodies):
         material = body.material.over(base)
         assert material.restitution is not None and material.friction is not None
         e = material.restitution
-        zeta[b] = ratio_cache.setdefault(e, damping_ratio_for_restitution(e))
+        zeta[b] = damping_ratio(e)
         friction[b] = material.friction
         if not body.collide:
             continue
@@ -132,7 +138,7 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
     static = np.array([b.static or b.kinematic for b in spec.bodies], dtype=bool)
     inv_mass = np.where(static, 0.0, support / model.body_mass)
     planes = contact.planes
-    plane_zeta = [ratio_cache.setdefault(e, damping_ratio_for_restitution(e))
+    plane_zeta = [damping_ratio(e)
                   for e in (p.material.over(base).restitution or DEFAULT_RESTITUTION for p in planes)]  # fmt: skip
     table = contact_table(
         sphere_body=np.concatenate(sphere_body) if sphere_body else [],
