@@ -87,11 +87,18 @@ def record_if_due(index, record_every, x, q, P, L, frames, filled):  # noqa: ANN
         return filled, STATUS_DIVERGED
     if filled >= frames.step.shape[0]:  # never write past the buffer, whatever the caller did
         return filled, STATUS_NO_ROOM
+    # element loops, not slice copies (frames.x[filled] = x): numba compiles a formatted shape-mismatch
+    # error message for every array-to-slice assignment, 2.2-2.6 s of a first run; a copy is bitwise
+    # the same either way
     frames.step[filled] = index
-    frames.x[filled] = x
-    frames.q[filled] = q
-    frames.P[filled] = P
-    frames.L[filled] = L
+    fx, fq, fP, fL = frames.x, frames.q, frames.P, frames.L
+    for b in range(x.shape[0]):
+        for k in range(3):
+            fx[filled, b, k] = x[b, k]
+            fP[filled, b, k] = P[b, k]
+            fL[filled, b, k] = L[b, k]
+        for k in range(4):
+            fq[filled, b, k] = q[b, k]
     filled += 1
     if filled == frames.step.shape[0]:
         return filled, STATUS_FULL
