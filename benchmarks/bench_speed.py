@@ -212,7 +212,7 @@ def measure(runners: dict[str, Runner], repeats: int, budget: float, max_steps: 
 def chunk_runner(compiled: CompiledScene, integrator: str) -> Runner:
     """The generated `run_chunk` alone, from the initial state, record_every = steps (one frame copied at the end)."""
     chunk = get_integrator(integrator).chunk()
-    km, forces = compiled.model.kernel(), compiled.forces
+    km, forces = compiled.model.kernel(), compiled.forces.kernel()  # as runs pass them (Simulation)
     n = compiled.model.body_count
     frames = empty_buffers(2, n)
 
@@ -234,14 +234,14 @@ def chunk_runner(compiled: CompiledScene, integrator: str) -> Runner:
 def dispatch_seconds(compiled: CompiledScene, integrator: str, calls: int = 200) -> float:
     """Seconds of one Python call of `run_chunk` for 0 steps: unboxing the arguments, the chunk's fixed cost."""
     chunk = get_integrator(integrator).chunk()
-    km, n = compiled.model.kernel(), compiled.model.body_count
+    km, forces, n = compiled.model.kernel(), compiled.forces.kernel(), compiled.model.body_count
     data = make_data(compiled.initial_state, compiled.forces, chunk.SCRATCH_WIDTH).kernel()
     frames = empty_buffers(2, n)
     best = float("inf")
     for _ in range(5):
         started = time.perf_counter()
         for _ in range(calls):
-            chunk.run_chunk(km, compiled.forces, data, DT, 0, 0, 1, frames, 0)
+            chunk.run_chunk(km, forces, data, DT, 0, 0, 1, frames, 0)
         best = min(best, (time.perf_counter() - started) / calls)
     return best
 

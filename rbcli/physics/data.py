@@ -9,6 +9,7 @@ writes lives here, so kernels never allocate and a run's memory is known when it
     scratch      the integrator's work columns, shape (body_count, SCRATCH_WIDTH of its module)
     force        what the force pass writes besides F and tau (forces/tables.py ForceData): stage
                  counters, and the contact stage's grid, per-evaluation arrays and contact history
+                 (None without a contact stage, so the kernels compile none of it)
     substeps     integrator steps per grid step (contact sub-stepping; 1 otherwise), a run setting
     adaptive     error-controlled runs only (physics/adaptive.py): stage work (body_count, dopri5
                  width), controller state `control` (2,) and step `counters` int64 (2,) that persist
@@ -25,7 +26,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from rbcli.physics.forces.tables import ForceData, ForceTables, make_force_data
+from rbcli.physics.forces.tables import ForceData, ForceTables, KernelForceTables, make_force_data
 from rbcli.physics.state import State
 
 
@@ -67,7 +68,8 @@ class Data:
         self.F[:] = 0.0
         self.tau[:] = 0.0
         self.scratch[:] = 0.0
-        self.force.contact.hist_count[:] = 0  # contacts form afresh from the new state
+        if self.force.contact is not None:  # None: the scene has no contact stage
+            self.force.contact.hist_count[:] = 0  # contacts form afresh from the new state
         if self.adaptive_work is not None:
             assert self.adaptive_control is not None
             self.adaptive_work[:] = 0.0
@@ -75,7 +77,12 @@ class Data:
 
 
 def make_data(
-    initial: State, forces: ForceTables, scratch_width: int, *, adaptive: bool = False, substeps: int = 1
+    initial: State,
+    forces: ForceTables | KernelForceTables,
+    scratch_width: int,
+    *,
+    adaptive: bool = False,
+    substeps: int = 1,
 ) -> Data:
     """A Data for `initial` (copied) and the force tables `forces`: zeroed accumulators, scratch and
     force data; the adaptive chunk's arrays (physics/adaptive.py: adaptive_work, their one

@@ -12,9 +12,18 @@ A step from grid index n (t = n dt) to n + 1 runs, in this order (STEP_STAGES):
       contact_commit  the last evaluation's contacts and tangential springs become the history
     record          on recording steps: the divergence check, then the state copied into the next frame
 
-Each stage is present only when the scene needs it (its `when` test is a table size, decided once per
-step in compiled code at the cost of one comparison). The runner (runner/loop.py) owns time, chunk
-sizes, sinks and interrupts; a chunk loop never prints, writes files or allocates.
+Each optional stage is present only when the scene needs it, decided when numba compiles the loop, not
+at run time: the loop takes `ForceTables.kernel()`, in which a force type's table is None when the scene
+has none of it, and calls the stage through a dispatcher of forces/stages.py (a `numba.extending.
+overload`) that compiles to nothing for a None table and to the stage otherwise. A run-time test
+(`if forces.impulse.body.shape[0]:`, as these loops had) skips the work but still compiles the stage
+(numba compiles both sides of a branch), so a gravity-only scene's first run compiled the impulses and
+the contact stage too. A scene always gets the same combination of None and tables, so numba's cache
+holds one loop per scene kind; a loop called with a plain ForceTables (tests, benchmarks) compiles every
+stage and skips the empty ones at run time.
+
+The runner (runner/loop.py) owns time, chunk sizes, sinks and interrupts; a chunk loop never prints,
+writes files or allocates.
 
 Why generated code: numba cannot cache a loop that receives the integrator's step as an argument (the
 cache index would hold dispatcher objects that do not exist in the next process), and one loop that
@@ -25,7 +34,8 @@ committed files differ from the template, and regenerates them with
 
     python tests/physics/test_pipeline.py --regenerate
 
-Adding a stage: one entry in STEP_STAGES (this file), the stage's own module, and the regeneration.
+Adding a stage: one entry in STEP_STAGES (this file), the stage's own module (with a dispatcher in
+forces/stages.py when only some scenes have it), and the regeneration.
 Adaptive runs (a tolerance instead of dt) step between output times under error control: their loop is
 `physics/adaptive.py` (dopri5 only), which runs the same update and record stages;
 `runner/simulation.py` applies impulses between its chunks.
@@ -44,14 +54,14 @@ class Stage:
     index (the grid step being taken), t = index * dt, k (steps done in this chunk), frames, filled,
     record_every; `integrator_step` is the integrator's update. Consecutive sub-step stages form one
     loop run data.substeps times (contact sub-stepping, 1 otherwise), where ts and h are the sub-step's
-    start time and length. A stage that ends the chunk returns (k + 1, filled, status).
+    start time and length. A stage that ends the chunk returns (k + 1, filled, status). A stage that
+    only some scenes have calls a dispatcher (forces/stages.py) that compiles to nothing without it.
     """
 
     name: str
     why: str  # the one-line comment written above the stage
     imports: tuple[str, ...]
     code: str  # lines of the loop body, without indentation
-    when: str = ""  # a condition that must hold for the stage to run ("" = always)
     substep: bool = False  # runs data.substeps times per step, at ts = t + sub h, h = dt / data.substeps
 
 
@@ -59,16 +69,14 @@ STEP_STAGES: tuple[Stage, ...] = (
     Stage(
         "impulses",
         "impulses: exact jumps of P and L at the start of the step that holds them",
-        ("from rbcli.physics.forces.impulse import apply_impulses",),
-        "apply_impulses(model, forces, data.force, t, t + dt, x, q, P, L)",
-        when="forces.impulse.body.shape[0]",
+        ("from rbcli.physics.forces.stages import impulse_stage",),
+        "impulse_stage(model, forces, data.force, t, t + dt, x, q, P, L)",
     ),
     Stage(
         "contact_begin",
         "contact_begin: the contact springs measure time from the start of this (sub-)step",
-        ("from rbcli.physics.contact.force import begin_contact_step",),
-        "begin_contact_step(data.force.contact, ts, h)",
-        when="forces.contact.sphere_body.shape[0]",
+        ("from rbcli.physics.forces.stages import contact_begin_stage",),
+        "contact_begin_stage(forces.contact, data.force.contact, ts, h)",
         substep=True,
     ),
     Stage(
@@ -81,9 +89,8 @@ STEP_STAGES: tuple[Stage, ...] = (
     Stage(
         "contact_commit",
         "contact_commit: the (sub-)step is complete: its last evaluation's contacts become the history",
-        ("from rbcli.physics.contact.force import commit_contacts",),
-        "commit_contacts(model, forces.contact, data.force.contact, x, q, P, L)",
-        when="forces.contact.sphere_body.shape[0]",
+        ("from rbcli.physics.forces.stages import contact_commit_stage",),
+        "contact_commit_stage(model, forces.contact, data.force.contact, x, q, P, L)",
         substep=True,
     ),
     Stage(
@@ -154,10 +161,6 @@ def chunk_source(module: str, name: str, stages: tuple[Stage, ...] = STEP_STAGES
         in_substeps = stage.substep
         depth = 12 if stage.substep else 8
         body.append(_indent(f"# {stage.why}", depth))
-        if stage.when:
-            body.append(_indent(f"if {stage.when}:", depth))
-            body.append(_indent(stage.code, depth + 4))
-        else:
-            body.append(_indent(stage.code, depth))
+        body.append(_indent(stage.code, depth))
     head = _HEADER.format(name=name, imports=_import_lines(module, stages))
     return head + "".join(body) + _FOOTER

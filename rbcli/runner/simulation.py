@@ -109,6 +109,7 @@ class Simulation:
                 compiled.initial_state, self.forces, chunk.SCRATCH_WIDTH, substeps=self.settings.substeps
             )
         self._kmodel = self.model.kernel()
+        self._kforces = self.forces.kernel()  # None for unused force types: their stages compile away
         self._kdata = self.data.kernel()
         from rbcli.physics.step import empty_buffers
 
@@ -172,7 +173,7 @@ class Simulation:
         step0 = self.data.state.step
         if self._chunk is not None:
             return self._chunk(
-                self._kmodel, self.forces, self._kdata, self.settings.dt, step0, n_steps, record_every, frames, filled
+                self._kmodel, self._kforces, self._kdata, self.settings.dt, step0, n_steps, record_every, frames, filled
             )
         return self._advance_adaptive(step0, n_steps, record_every, frames, filled)
 
@@ -191,12 +192,12 @@ class Simulation:
             if self._impulse_at.size:
                 if index in self._impulse_at:
                     t0 = index * st.dt
-                    apply_impulses(self._kmodel, self.forces, d.force, t0, t0 + st.dt, s.x, s.q, s.P, s.L)
+                    apply_impulses(self._kmodel, self._kforces, d.force, t0, t0 + st.dt, s.x, s.q, s.P, s.L)
                 later = self._impulse_at[self._impulse_at > index]
                 if later.size:
                     todo = min(todo, int(later[0]) - index)
             steps, filled, status = run_adaptive_chunk(
-                self._kmodel, self.forces, d.force, st.dt, index, todo, every, st.tolerance, st.steps * st.dt,
+                self._kmodel, self._kforces, d.force, st.dt, index, todo, every, st.tolerance, st.steps * st.dt,
                 s.x, s.q, s.P, s.L, d.F, d.tau, d.adaptive_work, d.adaptive_control, d.adaptive_counters,
                 frames, filled,
             )  # fmt: skip

@@ -5,8 +5,7 @@ Regenerate with `python tests/physics/test_pipeline.py --regenerate` after chang
 
 import numba
 
-from rbcli.physics.contact.force import begin_contact_step, commit_contacts
-from rbcli.physics.forces.impulse import apply_impulses
+from rbcli.physics.forces.stages import contact_begin_stage, contact_commit_stage, impulse_stage
 from rbcli.physics.integrators.split2 import SCRATCH_WIDTH
 from rbcli.physics.integrators.split2 import step as integrator_step
 from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, chunk_status, record_if_due
@@ -27,19 +26,16 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
         index = step0 + k
         t = index * dt
         # impulses: exact jumps of P and L at the start of the step that holds them
-        if forces.impulse.body.shape[0]:
-            apply_impulses(model, forces, data.force, t, t + dt, x, q, P, L)
+        impulse_stage(model, forces, data.force, t, t + dt, x, q, P, L)
         h = dt / data.substeps
         for sub in range(data.substeps):
             ts = t + sub * h
             # contact_begin: the contact springs measure time from the start of this (sub-)step
-            if forces.contact.sphere_body.shape[0]:
-                begin_contact_step(data.force.contact, ts, h)
+            contact_begin_stage(forces.contact, data.force.contact, ts, h)
             # update: the integrator's maths, its force evaluations through forces.wrench.accumulate_wrench
             integrator_step(model, forces, data.force, ts, h, x, q, P, L, data.F, data.tau, data.scratch)
             # contact_commit: the (sub-)step is complete: its last evaluation's contacts become the history
-            if forces.contact.sphere_body.shape[0]:
-                commit_contacts(model, forces.contact, data.force.contact, x, q, P, L)
+            contact_commit_stage(model, forces.contact, data.force.contact, x, q, P, L)
         # record: on recording steps, the divergence check and the state copied into the next frame
         filled, status = record_if_due(index + 1, record_every, x, q, P, L, frames, filled)
         if status != STATUS_OK:

@@ -1,10 +1,14 @@
 """Parameter tables of the force terms: one named tuple of flat arrays per force type.
 
 A table has one row per (term, touched body); a scene that does not use a type gets the same table
-with 0 rows, so the compiled wrench loops over nothing and the numba types stay the same for every
-scene (one compiled kernel serves all). Points are body-fixed offsets about the centre of mass in the
-PRINCIPAL frame (`KernelModel.particle_offset`'s frame), converted once at compile time from the
-user's body frame: r = E^T (p_user - centre_user). Vectors flagged `body_frame` are in the principal
+with 0 rows, so Python code reads every ForceTables alike (`forces.spring.body_a`, `table_rows`).
+Compiled kernels take `ForceTables.kernel()` instead (KernelForceTables): the same fields with None for
+every table without rows, so the stages of absent types compile to nothing (forces/stages.py); a scene
+always gets the same combination, so its kernels' numba types are stable from run to run.
+
+Points are body-fixed offsets about the centre of mass in the PRINCIPAL frame
+(`KernelModel.particle_offset`'s frame), converted once at compile time from the user's body frame:
+r = E^T (p_user - centre_user). Vectors flagged `body_frame` are in the principal
 frame too (v = E^T v_user); the others are world-frame. Every array of the tables is read-only; what
 the force pass writes at run time is a `ForceData`, owned by the run's Data (physics/data.py).
 
@@ -157,6 +161,45 @@ class ForceTables(NamedTuple):
     impulse: ImpulseTable
     contact: ContactTable
 
+    def kernel(self) -> KernelForceTables:
+        """The tables as compiled kernels take them: None for each table without rows (see
+        KernelForceTables)."""
+
+        def rows(table):  # noqa: ANN001, ANN202
+            return table if table_rows(table) else None
+
+        return KernelForceTables(
+            self.gravity, self.has_gravity, self.has_torque, self.torque_body, self.schedule,
+            rows(self.field), rows(self.point_force), rows(self.torque), rows(self.spring), rows(self.drag),
+            rows(self.impulse), self.contact if contact_present(self.contact) else None,
+        )  # fmt: skip
+
+
+class KernelForceTables(NamedTuple):
+    """ForceTables as compiled kernels take them (`ForceTables.kernel()`, like Model.kernel()): the
+    same fields in the same order, each force type's table None when the scene has no rows of it
+    (contact: None without contact spheres and static bodies), so numba types it as NoneType and its
+    stage compiles to nothing (forces/stages.py). Kernels also accept a ForceTables (every stage then
+    compiled, skipped at run time for 0 rows), as tests and benchmarks that call them directly do."""
+
+    gravity: np.ndarray
+    has_gravity: bool
+    has_torque: bool
+    torque_body: np.ndarray
+    schedule: ScheduleTable
+    field: FieldTable | None
+    point_force: PointForceTable | None
+    torque: TorqueTable | None
+    spring: SpringTable | None
+    drag: DragTable | None
+    impulse: ImpulseTable | None
+    contact: ContactTable | None
+
+
+def contact_present(contact: ContactTable | None) -> bool:
+    """True when the scene has a contact stage: contact spheres or static bodies."""
+    return contact is not None and bool(contact.sphere_body.shape[0] or contact.static_body.shape[0])
+
 
 class ForceData(NamedTuple):
     """What the force pass writes besides F and tau: the mutable part beside the read-only tables,
@@ -165,18 +208,22 @@ class ForceData(NamedTuple):
     term_evaluations: int64 (len(TERM_NAMES),), a diagnostic counter (Rapier's stage counters): each
       evaluation of a term adds the rows (field: particles; impulse: impulses applied; contact: contacts
       found) it processed.
-    contact: the contact stage's grid, per-evaluation arrays and contact history (contact/tables.py).
+    contact: the contact stage's grid, per-evaluation arrays and contact history (contact/tables.py);
+      None when the scene has no contact stage (`contact_present`), as KernelForceTables.contact is.
     """
 
     term_evaluations: np.ndarray
-    contact: ContactWork
+    contact: ContactWork | None
 
 
-def make_force_data(forces: ForceTables) -> ForceData:
-    """A zeroed ForceData for `forces`."""
+def make_force_data(forces: ForceTables | KernelForceTables) -> ForceData:
+    """A zeroed ForceData for `forces` (either form: the same ForceData)."""
+    contact = forces.contact
     return ForceData(
         term_evaluations=np.zeros(len(TERM_NAMES), dtype=np.int64),
-        contact=make_contact_work(forces.contact, forces.torque_body.shape[0]),
+        contact=make_contact_work(contact, forces.torque_body.shape[0])
+        if contact is not None and contact_present(contact)
+        else None,
     )
 
 

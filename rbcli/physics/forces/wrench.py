@@ -1,9 +1,22 @@
 """The total wrench of all force terms on every body: the one function integrators call.
 
-Stages, each a loop over its own table's rows only (0 rows: no work; rows list only touched bodies):
-gravity, per-particle fields, point forces, torques, springs-dampers, drag, contact (physics/contact:
-broad phase and contact forces), then static bodies held (their wrench zeroed). Impulses are not
-forces: they are applied between steps by `impulse.apply_impulses`.
+Stages, each a loop over its own table's rows only (rows list only touched bodies): gravity,
+per-particle fields, point forces, torques, springs-dampers, drag, contact (physics/contact: broad
+phase and contact forces), then static bodies held (their wrench zeroed). Impulses are not forces:
+they are applied between steps by `impulse.apply_impulses` (the pipeline's impulse stage).
+
+Only the stages a scene has are compiled. The kernels take `ForceTables.kernel()` (KernelForceTables,
+forces/tables.py), whose table of a force type the scene does not use is None; every stage but gravity
+is called through a dispatcher of forces/stages.py, a `numba.extending.overload` that compiles to a
+no-op for a NoneType table and to the stage's kernel otherwise. A run-time `if table.rows:` test, as
+this function had, skips the work but not the compilation: numba compiles both sides of a branch, so
+a gravity-only scene's first run compiled every force type. Why this design: the Python side keeps
+reading ForceTables as before (every table present, 0 rows when unused: `forces.spring.body_a`,
+`force_terms_present`, the scene checks), only the places that hand tables to kernels call `.kernel()`
+(runner/simulation.py), and kernels still accept a plain ForceTables (each stage then compiled and
+skipped at run time when empty), so tests and benchmarks that call kernels with `compiled.forces`
+work unchanged. A scene always gets the same combination of None and tables, so numba's on-disk cache
+serves its kernels from run to run.
 """
 
 from __future__ import annotations
@@ -11,23 +24,21 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from rbcli.physics.contact.force import accumulate_contact, hold_static_bodies
-from rbcli.physics.forces.drag import accumulate_drag, drag_numpy
-from rbcli.physics.forces.field import accumulate_field, field_numpy, field_potential
+from rbcli.physics.forces.drag import drag_numpy
+from rbcli.physics.forces.field import field_numpy, field_potential
 from rbcli.physics.forces.gravity import accumulate_gravity, gravity_potential
-from rbcli.physics.forces.point_force import accumulate_point_force, point_force_numpy, point_force_potential
-from rbcli.physics.forces.spring import accumulate_spring, spring_numpy, spring_potential
-from rbcli.physics.forces.tables import (
-    TERM_CONTACT,
-    TERM_DRAG,
-    TERM_FIELD,
-    TERM_GRAVITY,
-    TERM_POINT_FORCE,
-    TERM_SPRING,
-    TERM_TORQUE,
-    ForceTables,
+from rbcli.physics.forces.point_force import point_force_numpy, point_force_potential
+from rbcli.physics.forces.spring import spring_numpy, spring_potential
+from rbcli.physics.forces.stages import (
+    contact_stage,
+    drag_stage,
+    field_stage,
+    point_force_stage,
+    spring_stage,
+    torque_stage,
 )
-from rbcli.physics.forces.torque import accumulate_torque, torque_numpy
+from rbcli.physics.forces.tables import TERM_GRAVITY, ForceTables
+from rbcli.physics.forces.torque import torque_numpy
 from rbcli.physics.step import STEP_KERNEL
 
 
@@ -35,8 +46,9 @@ from rbcli.physics.step import STEP_KERNEL
 def accumulate_wrench(model, forces, force_data, t, x, q, P, L, F, tau) -> None:  # noqa: ANN001 - numba types
     """Set F [N] and tau [N m] (body_count, 3), world frame, about each centre of mass, to the sum of the
     scene's force terms at time t [s]. tau is left untouched (zero) when forces.has_torque is False;
-    otherwise it is exactly zero for every body that forces.torque_body does not flag. force_data
-    (ForceData) holds what the pass writes besides F and tau: the stage counters."""
+    otherwise it is exactly zero for every body that forces.torque_body does not flag. forces:
+    KernelForceTables (or ForceTables); force_data (ForceData) holds what the pass writes besides F and
+    tau: the stage counters and the contact work."""
     F[:, :] = 0.0
     if forces.has_torque:
         tau[:, :] = 0.0
@@ -44,21 +56,13 @@ def accumulate_wrench(model, forces, force_data, t, x, q, P, L, F, tau) -> None:
     if forces.has_gravity:
         accumulate_gravity(model.body_mass, forces.gravity, F)
         counts[TERM_GRAVITY] += F.shape[0]
-    if forces.field.body.shape[0]:
-        counts[TERM_FIELD] += accumulate_field(model, forces.field, forces.schedule, t, x, q, F, tau)
-    if forces.point_force.body.shape[0]:
-        counts[TERM_POINT_FORCE] += accumulate_point_force(forces.point_force, forces.schedule, t, q, F, tau)
-    if forces.torque.body.shape[0]:
-        counts[TERM_TORQUE] += accumulate_torque(forces.torque, forces.schedule, t, q, tau)
-    if forces.spring.body_a.shape[0]:
-        counts[TERM_SPRING] += accumulate_spring(model, forces.spring, x, q, P, L, F, tau)
-    if forces.drag.body.shape[0]:
-        counts[TERM_DRAG] += accumulate_drag(model, forces.drag, q, P, L, F, tau)
-    if forces.contact.sphere_body.shape[0]:
-        accumulate_contact(model, forces.contact, force_data.contact, t, x, q, P, L, F, tau)
-        counts[TERM_CONTACT] += np.int64(force_data.contact.stats[0])
-    if forces.contact.static_body.shape[0]:
-        hold_static_bodies(forces.contact, F, tau)
+    # each stage compiles to nothing when its table is None (forces/stages.py)
+    field_stage(model, forces.field, forces.schedule, t, x, q, F, tau, counts)
+    point_force_stage(forces.point_force, forces.schedule, t, q, F, tau, counts)
+    torque_stage(forces.torque, forces.schedule, t, q, tau, counts)
+    spring_stage(model, forces.spring, x, q, P, L, F, tau, counts)
+    drag_stage(model, forces.drag, q, P, L, F, tau, counts)
+    contact_stage(model, forces.contact, force_data.contact, t, x, q, P, L, F, tau, counts)
 
 
 def wrench_numpy(model, forces: ForceTables, t: float, x, q, P, L) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001

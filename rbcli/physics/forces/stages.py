@@ -1,0 +1,230 @@
+"""The optional stages of a step, each called through a dispatcher that compiles to nothing when the
+scene does not have it: numba compiles only what the scene needs.
+
+A kernel's stage tests at run time (`if table.rows:`) skip the work, not the compilation: numba types
+and compiles both sides of a branch, so a gravity-only scene's first run compiled every force type,
+the impulses and the contact stage (~12 s of a ~20 s first run). So the kernels take
+`ForceTables.kernel()` (KernelForceTables, forces/tables.py): a table without rows is None there, and
+numba types it as NoneType. Each optional stage is a plain Python function (never called from Python)
+with a `numba.extending.overload` that chooses its implementation from the argument types when a kernel
+that calls it is compiled: a no-op when the stage's table (or its work arrays) is NoneType, the real
+kernel otherwise, behind the same row test as before, so a ForceTables with 0-row tables (what tests
+and benchmarks pass when they call kernels directly) still works, compiles every stage and skips empty
+ones at run time. The results are bitwise the same either way: a stage that runs does what it did,
+and one compiled away had no rows to process.
+
+A scene always gets the same combination of None and tables, so its kernels' types are the same in
+every run and numba's on-disk cache serves them (the implementations below are compiled into the
+cached caller; they take STEP_KERNEL's options: cached, no reference counting).
+
+Force stages (called by forces/wrench.accumulate_wrench, each adding its rows to `counts`, the
+ForceData.term_evaluations counter): field, point force, torque, spring, drag, contact (with the
+static bodies held). Pipeline stages (called by the generated chunk loops, physics/pipeline.py):
+impulses, contact_begin, contact_commit. Gravity has no table (a flag and a vector) and is not here.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numba.core import types
+from numba.extending import overload
+
+from rbcli.physics.contact.force import accumulate_contact, begin_contact_step, commit_contacts, hold_static_bodies
+from rbcli.physics.forces.drag import accumulate_drag
+from rbcli.physics.forces.field import accumulate_field
+from rbcli.physics.forces.impulse import apply_impulses
+from rbcli.physics.forces.point_force import accumulate_point_force
+from rbcli.physics.forces.spring import accumulate_spring
+from rbcli.physics.forces.tables import (
+    TERM_CONTACT,
+    TERM_DRAG,
+    TERM_FIELD,
+    TERM_POINT_FORCE,
+    TERM_SPRING,
+    TERM_TORQUE,
+)
+from rbcli.physics.forces.torque import accumulate_torque
+from rbcli.physics.step import STEP_KERNEL
+
+# the dispatchers' implementations compile with the step kernels' options (cached, no reference counting);
+# typed Any: numba's stubs type jit_options as a TypedDict without its private `_nrt`
+_OPTIONS: Any = STEP_KERNEL
+
+
+def _absent(*argument_types: types.Type) -> bool:
+    """True when any of a stage's tables or work arrays is None (numba's NoneType): the stage is absent."""
+    return any(isinstance(t, types.NoneType) for t in argument_types)
+
+
+def _member(tuple_type: Any, name: str) -> types.Type:  # noqa: ANN401 - a numba NamedTuple type
+    """The numba type of field `name` of a named tuple type (ForceTables or KernelForceTables)."""
+    return dict(zip(tuple_type.fields, tuple_type.types, strict=True))[name]
+
+
+def _kernel_only(*_args: object) -> None:
+    raise TypeError("a stage dispatcher runs in compiled kernels only (forces/stages.py)")
+
+
+# ---- force stages: accumulate_wrench's -------------------------------------------------------------
+
+
+def field_stage(model, field, schedule, t, x, q, F, tau, counts) -> None:  # noqa: ANN001
+    """Per-particle fields (forces/field.py) when the scene has any."""
+    _kernel_only()
+
+
+@overload(field_stage, jit_options=_OPTIONS)
+def _field_stage(model, field, schedule, t, x, q, F, tau, counts):  # noqa: ANN001, ANN202
+    if _absent(field):
+        return lambda model, field, schedule, t, x, q, F, tau, counts: None
+
+    def run(model, field, schedule, t, x, q, F, tau, counts):  # noqa: ANN001, ANN202
+        if field.body.shape[0]:
+            counts[TERM_FIELD] += accumulate_field(model, field, schedule, t, x, q, F, tau)
+
+    return run
+
+
+def point_force_stage(point_force, schedule, t, q, F, tau, counts) -> None:  # noqa: ANN001
+    """Forces at body points (forces/point_force.py) when the scene has any."""
+    _kernel_only()
+
+
+@overload(point_force_stage, jit_options=_OPTIONS)
+def _point_force_stage(point_force, schedule, t, q, F, tau, counts):  # noqa: ANN001, ANN202
+    if _absent(point_force):
+        return lambda point_force, schedule, t, q, F, tau, counts: None
+
+    def run(point_force, schedule, t, q, F, tau, counts):  # noqa: ANN001, ANN202
+        if point_force.body.shape[0]:
+            counts[TERM_POINT_FORCE] += accumulate_point_force(point_force, schedule, t, q, F, tau)
+
+    return run
+
+
+def torque_stage(torque, schedule, t, q, tau, counts) -> None:  # noqa: ANN001
+    """Pure torques (forces/torque.py) when the scene has any."""
+    _kernel_only()
+
+
+@overload(torque_stage, jit_options=_OPTIONS)
+def _torque_stage(torque, schedule, t, q, tau, counts):  # noqa: ANN001, ANN202
+    if _absent(torque):
+        return lambda torque, schedule, t, q, tau, counts: None
+
+    def run(torque, schedule, t, q, tau, counts):  # noqa: ANN001, ANN202
+        if torque.body.shape[0]:
+            counts[TERM_TORQUE] += accumulate_torque(torque, schedule, t, q, tau)
+
+    return run
+
+
+def spring_stage(model, spring, x, q, P, L, F, tau, counts) -> None:  # noqa: ANN001
+    """Springs-dampers (forces/spring.py) when the scene has any."""
+    _kernel_only()
+
+
+@overload(spring_stage, jit_options=_OPTIONS)
+def _spring_stage(model, spring, x, q, P, L, F, tau, counts):  # noqa: ANN001, ANN202
+    if _absent(spring):
+        return lambda model, spring, x, q, P, L, F, tau, counts: None
+
+    def run(model, spring, x, q, P, L, F, tau, counts):  # noqa: ANN001, ANN202
+        if spring.body_a.shape[0]:
+            counts[TERM_SPRING] += accumulate_spring(model, spring, x, q, P, L, F, tau)
+
+    return run
+
+
+def drag_stage(model, drag, q, P, L, F, tau, counts) -> None:  # noqa: ANN001
+    """Drag (forces/drag.py) when the scene has any."""
+    _kernel_only()
+
+
+@overload(drag_stage, jit_options=_OPTIONS)
+def _drag_stage(model, drag, q, P, L, F, tau, counts):  # noqa: ANN001, ANN202
+    if _absent(drag):
+        return lambda model, drag, q, P, L, F, tau, counts: None
+
+    def run(model, drag, q, P, L, F, tau, counts):  # noqa: ANN001, ANN202
+        if drag.body.shape[0]:
+            counts[TERM_DRAG] += accumulate_drag(model, drag, q, P, L, F, tau)
+
+    return run
+
+
+def contact_stage(model, contact, work, t, x, q, P, L, F, tau, counts) -> None:  # noqa: ANN001
+    """Contact forces (contact/force.py), then the static bodies held (their wrench zeroed), when the
+    scene has a contact stage; work: ForceData.contact."""
+    _kernel_only()
+
+
+@overload(contact_stage, jit_options=_OPTIONS)
+def _contact_stage(model, contact, work, t, x, q, P, L, F, tau, counts):  # noqa: ANN001, ANN202
+    if _absent(contact, work):
+        return lambda model, contact, work, t, x, q, P, L, F, tau, counts: None
+
+    def run(model, contact, work, t, x, q, P, L, F, tau, counts):  # noqa: ANN001, ANN202
+        if contact.sphere_body.shape[0]:
+            accumulate_contact(model, contact, work, t, x, q, P, L, F, tau)
+            counts[TERM_CONTACT] += np.int64(work.stats[0])
+        if contact.static_body.shape[0]:
+            hold_static_bodies(contact, F, tau)
+
+    return run
+
+
+# ---- pipeline stages: the generated chunk loops' ---------------------------------------------------
+
+
+def impulse_stage(model, forces, force_data, t_prev, t_next, x, q, P, L) -> None:  # noqa: ANN001
+    """The impulses due in [t_prev, t_next) (forces/impulse.py) when the scene has any."""
+    _kernel_only()
+
+
+@overload(impulse_stage, jit_options=_OPTIONS)
+def _impulse_stage(model, forces, force_data, t_prev, t_next, x, q, P, L):  # noqa: ANN001, ANN202
+    if _absent(_member(forces, "impulse")):
+        return lambda model, forces, force_data, t_prev, t_next, x, q, P, L: None
+
+    def run(model, forces, force_data, t_prev, t_next, x, q, P, L):  # noqa: ANN001, ANN202
+        if forces.impulse.body.shape[0]:
+            apply_impulses(model, forces, force_data, t_prev, t_next, x, q, P, L)
+
+    return run
+
+
+def contact_begin_stage(contact, work, t, h) -> None:  # noqa: ANN001
+    """Start the contact springs' clock for the (sub-)step [t, t + h) when the scene has contact."""
+    _kernel_only()
+
+
+@overload(contact_begin_stage, jit_options=_OPTIONS)
+def _contact_begin_stage(contact, work, t, h):  # noqa: ANN001, ANN202
+    if _absent(contact, work):
+        return lambda contact, work, t, h: None
+
+    def run(contact, work, t, h):  # noqa: ANN001, ANN202
+        if contact.sphere_body.shape[0]:
+            begin_contact_step(work, t, h)
+
+    return run
+
+
+def contact_commit_stage(model, contact, work, x, q, P, L) -> None:  # noqa: ANN001
+    """Make the (sub-)step's last contacts the history when the scene has contact."""
+    _kernel_only()
+
+
+@overload(contact_commit_stage, jit_options=_OPTIONS)
+def _contact_commit_stage(model, contact, work, x, q, P, L):  # noqa: ANN001, ANN202
+    if _absent(contact, work):
+        return lambda model, contact, work, x, q, P, L: None
+
+    def run(model, contact, work, x, q, P, L):  # noqa: ANN001, ANN202
+        if contact.sphere_body.shape[0]:
+            commit_contacts(model, contact, work, x, q, P, L)
+
+    return run

@@ -1,0 +1,164 @@
+"""A first run compiles only what the scene needs (tracker issue 16, item 5): the kernels take
+`ForceTables.kernel()`, whose tables of unused force types are None, and every optional stage is called
+through a dispatcher (physics/forces/stages.py) that compiles to nothing for None. Checked by numba's
+own compile events in a fresh process with an empty cache (a warm cache compiles nothing at all, so it
+could not tell), then that a second process loads every kernel from that cache without compiling."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numba
+import numpy as np
+from conftest import make_body, make_scene, random_bodies
+
+from rbcli.api import prepare
+from rbcli.physics.contact import force as contact_force
+from rbcli.physics.data import make_data
+from rbcli.physics.forces import drag, field, impulse, point_force, spring, torque, wrench
+from rbcli.physics.forces.gravity import accumulate_gravity
+from rbcli.physics.forces.tables import KernelForceTables, make_force_data
+from rbcli.physics.integrators import get_integrator
+from rbcli.physics.step import empty_buffers
+from rbcli.scene.force_specs import BodyPoint, ForceField, ForceImpulse, ForceSpring
+
+ROOT = Path(__file__).resolve().parents[2]
+INTEGRATOR = "semi-implicit"  # the cheapest step to compile: the test is about the stages around it
+G = np.array([0.0, 0.0, -9.81])
+
+
+def _name(dispatcher) -> str:  # noqa: ANN001
+    return f"{dispatcher.py_func.__module__}.{dispatcher.py_func.__qualname__}"
+
+
+# the kernels of the force types and stages a gravity-only scene does not have
+UNUSED_BY_GRAVITY = {
+    _name(k)
+    for k in (
+        field.accumulate_field,
+        point_force.accumulate_point_force,
+        torque.accumulate_torque,
+        spring.accumulate_spring,
+        drag.accumulate_drag,
+        impulse.apply_impulses,
+        contact_force.accumulate_contact,
+        contact_force.hold_static_bodies,
+        contact_force.begin_contact_step,
+        contact_force.commit_contacts,
+    )
+}
+CHUNK = f"rbcli.physics.chunks.{INTEGRATOR.replace('-', '_')}.run_chunk"
+
+# Run in a fresh process: prints the qualified names of the functions numba compiled (not loaded from
+# its cache) while stepping a gravity-only scene and, with --forces, then a scene with a spring and an
+# impulse; `numba:compile` events fire only for real compilations.
+SCRIPT = """
+import json, sys
+from dataclasses import replace
+import numpy as np
+import numba.core.event as ev
+
+compiled = []
+
+class Recorder(ev.Listener):
+    def on_start(self, event):
+        f = event.data["dispatcher"].py_func
+        compiled.append(f"{f.__module__}.{f.__qualname__}")
+
+    def on_end(self, event):
+        pass
+
+ev.register("numba:compile", Recorder())
+
+from conftest import make_body, make_scene
+from rbcli.runner.simulation import Simulation
+from rbcli.scene.force_specs import BodyPoint, ForceImpulse, ForceSpring
+
+def run(forces):
+    body = make_body("h", velocity=np.array([0.5, 0.0, 4.0]), angular_momentum=np.array([0.01, 0.02, 0.03]))
+    scene = make_scene([body], integrator=sys.argv[1], gravity=np.array([0.0, 0.0, -9.81]))
+    start = len(compiled)
+    Simulation(replace(scene, forces=tuple(forces))).step(3)
+    return compiled[start:]
+
+out = {"gravity": run([])}
+if "--forces" in sys.argv:
+    spring = ForceSpring(end_a=BodyPoint(body="h", point=np.array([0.1, 0.0, 0.0])), anchor=np.zeros(3), stiffness=1.0)
+    kick = ForceImpulse(at=BodyPoint(body="h"), time=0.001, vector=np.array([0.0, 1.0, 0.0]))
+    out["spring_impulse"] = run([spring, kick])
+print(json.dumps(out))
+"""
+
+
+def _compiled_in_fresh_process(cache: Path, *extra: str) -> dict[str, list[str]]:
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), str(ROOT / "tests"), *filter(None, [env.get("PYTHONPATH")])])
+    out = subprocess.run([sys.executable, "-c", SCRIPT, INTEGRATOR, *extra], env=env, cwd=ROOT,
+                         capture_output=True, text=True, timeout=600)  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def test_first_run_compiles_only_the_stages_the_scene_has_and_the_second_loads_them(tmp_path):
+    cache = tmp_path / "numba_cache"
+    first = _compiled_in_fresh_process(cache, "--forces")
+
+    gravity = set(first["gravity"])
+    # the empty cache really compiled the scene's kernels (so the events are seen)...
+    assert {CHUNK, _name(wrench.accumulate_wrench), _name(accumulate_gravity)} <= gravity, sorted(gravity)
+    # ...and none of the kinds of force and stage the scene does not have
+    assert not gravity & UNUSED_BY_GRAVITY, sorted(gravity & UNUSED_BY_GRAVITY)
+    # record_if_due copies with element loops: no array-assignment shape-error message (~2.5 s) compiled
+    assert not [name for name in gravity if "shape_context" in name], sorted(gravity)
+
+    # a scene with a spring and an impulse compiles those two (a loop of its own types), still nothing else
+    forces = set(first["spring_impulse"])
+    assert {CHUNK, _name(spring.accumulate_spring), _name(impulse.apply_impulses)} <= forces, sorted(forces)
+    assert not forces & (UNUSED_BY_GRAVITY - {_name(spring.accumulate_spring), _name(impulse.apply_impulses)})
+
+    # numba's cache serves the loops that call the dispatchers: a second process compiles nothing
+    second = _compiled_in_fresh_process(cache, "--forces")
+    assert second == {"gravity": [], "spring_impulse": []}, second
+
+
+def test_kernel_tables_are_none_for_unused_types_and_stable_per_scene():
+    body = make_body("h")
+    kick = ForceImpulse(at=BodyPoint(body="h"), time=0.5, vector=np.ones(3))
+    forces = prepare(replace(make_scene([body], gravity=G), forces=(kick,))).forces
+    kernel = forces.kernel()
+    assert isinstance(kernel, KernelForceTables) and kernel._fields == forces._fields
+    assert kernel.impulse is forces.impulse and kernel.schedule is forces.schedule
+    for name in ("field", "point_force", "torque", "spring", "drag", "contact"):
+        assert getattr(kernel, name) is None, name
+    assert make_force_data(forces).contact is None and make_force_data(kernel).contact is None
+    again = prepare(replace(make_scene([body], gravity=G), forces=(kick,))).forces.kernel()
+    assert numba.typeof(again) == numba.typeof(kernel)  # one compiled kernel per kind of scene
+
+
+def test_a_chunk_gives_the_same_bits_with_kernel_tables_as_with_full_tables():
+    """Kernels also take a plain ForceTables (tests and benchmarks call them with `compiled.forces`):
+    every stage is then compiled and the empty ones skipped at run time, bitwise as the kernel form."""
+    bodies = random_bodies(3, seed=4)
+    specs = (
+        ForceSpring(end_a=BodyPoint(body="b0", point=np.array([0.1, 0.0, 0.0])), anchor=np.zeros(3), stiffness=2.0),
+        ForceField(value=np.array([0.0, 0.3, 0.0]), gradient=0.1 * np.eye(3)),
+        ForceImpulse(at=BodyPoint(body="b1", point=np.array([0.0, 0.1, 0.0])), time=0.004, vector=np.ones(3)),
+    )
+    compiled = prepare(replace(make_scene(bodies, integrator=INTEGRATOR, gravity=G), forces=specs))
+    chunk = get_integrator(INTEGRATOR).chunk()
+    results = []
+    for forces in (compiled.forces, compiled.forces.kernel()):
+        data = make_data(compiled.initial_state, forces, chunk.SCRATCH_WIDTH)
+        frames = empty_buffers(4, 3)
+        status = chunk.run_chunk(compiled.model.kernel(), forces, data.kernel(), 1e-3, 0, 20, 5, frames, 0)
+        results.append((status, data.state.x, data.state.q, data.state.P, data.state.L, frames.x,
+                        data.force.term_evaluations))  # fmt: skip
+    full, kernel = results
+    assert full[0] == kernel[0] == (20, 4, 2)  # the 4th frame fills the buffers
+    for a, b in zip(full[1:], kernel[1:], strict=True):
+        assert np.array_equal(a, b)
