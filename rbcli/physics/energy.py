@@ -29,6 +29,11 @@ INVARIANT_NAMES = (
     "quaternion_norm_defect",
 )
 
+# added for scenes with contact: contacts at the step, the deepest overlap [m], the energy stored in the
+# contact springs [J] (also counted in energy_potential and energy_total, so a bounce does not look like
+# a loss of energy while the springs hold it)
+CONTACT_INVARIANT_NAMES = ("contact_count", "contact_max_overlap", "contact_energy")
+
 
 def kinetic_energy(model: Model, P: np.ndarray, L: np.ndarray, omega: np.ndarray) -> np.ndarray:
     """Total kinetic energy [J] per frame, (K,): sum_b |P_b|^2/(2 M_b) + L_b . omega_b / 2."""

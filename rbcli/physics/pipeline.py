@@ -94,6 +94,12 @@ STEP_STAGES: tuple[Stage, ...] = (
         substep=True,
     ),
     Stage(
+        "contact_record",
+        "contact_record: on recording steps, the step's contact count, deepest overlap and energy",
+        ("from rbcli.physics.forces.stages import contact_record_stage",),
+        "contact_record_stage(data.force.contact, frames, filled, (index + 1) % record_every == 0)",
+    ),
+    Stage(
         "record",
         "record: on recording steps, the divergence check and the state copied into the next frame",
         ("from rbcli.physics.step import STATUS_OK, record_if_due",),

@@ -14,6 +14,9 @@ from typing import Any, NamedTuple
 import numba
 import numpy as np
 
+# columns of FrameBuffers.contact (physics/contact/tables.py STAT_COUNT; step.py imports no contact code)
+CONTACT_STATS = 3
+
 # |value| above this counts as a blow-up: far beyond any physical scene in SI units, far below
 # overflow, so a divergence is caught while the state is still printable.
 BLOWUP_LIMIT = 1e100
@@ -39,13 +42,16 @@ CHUNK_KERNEL: dict[str, Any] = {"cache": True, "nogil": True}
 
 
 class FrameBuffers(NamedTuple):
-    """Preallocated recorded frames: step (K,) int64, x (K,N,3), q (K,N,4), P (K,N,3), L (K,N,3)."""
+    """Preallocated recorded frames: step (K,) int64, x (K,N,3), q (K,N,4), P (K,N,3), L (K,N,3), and
+    contact (K, CONTACT_STATS): the contact stage's statistics of each recorded step (zeros without
+    contact; contact/tables.py STAT_*: contacts, deepest overlap [m], energy in the contact springs [J])."""
 
     step: np.ndarray
     x: np.ndarray
     q: np.ndarray
     P: np.ndarray
     L: np.ndarray
+    contact: np.ndarray
 
 
 def empty_buffers(capacity: int, body_count: int) -> FrameBuffers:
@@ -56,6 +62,7 @@ def empty_buffers(capacity: int, body_count: int) -> FrameBuffers:
         np.zeros((capacity, body_count, 4)),
         np.zeros((capacity, body_count, 3)),
         np.zeros((capacity, body_count, 3)),
+        np.zeros((capacity, CONTACT_STATS)),
     )
 
 

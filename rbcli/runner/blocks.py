@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rbcli.physics.energy import invariants_from_totals
+from rbcli.physics.energy import CONTACT_INVARIANT_NAMES, invariants_from_totals
 from rbcli.physics.frames import particle_world
 from rbcli.physics.outputs import TOTALS_WIDTH, derive_outputs
 from rbcli.record.frame import FrameBlock
@@ -12,9 +12,16 @@ from rbcli.scene.compile import CompiledScene
 
 
 def make_block(
-    compiled: CompiledScene, step: np.ndarray, x: np.ndarray, q: np.ndarray, P: np.ndarray, L: np.ndarray
+    compiled: CompiledScene,
+    step: np.ndarray,
+    x: np.ndarray,
+    q: np.ndarray,
+    P: np.ndarray,
+    L: np.ndarray,
+    contact: np.ndarray | None = None,
 ) -> FrameBlock:
-    """A FrameBlock of K frames from raw (K, N, ...) arrays; copies, so buffers can be reused."""
+    """A FrameBlock of K frames from raw (K, N, ...) arrays; copies, so buffers can be reused. contact:
+    (K, 3) the contact statistics of each frame (FrameBuffers.contact), for scenes with contact."""
     model, settings = compiled.model, compiled.settings
     q_user, v, omega = np.empty_like(q), np.empty_like(P), np.empty_like(L)
     totals = np.empty((q.shape[0], TOTALS_WIDTH))
@@ -31,6 +38,12 @@ def make_block(
     )
     if "invariants" in settings.streams:
         block.invariants = invariants_from_totals(model, compiled.forces, x, q, totals)
+        if compiled.contact is not None:
+            stats = np.zeros((q.shape[0], 3)) if contact is None else contact
+            for k, name in enumerate(CONTACT_INVARIANT_NAMES):
+                block.invariants[name] = np.ascontiguousarray(stats[:, k], dtype=np.float64)
+            for name in ("energy_potential", "energy_total"):  # the contact springs' energy is potential
+                block.invariants[name] = block.invariants[name] + block.invariants["contact_energy"]
     if "particles" in settings.streams:
         block.particle_position, _ = particle_world(model, x, q, P, L)
     return block

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from rbcli._version import __version__
-from rbcli.physics.energy import INVARIANT_NAMES
+from rbcli.physics.energy import CONTACT_INVARIANT_NAMES, INVARIANT_NAMES
 from rbcli.record.frame import RunHeader, RunSummary, Sink
 from rbcli.runner.divergence import GUARD_STEPS, JUMP_FACTOR, EnergyGuard, explain, likely_cause
 from rbcli.runner.recorder import Recorder
@@ -64,7 +64,11 @@ def run_header(compiled: CompiledScene, *, steps: int | None = None, record_ever
         streams=settings.streams,
         rbsim_version=__version__,
         seed=settings.seed,
-        invariant_names=INVARIANT_NAMES if "invariants" in settings.streams else (),
+        invariant_names=(
+            (*INVARIANT_NAMES, *(CONTACT_INVARIANT_NAMES if compiled.contact is not None else ()))
+            if "invariants" in settings.streams
+            else ()
+        ),
     )
 
 
@@ -138,6 +142,8 @@ def run_simulation(
         buf.step[frames] = state.step
         for key in ("x", "q", "P", "L"):
             getattr(buf, key)[frames] = getattr(state, key)
+        contact = sim.data.force.contact
+        buf.contact[frames] = contact.stats if contact is not None else 0.0  # the last evaluation's (0 at start)
         return frames + 1
 
     handed_at = time.perf_counter()

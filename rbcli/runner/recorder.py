@@ -106,7 +106,10 @@ class Recorder:
         # the last frames before a divergence hold huge numbers whose squares overflow to inf in the
         # invariants: that is what the log should show, without numpy warnings on the terminal
         with np.errstate(over="ignore", invalid="ignore"):
-            block = make_block(self._compiled, b.step[:frames], b.x[:frames], b.q[:frames], b.P[:frames], b.L[:frames])
+            block = make_block(
+                self._compiled, b.step[:frames], b.x[:frames], b.q[:frames], b.P[:frames], b.L[:frames],
+                b.contact[:frames],
+            )  # fmt: skip
             for sink in self._sinks:
                 sink.write(block)
         self.frames_written += frames

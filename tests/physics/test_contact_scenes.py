@@ -58,3 +58,17 @@ def test_head_on_balls_separate_at_their_restitution():
     np.testing.assert_allclose(sim.state.P.sum(axis=0), P0, atol=1e-14)
     assert sim.state.v[1, 0] - sim.state.v[0, 0] == pytest.approx(0.8 * 2.0, rel=0.05)
     assert np.abs(sim.state.omega).max() < 1e-12  # frictionless: no spin (the lattice centre is ~1e-18 m off)
+
+
+@pytest.mark.parametrize("suffix", [".mcap", ".rrd"])
+def test_contact_invariants_are_recorded(tmp_path, suffix):
+    """Contact count, deepest overlap and the springs' energy per frame, in both formats; the total
+    energy (the springs' included) never rises while the brick bounces and settles."""
+    compiled = rbcli.prepare(SCENES / "box_drop.yaml", duration=1.0)
+    rbcli.run_to_file(compiled, tmp_path / f"box{suffix}")
+    invariants = rbcli.read_recording(tmp_path / f"box{suffix}").invariants
+    count, overlap = invariants["contact_count"], invariants["contact_max_overlap"]
+    assert count[0] == 0 and count[-1] == 128  # lying on its 0.2 x 0.1 face: 16 x 8 lattice spheres
+    assert 0 < overlap[-1] < 0.01 * 0.00625  # under 1 % of the sphere radius at rest
+    energy = invariants["energy_total"]
+    assert np.all(np.diff(energy) <= 1e-9 * abs(energy[0]))

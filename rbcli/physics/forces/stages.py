@@ -20,7 +20,7 @@ cached caller; they take STEP_KERNEL's options: cached, no reference counting).
 Force stages (called by forces/wrench.accumulate_wrench, each adding its rows to `counts`, the
 ForceData.term_evaluations counter): field, point force, torque, spring, drag, contact (with the
 static bodies held). Pipeline stages (called by the generated chunk loops, physics/pipeline.py):
-impulses, contact_begin, contact_commit. Gravity has no table (a flag and a vector) and is not here.
+impulses, contact_begin, contact_commit, contact_record. Gravity has no table (a flag and a vector) and is not here.
 """
 
 from __future__ import annotations
@@ -226,5 +226,24 @@ def _contact_commit_stage(model, contact, work, x, q, P, L):  # noqa: ANN001, AN
     def run(model, contact, work, x, q, P, L):  # noqa: ANN001, ANN202
         if contact.sphere_body.shape[0]:
             commit_contacts(model, contact, work, x, q, P, L)
+
+    return run
+
+
+def contact_record_stage(work, frames, filled, due) -> None:  # noqa: ANN001
+    """On a recording step, put the step's contact statistics (count, deepest overlap, stored energy of its
+    last force evaluation) in the frame the record stage is about to fill, when the scene has contact."""
+    _kernel_only()
+
+
+@overload(contact_record_stage, jit_options=_OPTIONS)
+def _contact_record_stage(work, frames, filled, due):  # noqa: ANN001, ANN202
+    if _absent(work):
+        return lambda work, frames, filled, due: None
+
+    def run(work, frames, filled, due):  # noqa: ANN001, ANN202
+        if due and filled < frames.contact.shape[0]:
+            for k in range(frames.contact.shape[1]):
+                frames.contact[filled, k] = work.stats[k]
 
     return run
