@@ -38,7 +38,8 @@ def test_committed_chunk_loops_are_generated_from_the_stage_list(name):
 
 
 def test_stage_list_is_impulses_contact_update_record():
-    assert [stage.name for stage in STEP_STAGES] == ["impulses", "contact_begin", "update", "contact_commit", "contact_record", "record"]
+    names = ["impulses", "contact_begin", "update", "contact_commit", "contact_record", "record"]
+    assert [stage.name for stage in STEP_STAGES] == names
     assert [stage.name for stage in STEP_STAGES if stage.substep] == ["contact_begin", "update", "contact_commit"]
 
 
