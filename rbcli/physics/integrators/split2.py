@@ -57,6 +57,7 @@ from rbcli.physics.integrators.kinematics import (
     turn,
     turn_numpy,
 )
+from rbcli.physics.rotation import quat_multiply
 from rbcli.physics.step import STEP_KERNEL
 
 # per body: body-frame angular momentum m (3), cos and sin of the half angle of the last T_c (2)
@@ -95,14 +96,18 @@ def compose(model, forces, force_data, t, h, weights, x, q, P, L, F, tau, scratc
 
 @numba.njit(cache=True, inline="always")
 def _drift_to_first_kick(model, h, x, q, P, L, scratch) -> None:  # noqa: ANN001
-    """D_x(h/2) T_a(h/2) T_b(h/2) T_c(h/2); leaves m and T_c's (cos, sin) in scratch."""
+    """D_x(h/2) T_a(h/2) T_b(h/2) T_c(h/2); leaves m and T_c's (cos, sin) in scratch.
+    An isotropic body (a ball) turns by its exact free rotation T(h/2) instead (`_turn_isotropic`)."""
     for b in range(x.shape[0]):
         inv0, inv1, inv2 = model.body_inertia_inv[b, 0], model.body_inertia_inv[b, 1], model.body_inertia_inv[b, 2]
-        ka, kb, kc = axis_order(model.body_inertia[b, 0], model.body_inertia[b, 1], model.body_inertia[b, 2])
         drift = 0.5 * h / model.body_mass[b]
         x[b, 0] += drift * P[b, 0]
         x[b, 1] += drift * P[b, 1]
         x[b, 2] += drift * P[b, 2]
+        if inv0 == inv1 and inv1 == inv2:
+            _turn_isotropic(q, L, b, 0.5 * h * inv0)
+            continue
+        ka, kb, kc = axis_order(model.body_inertia[b, 0], model.body_inertia[b, 1], model.body_inertia[b, 2])
         w, qx, qy, qz = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
         m0, m1, m2 = rotate_inverse(w, qx, qy, qz, L[b, 0], L[b, 1], L[b, 2])
         c, s = half_turn(ka, 0.5 * h, m0, m1, m2, inv0, inv1, inv2)
@@ -126,6 +131,25 @@ def _kick_and_drift(model, has_torque, torque_body, h_prev, h_next, x, q, P, L, 
     """
     for b in range(x.shape[0]):
         inv0, inv1, inv2 = model.body_inertia_inv[b, 0], model.body_inertia_inv[b, 1], model.body_inertia_inv[b, 2]
+        if inv0 == inv1 and inv1 == inv2:  # K(h_prev), then T((h_prev + h_next)/2) D_x((h_prev + h_next)/2)
+            h_mid = 0.5 * (h_prev + h_next)
+            P[b, 0] += h_prev * F[b, 0]
+            P[b, 1] += h_prev * F[b, 1]
+            P[b, 2] += h_prev * F[b, 2]
+            if has_torque and torque_body[b]:
+                L[b, 0] += h_prev * tau[b, 0]
+                L[b, 1] += h_prev * tau[b, 1]
+                L[b, 2] += h_prev * tau[b, 2]
+            _turn_isotropic(q, L, b, h_mid * inv0)
+            drift = h_mid / model.body_mass[b]
+            x[b, 0] += drift * P[b, 0]
+            x[b, 1] += drift * P[b, 1]
+            x[b, 2] += drift * P[b, 2]
+            if h_next == 0.0:
+                w, qx, qy, qz = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
+                norm = 1.0 / math.sqrt(w * w + qx * qx + qy * qy + qz * qz)
+                q[b, 0], q[b, 1], q[b, 2], q[b, 3] = w * norm, qx * norm, qy * norm, qz * norm
+            continue
         ka, kb, kc = axis_order(model.body_inertia[b, 0], model.body_inertia[b, 1], model.body_inertia[b, 2])
         w, qx, qy, qz = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
         m0, m1, m2 = scratch[b, 0], scratch[b, 1], scratch[b, 2]
@@ -167,6 +191,27 @@ def _kick_and_drift(model, has_torque, torque_body, h_prev, h_next, x, q, P, L, 
         scratch[b, 0], scratch[b, 1], scratch[b, 2] = m0, m1, m2
 
 
+@numba.njit(cache=True, inline="always")
+def _turn_isotropic(q, L, b, s_over_i) -> None:  # noqa: ANN001
+    """The exact free rotation of an isotropic body (I1 = I2 = I3 = I) over a time s: omega = L / I is
+    fixed in the world, so q <- (cos(theta/2), sin(theta/2) L/|L|) * q with theta = |L| s / I. It is
+    the exact flow of the whole rotational kinetic energy |L|^2 / (2 I), which the axis pieces T_a T_b
+    T_c only approximate (they do not commute), so a ball's turn costs one sin/cos pair, not five or six.
+    """
+    l0, l1, l2 = L[b, 0], L[b, 1], L[b, 2]
+    length = math.sqrt(l0 * l0 + l1 * l1 + l2 * l2)
+    if length == 0.0:
+        return
+    half = 0.5 * length * s_over_i
+    c, s = math.cos(half), math.sin(half) / length
+    rx, ry, rz = s * l0, s * l1, s * l2
+    w, qx, qy, qz = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
+    q[b, 0] = c * w - rx * qx - ry * qy - rz * qz
+    q[b, 1] = c * qx + rx * w + ry * qz - rz * qy
+    q[b, 2] = c * qy - rx * qz + ry * w + rz * qx
+    q[b, 3] = c * qz + rx * qy - ry * qx + rz * w
+
+
 def step_numpy(model, forces, t, dt, x, q, P, L) -> None:  # noqa: ANN001
     """Plain numpy reference of `step`, vectorised over bodies, in place."""
     compose_numpy(model, forces, t, dt, WEIGHTS, x, q, P, L)
@@ -176,20 +221,34 @@ def compose_numpy(model, forces, t, h, weights, x, q, P, L) -> None:  # noqa: AN
     """Numpy reference of `compose`: each stage unmerged, D_x T_a T_b T_c K T_c T_b T_a D_x."""
     order = axis_order_numpy(model.body_inertia)
     inv = model.body_inertia_inv
+    iso = (inv[:, 0] == inv[:, 1]) & (inv[:, 1] == inv[:, 2])
     elapsed = 0.0
     for weight in weights:
         s = weight * h
         x += 0.5 * s * P / model.body_mass[:, None]
         m = body_momentum_numpy(q, L)
+        q_iso = _turn_isotropic_numpy(q, L, 0.5 * s * inv[:, 0])
         for axis in (order[:, 0], order[:, 1], order[:, 2]):
             m, q[:] = turn_numpy(axis, 0.5 * s, m, q, inv)
+        q[iso] = q_iso[iso]
         F, tau = wrench_numpy(model, forces, t + elapsed + 0.5 * s, x, q, P, L)
         P += s * F
         if forces.has_torque:
             L += s * tau
             m = m + s * body_momentum_numpy(q, tau)
+        q_iso = _turn_isotropic_numpy(q, L, 0.5 * s * inv[:, 0])
         for axis in (order[:, 2], order[:, 1], order[:, 0]):
             m, q[:] = turn_numpy(axis, 0.5 * s, m, q, inv)
+        q[iso] = q_iso[iso]
         x += 0.5 * s * P / model.body_mass[:, None]
         elapsed += s
     q /= np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def _turn_isotropic_numpy(q: np.ndarray, L: np.ndarray, s_over_i: np.ndarray) -> np.ndarray:
+    """Numpy reference of `_turn_isotropic`, every body (the caller keeps the isotropic ones)."""
+    length = np.linalg.norm(L, axis=1)
+    half = 0.5 * length * s_over_i
+    safe = np.where(length > 0.0, length, 1.0)
+    r = np.concatenate([np.cos(half)[:, None], (np.sin(half) / safe)[:, None] * L], axis=1)
+    return quat_multiply(r, q)
