@@ -33,6 +33,11 @@ within 15 % of it everywhere: flip 6.3e-3 rad (worst order 6.3e-2), generic 6.2e
 rod 1.5e-6 to 4e-6 (worst 2.5 rad), and at fast spin it keeps the energy error at 6.7 % where other
 orders reach 45 to 160 % (table in docs/integrators.md).
 
+Isotropic bodies (I1 = I2 = I3: balls, kinematic bodies): T_a T_b T_c is replaced by the exact flow of
+the whole rotational energy |L|^2 / (2 I), a turn about the world-fixed omega = L / I (one sin/cos pair
+instead of five or six; the axis pieces do not commute, so for these bodies the composition only
+approximated what is now exact). The 1,000-ball pile of the collisions issue ran 26x -> 31x MuJoCo.
+
 Properties: symplectic and time-reversible; order 2; L exactly conserved torque-free (it is never
 touched), |m| = |L| exactly, energy error bounded (no drift); one force evaluation per step.
 `compose` also runs any symmetric composition of this step (split4) with the half drifts of adjacent
