@@ -19,7 +19,8 @@ Body-steps per second (bodies x steps / wall second) for, all in one process, on
     damping and attachment points;
   recording 1,000 bodies x 1,000 steps every step to each sink (memory, .mcap, .rrd) against none;
   peak traced memory of a recorded run at two lengths (flat = nothing grows with steps);
-  start-up: `rbsim --help`, `rbsim validate`, a second `rbsim run` (warm numba cache), median of 5.
+  start-up: `rbsim --help`, `rbsim validate`, a second `rbsim run` (warm numba cache), median of 5;
+  contact: the collisions issue's 1,000-ball pile against MuJoCo CG (benchmarks/bench_contact.py).
 Each measurement is warmed up first (kernels compiled or loaded from numba's cache, the time reported),
 then repeated; runs of one scene size are interleaved across engines so a change of machine load hits
 them alike; the best repeat is reported and the median/best spread printed (a shared machine is noisy).
@@ -754,11 +755,11 @@ def main() -> None:
     parser.add_argument("--integrators", default="", help="comma list [default: quick: " + ",".join(MAIN_INTEGRATORS)
                         + "; full: every registered integrator with a run_chunk]")  # fmt: skip
     parser.add_argument("--no-pybullet", action="store_true")
-    parser.add_argument("--sections", default="free,chain,recording,startup",
+    parser.add_argument("--sections", default="free,chain,recording,startup,contact",
                         help="comma list of sections to run [default: all]; --write-docs needs all")  # fmt: skip
     args = parser.parse_args()
     sections = set(args.sections.split(","))
-    if args.write_docs and sections != {"free", "chain", "recording", "startup"}:
+    if args.write_docs and sections != {"free", "chain", "recording", "startup", "contact"}:
         parser.error("--write-docs needs every section")
 
     repeats, budget = (3, 0.15) if args.quick else (7, 1.0)
@@ -781,12 +782,16 @@ def main() -> None:
             rep.say(f"- {missing}")
     if args.no_pybullet:
         engines.discard("pybullet")
-    rep.say("- contact: the sphere-pile benchmark against MuJoCo waits for the collisions issue (no contact yet)")
     rep.say()
 
     free = free_body_section(rep, names, repeats, budget, engines) if "free" in sections else None
     if "chain" in sections:
         chain_section(rep, names, repeats, budget, engines)
+    if "contact" in sections:  # the collisions issue's 1,000-ball pile (benchmarks/bench_contact.py)
+        from bench_contact import pile_section
+
+        for line in pile_section(args.quick, "mujoco" in engines, big=False):
+            rep.say(line)
     out = Path(tempfile.mkdtemp(prefix="rbsim-bench-speed-"))
     try:
         recording = recording_section(rep, args.quick, out) if "recording" in sections else None
