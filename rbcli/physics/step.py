@@ -34,11 +34,14 @@ STATUS_NO_ROOM = 4
 # tables hold ~55 arrays), which was ~75 % of a one-body split2 step. A kernel that allocates fails to
 # compile with these options, loudly, rather than misbehaving. `_nrt` is a numba option without a public
 # spelling; the test suite compiles every kernel, so a numba that drops it is caught at once.
-STEP_KERNEL: dict[str, Any] = {"cache": True, "_nrt": False}
+STEP_KERNEL: dict[str, Any] = {"cache": True, "_nrt": False, "error_model": "numpy"}
 
 # Options for the chunk loops the runner calls from Python: they release the GIL, so a recording thread
 # (runner.recorder) encodes and writes the previous block while the next chunk runs on another core.
-CHUNK_KERNEL: dict[str, Any] = {"cache": True, "nogil": True}
+CHUNK_KERNEL: dict[str, Any] = {"cache": True, "nogil": True, "error_model": "numpy"}
+# error_model "numpy" (both options): a float division by zero gives inf or nan, as IEEE arithmetic does,
+# instead of numba's default Python ZeroDivisionError, which escaped a diverging rk4 run as a traceback;
+# the state check then stops the run with rbsim's own divergence message. Finite results are the same.
 
 
 class FrameBuffers(NamedTuple):

@@ -117,3 +117,15 @@ def test_energy_guard_stops_at_the_same_step_however_the_chunks_fall(monkeypatch
     status, steps, last, message = results[0]
     assert status == "diverged" and steps % 1000 == 0 and last == steps - 1
     assert "body 'ball': kinetic energy grew" in message
+
+
+def test_a_division_by_zero_in_a_kernel_is_a_divergence_not_a_traceback(tmp_path):
+    """rk4 on a stiff spring overflows within a few steps and divides by a zero norm: the kernels follow
+    IEEE arithmetic (numba error_model numpy), so the run ends with the divergence message, exit 3."""
+    scene = tmp_path / "stiff.yaml"
+    text = SPRING.replace("integrator: split2", "integrator: rk4").replace("dt: 0.05", "dt: 0.01")
+    scene.write_text(text.replace("stiffness: 5000", "stiffness: 1000000"))
+    run = subprocess.run([sys.executable, "-m", "rbcli", "run", str(scene), "-o", str(tmp_path / "s.mcap")],
+                         capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert run.returncode == 3, run.stderr
+    assert "Traceback" not in run.stderr and "body 'bob'" in run.stderr
