@@ -4,7 +4,10 @@ long way: its scene edited by hand and run by `rbcli.Simulation`, without the sw
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
+import pytest
 import yaml
 
 import rbcli
@@ -59,4 +62,26 @@ def rows_without_wall_time(table) -> list[dict]:  # noqa: ANN001 - a pyarrow Tab
     """The rows of a results table, minus the one column that differs between runs of a variant (wall_s).
     Failed rows too: the run loop's energy guard looks at a fixed grid of steps, so a diverging variant
     stops at the same step however the wall-clock-sized chunks fall."""
-    return table.drop_columns(["wall_s"]).to_pylist()
+    return [nan_as_text(row) for row in table.drop_columns(["wall_s"]).to_pylist()]
+
+
+def nan_as_text(value):  # noqa: ANN001, ANN202
+    """NaN as the text 'nan' (NaN != NaN would make equal rows of a diverged variant compare unequal)."""
+    if isinstance(value, float) and value != value:
+        return "nan"
+    if isinstance(value, dict):
+        return {k: nan_as_text(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [nan_as_text(v) for v in value]
+    return value
+
+
+# the fixture tests/sweep/conftest.py used to hold: a conftest.py here would be registered as the module
+# `conftest` too, shadowing tests/conftest.py for any later `from conftest import ...` in other folders
+@pytest.fixture(name="spring_sweep")
+def spring_sweep_fixture(tmp_path: Path) -> Path:
+    """A sweep file (and its scene) in a fresh folder: 3 stiffnesses x 2 integrators, one stiffness diverging."""
+    (tmp_path / "spring.yaml").write_text(SPRING_SCENE)
+    path = tmp_path / "spring.sweep.yaml"
+    path.write_text(SPRING_SWEEP)
+    return path

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
-from sweep_cases import rows_without_wall_time
+from sweep_cases import rows_without_wall_time, spring_sweep_fixture  # noqa: F401 - a fixture
 from typer.testing import CliRunner
 
 from rbcli.cli.app import app
