@@ -23,6 +23,7 @@ from rbcli.scene.issues import IssueCollector, did_you_mean, quoted_list
 from rbcli.scene.schema_errors import SchemaErrorFormatter
 from rbcli.scene.schema_path import scene_schema
 from rbcli.scene.spec import (
+    SCENE_FORMAT_VERSION,
     BodySpec,
     ForceSpec,
     RecordSpec,
@@ -128,6 +129,8 @@ def _analyse(
     if not isinstance(data, dict):
         issues.error((), "a scene must be a mapping", "keys such as name, simulation and bodies")
         return None, issues.sorted()
+    if _newer_format(data, issues):
+        return None, issues.sorted()
     data = _merge_defaults(doc, data)
     bad_paths = _check_finite(data, (), issues)
     errors = sorted(_validator().iter_errors(data), key=lambda e: list(map(str, e.absolute_path)))
@@ -218,6 +221,21 @@ def _forces(data: dict[str, Any], clean: Any, issues: IssueCollector) -> tuple[F
         except Exception as exc:  # noqa: BLE001
             issues.error(("forces", i), f"cannot read this force: {exc}", "a force entry as docs/forces.md describes")
     return tuple(forces)
+
+
+def _newer_format(data: dict[str, Any], issues: IssueCollector) -> bool:
+    """A scene written for a newer format: one located error, and nothing else checked (its other keys may
+    be ones this rbsim does not know, and a screen of "unknown key" errors would hide the reason)."""
+    version = data.get("version", SCENE_FORMAT_VERSION)
+    if isinstance(version, int) and not isinstance(version, bool) and version > SCENE_FORMAT_VERSION:
+        issues.error(
+            ("version",),
+            f"scene format version {version} is newer than this rbsim understands (it reads up to "
+            f"version {SCENE_FORMAT_VERSION})",
+            f"a newer rbsim (pip install -U rbsim), or a scene written for version {SCENE_FORMAT_VERSION}",
+        )
+        return True
+    return False
 
 
 # ---- defaults -----------------------------------------------------------------------------------------

@@ -1,0 +1,72 @@
+"""Recordings carry rbsim's version and the recording format version (MCAP metadata, .rrd properties), and
+a file in a newer format than this rbsim reads is refused with a clear error by every reader: the public
+`read_recording`, `rbsim info`, and the MCAP-to-RRD conversion of `rbsim replay --save`."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+from record_synthetic import make_blocks, make_header, write_run
+
+import rbcli
+from rbcli.record import frame
+from rbcli.record.convert import mcap_to_rrd
+from rbcli.record.mcap_sink import METADATA_RUN, SinkMcap, read_mcap_contents
+from rbcli.record.read import RecordingTooNew, read_rrd, summarize
+from rbcli.record.rerun_sink import SinkRerun
+
+SINKS = {"mcap": SinkMcap, "rrd": SinkRerun}
+
+
+def write(path, version: int = frame.RECORDING_FORMAT_VERSION) -> None:
+    """A three-frame run written as if by an rbsim whose recording format is `version`."""
+    header = make_header()
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(frame, "RECORDING_FORMAT_VERSION", version)
+        write_run(SINKS[path.suffix[1:]](path), header, make_blocks(header, sizes=(3,), diverge=False), "completed")
+
+
+def test_mcap_metadata_carries_both_versions(tmp_path):
+    path = tmp_path / "run.mcap"
+    write(path)
+    meta = read_mcap_contents(path).metadata[METADATA_RUN]
+    assert meta["format_version"] == str(frame.RECORDING_FORMAT_VERSION)
+    assert meta["rbsim_version"] == make_header().rbsim_version
+
+
+def test_rrd_properties_carry_both_versions(tmp_path):
+    path = tmp_path / "run.rrd"
+    write(path)
+    meta = read_rrd(path).metadata
+    assert meta["format_version"] == str(frame.RECORDING_FORMAT_VERSION)
+    assert meta["rbsim_version"] == make_header().rbsim_version
+
+
+@pytest.mark.parametrize("suffix", ["mcap", "rrd"])
+def test_current_format_reads(tmp_path, suffix):
+    path = tmp_path / f"run.{suffix}"
+    write(path)
+    assert rbcli.read_recording(path).t.shape == (3,)
+    assert summarize(path).frames == 3
+
+
+@pytest.mark.parametrize("suffix", ["mcap", "rrd"])
+def test_newer_format_is_refused_clearly(tmp_path, suffix):
+    path = tmp_path / f"new.{suffix}"
+    newer = frame.RECORDING_FORMAT_VERSION + 1
+    write(path, newer)
+    for read in (rbcli.read_recording, summarize):
+        with pytest.raises(RecordingTooNew) as caught:
+            read(path)
+        message = str(caught.value)
+        assert f"recording format version {newer}" in message and "newer than this rbsim" in message
+        assert f"up to version {frame.RECORDING_FORMAT_VERSION}" in message and "upgrade rbsim" in message
+        assert "not a readable" not in message  # not mistaken for a damaged file
+    if suffix == "mcap":
+        with pytest.raises(RecordingTooNew):
+            mcap_to_rrd(path, tmp_path / "converted.rrd")
+    info = subprocess.run([sys.executable, "-m", "rbcli", "info", str(path)], capture_output=True, text=True)
+    assert info.returncode == 1 and f"recording format version {newer}" in info.stderr
+    assert "Traceback" not in info.stderr
