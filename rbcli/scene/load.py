@@ -11,6 +11,7 @@ every other subtree still is. `schemas/scene.schema.json` is the single source o
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import replace
 from functools import cache
 from pathlib import Path
@@ -103,9 +104,15 @@ def analyse_scene(path: str | Path) -> tuple[SceneSpec | None, list[SceneIssue]]
     try:
         with open(path, "rb") as handle:
             raw = handle.read(MAX_SCENE_BYTES + 1)
+            size = os.fstat(handle.fileno()).st_size
     except OSError as exc:
         reason = exc.strerror or str(exc)
         return None, [SceneIssue(None, f"cannot read scene file '{file}': {reason}", "a readable YAML file")]
+    if len(raw) > MAX_SCENE_BYTES:  # only the first bytes were read: the error gives the file's real size
+        try:
+            decode_scene_bytes(raw, file, max(size, len(raw)))
+        except SceneError as exc:
+            return None, exc.issues
     return analyse_scene_text(raw, file, Path(path).resolve().parent)
 
 

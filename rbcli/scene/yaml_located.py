@@ -19,6 +19,7 @@ Floats follow YAML 1.2 (`1e-3` is a number; PyYAML's YAML 1.1 resolver would mak
 
 from __future__ import annotations
 
+import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -36,6 +37,7 @@ from rbcli.scene.spec import SceneError, SceneIssue, SourceLocation
 YamlPath = tuple[str | int, ...]
 
 MAX_SCENE_BYTES = 10 * 1024 * 1024
+TOO_LARGE_HINT = "a smaller scene; give large particle sets as a mesh or a generated grid"
 MAX_DEPTH = 100
 MAX_EXPANDED_DEPTH = 200
 EXPANSION_FACTOR = 10
@@ -166,20 +168,14 @@ def _issue(file: str, line: int, column: int, message: str, expected: str = "") 
     return SceneIssue(SourceLocation(file, line, column), message, expected)
 
 
-def decode_scene_bytes(raw: bytes, file: str) -> str:
-    """UTF-8 text of a scene file, or SceneError located at the first offending byte or character."""
+def decode_scene_bytes(raw: bytes, file: str, size: int | None = None) -> str:
+    """UTF-8 text of a scene file, or SceneError located at the first offending byte or character.
+
+    size: the file's real length [bytes] when `raw` is only its first MAX_SCENE_BYTES + 1 bytes (the
+    readers stop there), so an oversized file is reported with its true size."""
     if len(raw) > MAX_SCENE_BYTES:
-        raise SceneError(
-            [
-                _issue(
-                    file,
-                    1,
-                    1,
-                    f"file is {len(raw) / 1e6:.1f} MB, over the {MAX_SCENE_BYTES / 1e6:.1f} MB limit for scenes",
-                    "a smaller scene; give large particle sets as a mesh or a generated grid",
-                )
-            ]
-        )
+        raise SceneError([_issue(file, 1, 1, _too_large(size if size is not None else len(raw)),
+                                 TOO_LARGE_HINT)])  # fmt: skip
     if raw[:2] in (b"\xff\xfe", b"\xfe\xff"):
         raise SceneError([_issue(file, 1, 1, "file is UTF-16 encoded", "UTF-8 text (save the file as UTF-8)")])
     nul = raw.find(b"\x00")
@@ -204,6 +200,15 @@ def decode_scene_bytes(raw: bytes, file: str) -> str:
     return text.removeprefix("\ufeff")
 
 
+def _too_large(size: int) -> str:
+    """'file is 52,428,800 bytes (50.0 MiB), over the 10,485,760-byte (10.0 MiB) limit for scenes': exact
+    sizes, as rounding both to one decimal made a 50 MB file read as 10.5 MB (only its first bytes are read)."""
+    return (
+        f"file is {size:,} bytes ({size / 2**20:.1f} MiB), over the {MAX_SCENE_BYTES:,}-byte "
+        f"({MAX_SCENE_BYTES / 2**20:.1f} MiB) limit for scenes"
+    )
+
+
 def _byte_line_column(raw: bytes, offset: int) -> tuple[int, int]:
     line_start = raw.rfind(b"\n", 0, offset) + 1
     column = len(raw[line_start:offset].decode("utf-8", errors="replace")) + 1
@@ -221,18 +226,20 @@ def read_located_yaml(path: str | Path) -> LocatedDocument:
     try:
         with open(path, "rb") as handle:
             raw = handle.read(MAX_SCENE_BYTES + 1)
+            size = os.fstat(handle.fileno()).st_size
     except OSError as exc:
         raise SceneError(
             [SceneIssue(None, f"cannot read scene file '{file}': {exc.strerror or exc}", "a readable YAML file")]
         ) from None
-    return parse_located_yaml(raw, file)
+    return parse_located_yaml(decode_scene_bytes(raw, file, max(size, len(raw))), file)
 
 
 def parse_located_yaml(source: str | bytes, file: str = "<string>") -> LocatedDocument:
     """Parse one YAML document into plain values with locations (see module docstring for the rules)."""
     text = decode_scene_bytes(source, file) if isinstance(source, bytes) else source
-    if len(text.encode("utf-8", errors="surrogatepass")) > MAX_SCENE_BYTES:
-        decode_scene_bytes(text.encode("utf-8", errors="surrogatepass"), file)  # raises the size error
+    encoded_size = len(text.encode("utf-8", errors="surrogatepass"))
+    if encoded_size > MAX_SCENE_BYTES:
+        raise SceneError([_issue(file, 1, 1, _too_large(encoded_size), TOO_LARGE_HINT)])
     bad = _NON_PRINTABLE.search(text)
     if bad:
         line, column = _text_line_column(text, bad.start())

@@ -230,8 +230,16 @@ def test_collinear_particles_with_a_radius_are_a_rigid_body():
 
 def test_single_particle_is_rejected():
     body = "  - name: dot\n    particles: {positions: [[1, 2, 3]], masses: [2.0]}\n"
-    issue = the_issue(issues_of(SIM + "bodies:\n" + body), "one point")
+    issue = the_issue(issues_of(SIM + "bodies:\n" + body), "a single particle is one point")
     assert at(issue) == (4, 5)
+    assert "line" not in issue.message + issue.expected  # one particle lies on no line to move it off
+    assert "radius" in issue.expected and "more particles" in issue.expected
+
+
+def test_particles_all_at_one_point_are_told_to_spread():
+    body = "  - name: dots\n    particles: {positions: [[1, 2, 3], [1, 2, 3]], masses: 1.0}\n"
+    issue = the_issue(issues_of(SIM + "bodies:\n" + body), "all particles are at one point")
+    assert "line" not in issue.expected and "spread in three dimensions" in issue.expected
 
 
 def test_too_coarse_a_spacing_is_a_warning():
