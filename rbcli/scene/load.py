@@ -72,9 +72,9 @@ def _adaptive_integrator_names() -> tuple[str, ...]:
 
 @cache
 def _validator() -> Any:
-    from jsonschema import Draft202012Validator
+    from rbcli.scene.schema_validator import scene_validator
 
-    return Draft202012Validator(scene_schema())
+    return scene_validator(scene_schema())
 
 
 def load_scene(path: str | Path) -> SceneSpec:
@@ -297,21 +297,39 @@ def _gives_source(entry: dict[str, Any]) -> bool:
 
 # ---- numbers ------------------------------------------------------------------------------------------
 def _check_finite(value: Any, path: YamlPath, issues: IssueCollector) -> set[YamlPath]:
-    """Report non-finite floats (.nan, .inf) and integers too large for a float64 or int64."""
+    """Report non-finite floats (.nan, .inf) and integers too large for a float64 or int64.
+
+    Lists of plain numbers (a large scene's particle data) are scanned without building a path per item:
+    a path is made only for a container or a bad number."""
     bad: set[YamlPath] = set()
+
+    def report(item: Any, where: YamlPath) -> None:
+        if isinstance(item, float):
+            issues.error(where, f"{item} is not a finite number", "a finite number")
+        else:
+            issues.error(where, "integer is too large", "an integer below 2^63 in magnitude")
+        bad.add(where)
+
     stack: list[tuple[Any, YamlPath]] = [(value, path)]
     while stack:
         item, where = stack.pop()
         if isinstance(item, dict):
             stack.extend((v, (*where, k)) for k, v in item.items())
         elif isinstance(item, list):
-            stack.extend((v, (*where, i)) for i, v in enumerate(item))
+            for i, v in enumerate(item):
+                kind = type(v)
+                if kind is float:
+                    if v - v != 0.0:  # inf - inf and nan - nan are nan: one test for both
+                        report(v, (*where, i))
+                elif kind is int:
+                    if not -(2**63) < v < 2**63:
+                        report(v, (*where, i))
+                elif kind is list or kind is dict:
+                    stack.append((v, (*where, i)))
         elif isinstance(item, float) and not math.isfinite(item):
-            issues.error(where, f"{item} is not a finite number", "a finite number")
-            bad.add(where)
+            report(item, where)
         elif isinstance(item, int) and not isinstance(item, bool) and abs(item) >= 2**63:
-            issues.error(where, "integer is too large", "an integer below 2^63 in magnitude")
-            bad.add(where)
+            report(item, where)
     return bad
 
 
