@@ -54,6 +54,13 @@ def replay(
     if suffix not in (".mcap", ".rrd"):
         err.print(f"[red]error:[/] {file_text}: not a recording (expected a .mcap or .rrd file)")
         raise typer.Exit(EXIT_INVALID)
+    from rbcli.record.read import RecordingTooNew, refuse_newer_recording
+
+    try:
+        refuse_newer_recording(file)
+    except RecordingTooNew as exc:
+        err.print(f"[red]error:[/] {escape(str(exc))}")
+        raise typer.Exit(EXIT_INVALID) from None
 
     if save is not None:
         _save(file, save, err)

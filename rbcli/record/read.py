@@ -90,6 +90,23 @@ def check_format_version(path: str | Path, meta: dict[str, str]) -> None:
         )
 
 
+def refuse_newer_recording(path: str | Path) -> None:
+    """RecordingTooNew when a recording's run parameters say it is in a newer format (what `rbsim replay`
+    checks before handing the file to the viewer); a file whose parameters cannot be read passes here."""
+    try:
+        if recording_format(path) == "mcap":
+            from rbcli.record.mcap_sink import METADATA_RUN, read_mcap_contents
+
+            meta = read_mcap_contents(path).metadata.get(METADATA_RUN, {})
+        else:
+            from rbcli.record.rerun_sink import read_rrd_properties
+
+            meta = read_rrd_properties(path).get("rbsim", {})
+    except Exception:  # noqa: BLE001 - damaged or foreign: the viewer (or the converter) says what it finds
+        return
+    check_format_version(path, meta)
+
+
 def _json_list(value: str | None) -> list:
     return json.loads(value) if value else []
 

@@ -14,7 +14,7 @@ import rbcli
 from rbcli.record import frame
 from rbcli.record.convert import mcap_to_rrd
 from rbcli.record.mcap_sink import METADATA_RUN, SinkMcap, read_mcap_contents
-from rbcli.record.read import RecordingTooNew, read_rrd, summarize
+from rbcli.record.read import RecordingTooNew, read_rrd, refuse_newer_recording, summarize
 from rbcli.record.rerun_sink import SinkRerun
 
 SINKS = {"mcap": SinkMcap, "rrd": SinkRerun}
@@ -50,6 +50,7 @@ def test_current_format_reads(tmp_path, suffix):
     write(path)
     assert rbcli.read_recording(path).t.shape == (3,)
     assert summarize(path).frames == 3
+    refuse_newer_recording(path)  # passes
 
 
 @pytest.mark.parametrize("suffix", ["mcap", "rrd"])
@@ -67,6 +68,12 @@ def test_newer_format_is_refused_clearly(tmp_path, suffix):
     if suffix == "mcap":
         with pytest.raises(RecordingTooNew):
             mcap_to_rrd(path, tmp_path / "converted.rrd")
-    info = subprocess.run([sys.executable, "-m", "rbcli", "info", str(path)], capture_output=True, text=True)
-    assert info.returncode == 1 and f"recording format version {newer}" in info.stderr
-    assert "Traceback" not in info.stderr
+    refused = [
+        [sys.executable, "-m", "rbcli", "info", str(path)],
+        [sys.executable, "-m", "rbcli", "replay", str(path)],  # before any viewer starts
+        [sys.executable, "-m", "rbcli", "replay", str(path), "--save", str(tmp_path / "out.rrd")],
+    ]
+    for command in refused:
+        done = subprocess.run(command, capture_output=True, text=True, timeout=120)
+        assert done.returncode == 1 and f"recording format version {newer}" in done.stderr, command
+        assert "Traceback" not in done.stderr and not (tmp_path / "out.rrd").exists()
