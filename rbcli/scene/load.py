@@ -139,7 +139,8 @@ def _analyse(
     if _newer_format(data, issues):
         return None, issues.sorted()
     data = _merge_defaults(doc, data)
-    bad_paths = _check_finite(data, (), issues)
+    # a walk over every number only when the reader saw a non-finite one (or one beyond int64)
+    bad_paths = _check_finite(data, (), issues) if doc.suspect_numbers else set()
     errors = sorted(_validator().iter_errors(data), key=lambda e: list(map(str, e.absolute_path)))
     bad_paths |= SchemaErrorFormatter(scene_schema(), issues).report(errors, skip_paths=bad_paths)
 

@@ -14,7 +14,6 @@ copy, as a composer-based loader would, so editing one place of a document never
 
 from __future__ import annotations
 
-import re
 from array import array
 from dataclasses import dataclass
 from typing import Any
@@ -42,8 +41,22 @@ TAG = "tag:yaml.org,2002:"
 MERGE_TAG = TAG + "merge"
 _SCALAR_KINDS = {"null", "bool", "int", "float", "str", "timestamp"}
 
-# plain decimal numbers, which YAML 1.2 and Python read alike: sign, digits, fraction, exponent
-_DECIMAL = re.compile(r"[-+]?([0-9]+)(\.[0-9]*)?([eE][-+]?[0-9]+)?\Z")
+_FLOAT_END = frozenset("0123456789.")
+
+
+def plain_float(text: str) -> bool:
+    """Whether `float(text)`, when it succeeds, reads a plain scalar exactly as YAML 1.2 (our resolver) does:
+    a float (with a fraction or an exponent). Python also takes what YAML reads otherwise: inf/nan
+    spellings (they end in a letter), underscores (1_000 is an int to YAML), non-ASCII digits, a sign
+    before the point (-.5 is text to YAML) and integers; those go to the resolver."""
+    return (
+        text[-1:] in _FLOAT_END
+        and ("." in text or "e" in text or "E" in text)
+        and "_" not in text
+        and text.isascii()
+        and text[:2] not in ("-.", "+.")
+    )
+
 
 # a location packed in one integer: 1-based line and column
 _SHIFT = 32
@@ -80,6 +93,7 @@ class Built:
     alias_visits: list[tuple[int, int]]  # (values expanded so far, alias location), one per alias
     duplicates: list[tuple[int, str, int]]  # (location, key, line of its first occurrence)
     empty: bool  # no document, or an empty scalar as the whole document
+    suspect_numbers: bool  # some number is non-finite or beyond int64
 
 
 class _Frame:
@@ -124,6 +138,7 @@ class EventBuilder:
         self.duplicates: list[tuple[int, str, int]] = []
         self.root: tuple[Any, int] | None = None
         self._root_was_empty = False
+        self.suspect_numbers = False  # a non-finite float or an integer beyond int64 was read
 
     # ---- the event loop ----------------------------------------------------------------------------
     def build(self) -> Built:
@@ -167,7 +182,10 @@ class EventBuilder:
         return self._built(value, where, empty=empty)
 
     def _built(self, value: Any, where: int, *, empty: bool) -> Built:
-        return Built(value, where, self.tables, self.keep, self.composed, self.alias_visits, self.duplicates, empty)
+        return Built(
+            value, where, self.tables, self.keep, self.composed, self.alias_visits, self.duplicates, empty,
+            self.suspect_numbers,
+        )  # fmt: skip
 
     # ---- values ------------------------------------------------------------------------------------
     def _depth_check(self, where: int) -> None:
@@ -180,7 +198,7 @@ class EventBuilder:
         masses), straight into it; the first other event is handled as usual and ends the run."""
         frame = self.stack[-1]
         values, table = frame.value.append, frame.table.append
-        construct, decimal = self._construct, _DECIMAL.match
+        construct = self._construct
         count = 0
         deep = len(self.stack) >= self.max_depth
         while True:
@@ -190,9 +208,15 @@ class EventBuilder:
             mark = event.start_mark
             where = ((mark.line + 1) << _SHIFT) | (mark.column + 1)
             text = event.value
-            number = decimal(text) if event.tag is None and event.implicit[0] else None
-            if number is not None and (number.group(2) or number.group(3)):
-                values(float(text))
+            if event.tag is None and event.implicit[0] and plain_float(text):
+                try:
+                    number = float(text)
+                except ValueError:
+                    number = construct(event, where)
+                else:
+                    if number - number != 0.0:  # 1e999: inf (and load.py reports it)
+                        self.suspect_numbers = True
+                values(number)
             else:
                 values(construct(event, where))
             table(where)
@@ -245,24 +269,29 @@ class EventBuilder:
         self._emit(value, where, 1, 1)
 
     def _construct(self, event: Any, where: int) -> Any:
+        value = self._value(event, where)
+        kind = type(value)
+        if (kind is float and value - value != 0.0) or (kind is int and not -(2**63) < value < 2**63):
+            self.suspect_numbers = True  # load.py's finite-number check has something to find
+        return value
+
+    def _value(self, event: Any, where: int) -> Any:
         tag = event.tag
         value = event.value
         if tag is None and event.implicit[0]:
-            decimal = _DECIMAL.match(value)
-            if decimal is not None:  # the common case at C speed (YAML's other number forms: the resolver)
-                if decimal.group(2) or decimal.group(3):
+            if plain_float(value):
+                try:  # the common case at C speed (YAML's other number forms: the resolver below)
                     return float(value)
-                if len(value) <= 18 and (decimal.group(1) == "0" or not decimal.group(1).startswith("0")):
-                    return int(value)  # a leading 0 is octal in YAML 1.1: the constructor reads it
+                except ValueError:
+                    pass
+            elif value.isascii() and value.isdigit() and len(value) <= 18 and (value[0] != "0" or value == "0"):
+                return int(value)  # plain decimal (a leading 0 is octal in YAML 1.1: the constructor reads it)
         if tag is None or tag == "!":
             tag = self.resolver.resolve(ScalarNode, value, event.implicit)
         kind = tag[len(TAG) :] if tag.startswith(TAG) else None
         if kind not in _SCALAR_KINDS:
-            raise LocatedError(
-                where,
-                f"tag '{short_tag(tag)}' is not allowed",
-                "plain data: numbers, strings, booleans, lists and mappings",
-            )
+            plain = "plain data: numbers, strings, booleans, lists and mappings"
+            raise LocatedError(where, f"tag '{short_tag(tag)}' is not allowed", plain)
         if kind == "str" or kind == "timestamp":  # a date-like name stays the text the user wrote
             return value
         try:

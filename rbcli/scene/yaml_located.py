@@ -102,6 +102,8 @@ class LocatedDocument:
         self._tables: dict[int, Any] = built.tables if built is not None else {}
         self._keep = built.keep if built is not None else []
         self._copies: dict[YamlPath, YamlPath] = {}  # target prefix -> source prefix (copy_locations)
+        # False only when the reader saw every number: then none is non-finite or beyond int64
+        self.suspect_numbers = built.suspect_numbers if built is not None else True
 
     def _location(self, packed: int) -> SourceLocation:
         line, column = unpack(packed)
@@ -275,6 +277,40 @@ def parse_located_yaml(source: str | bytes, file: str = "<string>") -> LocatedDo
     if built.alias_visits:
         unshare(built)
     return LocatedDocument(built.value, file, built)
+
+
+def top_level_keys(text: str, stop: frozenset[str] = frozenset()) -> set[str]:
+    """The keys of a document's top-level mapping, read from the parser's events without building any value;
+    the scan ends at the first key in `stop` (what it needs to tell a sweep file from a 9 MB scene at once).
+    Empty for a document that is not a mapping; yaml.YAMLError for text that is not YAML."""
+    parser = _parser(text)
+    starts = (yaml.MappingStartEvent, yaml.SequenceStartEvent)
+    ends = (yaml.MappingEndEvent, yaml.SequenceEndEvent)
+    keys: set[str] = set()
+    depth = 0
+    child = 0  # children of the top-level mapping so far: keys at even positions, values at odd
+    while parser.check_event():
+        event = parser.get_event()
+        if depth == 0:
+            if isinstance(event, yaml.MappingStartEvent):
+                depth = 1
+            elif not isinstance(event, yaml.StreamStartEvent | yaml.DocumentStartEvent):
+                return keys  # not a mapping, or no document
+        elif isinstance(event, starts):
+            depth += 1
+        elif isinstance(event, ends):
+            depth -= 1
+            if depth == 0:
+                return keys
+            if depth == 1:
+                child += 1
+        elif depth == 1:  # a scalar or an alias in the top-level mapping
+            if child % 2 == 0 and isinstance(event, yaml.ScalarEvent):
+                keys.add(event.value)
+                if event.value in stop:
+                    return keys
+            child += 1
+    return keys
 
 
 def _packed_issue(file: str, where: int, message: str, expected: str) -> SceneIssue:

@@ -141,3 +141,32 @@ def test_aliases_are_copies_with_their_own_locations():
     # inside an alias: the anchored text's place; the alias itself: where it is used
     assert (doc.locate(("copy", "m", 1)).line, doc.locate(("copy", "m", 1)).column) == (1, 18)
     assert (doc.locate(("copy",)).line, doc.locate(("copy",)).column) == (2, 7)
+
+
+PLAIN_SCALARS = [
+    "1.5", "-0.732267355", "+1.5", "1.", ".5", "-.5", "+.5", "1e5", "1E+05", "1e-3", "-2.5e300", "1e999", "-1e999",
+    "1.e5", "00.5", "-0.0", "1_000.5", "1_000", "017", "0", "-0", "12", "-12", "+12", "0x1F", "0o17", "1:30.5",
+    "1:30", ".inf", "-.inf", ".nan", "inf", "nan", "-inf", "infinity", "1.5.3", "e5", "5e", ".", "١.٥", "1.5x",
+    "123456789012345678901234567890", "null", "~", "true", "no", "2024-01-02", "1e5_0", "1__0.5",
+]  # fmt: skip
+
+
+@pytest.mark.parametrize("text", PLAIN_SCALARS)
+def test_fast_number_reading_agrees_with_the_yaml_resolver(text):
+    """Plain scalars read on the fast path (float()/int() at C speed) equal what the YAML 1.2 resolver and
+    PyYAML's constructor make of them, type included; in a list (the bulk path) and as a mapping value."""
+    from yaml.constructor import SafeConstructor
+    from yaml.nodes import ScalarNode
+
+    from rbcli.scene.yaml_located import _SceneResolver
+
+    tag = _SceneResolver().resolve(ScalarNode, text, (True, False))
+    kind = tag.rsplit(":", 1)[-1]
+    if kind in ("str", "timestamp"):
+        want = text
+    else:
+        want = getattr(SafeConstructor(), f"construct_yaml_{kind}")(ScalarNode(tag, text))
+    for source, get in ((f"[{text}]\n", lambda v: v[0]), (f"a: {text}\n", lambda v: v["a"])):
+        got = get(parse_located_yaml(source, "s.yaml").value)
+        assert type(got) is type(want)
+        assert got == want or (got != got and want != want)  # NaN equals NaN here

@@ -214,3 +214,13 @@ def test_missing_file(tmp_path):
         read_located_yaml(tmp_path / "nope.yaml")
     assert info.value.issues[0].location is None
     assert "nope.yaml" in info.value.issues[0].message
+
+
+def test_top_level_keys_without_building_values():
+    from rbcli.scene.yaml_located import top_level_keys
+
+    text = "a: 1\nb: [1, {c: 2}]\nd: {x: [1]}\n? [1]\n: 3\nf: &v 4\ng: *v\n"
+    assert top_level_keys(text) == {"a", "b", "d", "f", "g"}
+    assert top_level_keys("[1, 2]\n") == set() and top_level_keys("") == set()
+    # the scan stops at a stop key: what follows is never read (here: text that is not YAML at all)
+    assert top_level_keys("axes: []\nbodies: [1]\nrest: [unclosed\n", frozenset({"bodies"})) == {"axes", "bodies"}
