@@ -68,12 +68,17 @@ def test_newer_format_is_refused_clearly(tmp_path, suffix):
     if suffix == "mcap":
         with pytest.raises(RecordingTooNew):
             mcap_to_rrd(path, tmp_path / "converted.rrd")
-    refused = [
-        [sys.executable, "-m", "rbcli", "info", str(path)],
-        [sys.executable, "-m", "rbcli", "replay", str(path)],  # before any viewer starts
-        [sys.executable, "-m", "rbcli", "replay", str(path), "--save", str(tmp_path / "out.rrd")],
-    ]
-    for command in refused:
+
+
+def test_the_cli_refuses_a_newer_recording_before_any_work(tmp_path):
+    """`rbsim info` and `rbsim replay` (before any viewer starts; with --save, before converting): exit 1
+    and the reason, one subprocess per command and format pair that matters."""
+    newer = frame.RECORDING_FORMAT_VERSION + 1
+    for suffix in ("mcap", "rrd"):
+        write(tmp_path / f"new.{suffix}", newer)
+    out = tmp_path / "out.rrd"
+    for args in (["info", "new.mcap"], ["replay", "new.rrd"], ["replay", "new.mcap", "--save", str(out)]):
+        command = [sys.executable, "-m", "rbcli", args[0], str(tmp_path / args[1]), *args[2:]]
         done = subprocess.run(command, capture_output=True, text=True, timeout=120)
-        assert done.returncode == 1 and f"recording format version {newer}" in done.stderr, command
-        assert "Traceback" not in done.stderr and not (tmp_path / "out.rrd").exists()
+        assert done.returncode == 1 and f"recording format version {newer}" in done.stderr, (args, done.stderr)
+        assert "Traceback" not in done.stderr and not out.exists()
