@@ -15,6 +15,7 @@ from types import FrameType
 import typer
 
 EXIT_INVALID = 1
+EXIT_USAGE = 2
 EXIT_DIVERGED = 3
 EXIT_INTERRUPTED = 130  # 128 + the signal's number: 130 SIGINT, 143 SIGTERM, 129 SIGHUP
 _STOP_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")  # each ends a run at a step boundary (_stop_signals)
@@ -25,7 +26,7 @@ MAX_BODY_STEPS = 10**10
 
 
 def run(
-    scene: Path = typer.Argument(..., help="Scene YAML file."),
+    scene: Path | None = typer.Argument(None, help="Scene YAML file (omit with --resume)."),
     output: Path | None = typer.Option(
         None,
         "--output",
@@ -49,6 +50,12 @@ def run(
         False, "--allow-large", help=f"Run even when the run plans more than {MAX_BODY_STEPS:.0e} body-steps."
     ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar or summary."),
+    resume: Path | None = typer.Option(
+        None,
+        "--resume",
+        help="Continue the stopped run this .mcap log holds (a signal, or a kill: its .partial.mcap) from its "
+        "last checkpoint, bit for bit, into a new complete log [default output: <log>.resumed.mcap].",
+    ),
 ) -> None:
     """Integrate SCENE and record it; exits 1 on an invalid scene or output (writing nothing), 3 on divergence."""
     from rich.console import Console
@@ -64,6 +71,19 @@ def run(
     from rbcli.scene.spec import SceneError
 
     err = Console(stderr=True, highlight=False, soft_wrap=True)  # soft_wrap: one message, one line
+    if resume is not None:
+        overrides = {"dt": dt, "duration": duration, "integrator": integrator, "record_every": record_every}
+        fixed = [f"--{k.replace('_', '-')}" for k, v in {**overrides, "tolerance": tolerance}.items() if v is not None]
+        if scene is not None or fixed:
+            extra = ["SCENE"] if scene is not None else []
+            err.print(f"error: --resume continues the run as its log recorded it; drop {', '.join(extra + fixed)}",
+                      markup=False)  # fmt: skip
+            raise typer.Exit(EXIT_USAGE)
+        _resume(resume, output, compression, err, quiet)
+        return
+    if scene is None:
+        err.print("error: give a SCENE to run, or --resume LOG to continue a stopped run", markup=False)
+        raise typer.Exit(EXIT_USAGE)
     if not scene.is_file():
         err.print(f"[red]error:[/] scene file not found: {escape(str(scene))}")
         raise typer.Exit(EXIT_INVALID)
@@ -108,15 +128,57 @@ def run(
         _run_and_report(compiled, target, err, quiet, stops)
 
 
-def _run_and_report(compiled, target: Path, err, quiet: bool, stops: _Stops) -> None:  # noqa: ANN001
-    """Run to `target`, then say how the run ended (one line for an interruption: where the log is and up
-    to which step and time it holds); raises typer.Exit with the exit status."""
+def _resume(log: Path, output: Path | None, compression: str | None, err, quiet: bool) -> None:  # noqa: ANN001
+    """`run --resume LOG`: plan from the log alone, check the output, then run as `run` does."""
+    from rbcli.api import resume_to_file
+    from rbcli.record.output_file import OutputError, check_output, expected_run_bytes
+    from rbcli.runner.resume import ResumeError, plan_resume
+    from rbcli.scene.spec import SceneError
+
+    try:
+        if compression is not None and compression not in COMPRESSIONS:
+            raise ValueError(f"--compression {compression!r}: expected one of {', '.join(COMPRESSIONS)}")
+        plan = plan_resume(log, compression=compression)
+        target = output or resumed_output_path(log)
+        if target.resolve() == log.resolve():
+            raise ValueError(f"{target}: the resumed log must go to another file than the one it resumes")
+        check_output(target, expected_bytes=expected_run_bytes(plan.compiled, target))
+    except SceneError as exc:  # the attached scene no longer loads (a mesh file it names changed or went away)
+        for issue in exc.issues:
+            err.print(str(issue), markup=False)
+        raise typer.Exit(EXIT_INVALID) from None
+    except (ResumeError, OutputError, ValueError, KeyError) as exc:
+        err.print(f"error: {exc.args[0] if exc.args else exc}", markup=False)
+        raise typer.Exit(EXIT_INVALID) from None
+    if not quiet:
+        t = plan.checkpoint.t
+        err.print(f"resuming {log} ({plan.log_status}) at step {plan.checkpoint.step} (t = {t:.6g} s)", markup=False)
+    _warm_up_kernels(plan.compiled, err, quiet)
+    with _stop_signals() as stops:
+        _run_and_report(
+            plan.compiled, target, err, quiet, stops,
+            run=lambda path, progress: resume_to_file(plan, path, progress=progress), start=plan.checkpoint.step,
+        )  # fmt: skip
+
+
+def resumed_output_path(log: Path) -> Path:
+    """Where `run --resume LOG` writes by default: outputs/x.mcap and outputs/x.partial.mcap (a killed
+    run's) both give outputs/x.resumed.mcap."""
+    stem = log.name[: -len(log.suffix)] if log.suffix else log.name
+    stem = stem.removesuffix(".partial")
+    return log.with_name(f"{stem}.resumed{log.suffix or '.mcap'}")
+
+
+def _run_and_report(compiled, target: Path, err, quiet: bool, stops: _Stops, run=None, start: int = 0) -> None:  # noqa: ANN001
+    """Run to `target` (with `run(target, progress)`, default `run_to_file` of `compiled`), then say how
+    the run ended (one line for an interruption: where the log is and up to which step and time it
+    holds); raises typer.Exit with the exit status. start: the step the run starts from."""
     from rich.markup import escape
 
     from rbcli.record.output_file import OutputError, partial_path
 
     try:
-        summary, wall = _run_with_progress(compiled, target, err, quiet, stops)
+        summary, wall = _run_with_progress(compiled, target, err, quiet, stops, run, start)
     except OutputError as exc:  # the output was taken or went away after the check
         err.print(f"[red]error:[/] {escape(str(exc))}")
         raise typer.Exit(EXIT_INVALID) from None
@@ -130,9 +192,9 @@ def _run_and_report(compiled, target: Path, err, quiet: bool, stops: _Stops) -> 
         raise typer.Exit(EXIT_INVALID) from None
     settings = compiled.settings
     if not quiet:
-        rate = summary.steps * compiled.model.body_count / max(wall, 1e-9)
+        rate = (summary.steps - start) * compiled.model.body_count / max(wall, 1e-9)
         err.print(
-            f"{summary.status}: {summary.steps} steps x {compiled.model.body_count} bodies "
+            f"{summary.status}: {summary.steps - start} steps x {compiled.model.body_count} bodies "
             f"({settings.integrator}, dt = {settings.dt:g} s) in {wall:.2f} s "
             f"({rate:.3g} body-steps/s); {summary.frames} frames -> {target}"
             + (
@@ -244,8 +306,13 @@ def _warm_up_kernels(compiled, err, quiet: bool) -> None:  # noqa: ANN001
         timer.cancel()
 
 
-def _run_with_progress(compiled, target: Path, err, quiet: bool, stops: _Stops):  # noqa: ANN001, ANN202
+def _run_with_progress(compiled, target: Path, err, quiet: bool, stops: _Stops, run=None, start: int = 0):  # noqa: ANN001, ANN202
     from rbcli.api import run_to_file
+
+    if run is None:
+
+        def run(path: Path, progress):  # noqa: ANN001, ANN202
+            return run_to_file(compiled, path, progress=progress)
 
     started = time.perf_counter()
     if quiet or not sys.stderr.isatty():
@@ -254,19 +321,19 @@ def _run_with_progress(compiled, target: Path, err, quiet: bool, stops: _Stops):
             if stops.received:  # a signal that came before the loop ran: stop after this chunk
                 stops.forward()
 
-        summary = run_to_file(compiled, target, progress=forward_stop)
+        summary = run(target, forward_stop)
         return summary, time.perf_counter() - started
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn  # only for the bar
 
     columns = (TextColumn("simulating"), BarColumn(), TextColumn("t = {task.fields[t]:.4g} s"), TimeRemainingColumn())
     with Progress(*columns, console=err, transient=True) as bar:
-        task = bar.add_task("run", total=compiled.settings.steps, t=0.0)
+        task = bar.add_task("run", total=compiled.settings.steps - start, t=start * compiled.settings.dt)
         dt = compiled.settings.dt
 
         def progress(done: int, total: int) -> None:
             if stops.received:
                 stops.forward()
-            bar.update(task, completed=done, t=done * dt)
+            bar.update(task, completed=done, total=total, t=(start + done) * dt)
 
-        summary = run_to_file(compiled, target, progress=progress)
+        summary = run(target, progress)
     return summary, time.perf_counter() - started
