@@ -17,6 +17,7 @@ import typer
 from rbcli._version import __version__
 from rbcli.cli import info as _info
 from rbcli.cli import integrators as _integrators
+from rbcli.cli import messages
 from rbcli.cli import recover as _recover
 from rbcli.cli import replay as _replay
 from rbcli.cli import run as _run
@@ -24,12 +25,18 @@ from rbcli.cli import schema as _schema
 from rbcli.cli import study as _study
 from rbcli.cli import sweep as _sweep
 from rbcli.cli import validate as _validate
+from rbcli.cli.exit_codes import ExitCode, exit_code_lines
 
+PROG_NAME = "rbsim"  # also under `python -m rbcli`: usage lines, completion (_RBSIM_COMPLETE) say rbsim
+
+# Help is plain text (no Rich markup mode): what a help string says is what prints, brackets included
+# ("[s]", "[default: ...]"), and flags show no value placeholder.
 app = typer.Typer(
-    name="rbsim",
+    name=PROG_NAME,
     help="Rigid-body dynamics from YAML scenes, recorded to MCAP or Rerun.",
-    no_args_is_help=True,
-    add_completion=False,
+    epilog="\b\nExit status:\n" + "\n".join(exit_code_lines()),
+    add_completion=True,
+    rich_markup_mode=None,
     pretty_exceptions_enable=False,
 )
 
@@ -68,13 +75,32 @@ EXIT_WITHOUT_TEARDOWN = frozenset({"run"})
 
 
 def main() -> None:
-    """Console-script entry point (also `python -m rbcli`)."""
+    """Console-script entry point (also `python -m rbcli`): no arguments prints the help (exit 0)."""
+    code = run_app(sys.argv[1:] or ["--help"])
+    if sys.argv[1:2] and sys.argv[1] in EXIT_WITHOUT_TEARDOWN:
+        _exit_now(code)
+    sys.exit(code)
+
+
+def run_app(args: list[str]) -> int:
+    """Run the command line `args` and return its exit status (exit_codes.ExitCode). Click's own errors
+    (an unknown option, a missing argument, a value of the wrong type) are printed by the shared
+    formatter, as one line with the usage expected, exit 2."""
     try:
-        app()
-    except SystemExit as exc:
-        if sys.argv[1:2] and sys.argv[1] in EXIT_WITHOUT_TEARDOWN and (exc.code is None or isinstance(exc.code, int)):
-            _exit_now(exc.code or 0)
-        raise
+        result = app(args=args, prog_name=PROG_NAME, standalone_mode=False)
+    except typer.TyperException as exc:  # Click's usage errors (exit 2) and its other errors (exit 1)
+        context = getattr(exc, "ctx", None)
+        usage = context.get_usage().removeprefix("Usage: ") if context is not None else ""
+        more = f" (`{context.command_path} --help`)" if context is not None else ""
+        messages.error(exc.format_message().rstrip("."), expected=f"{usage}{more}" if usage else "")
+        return int(getattr(exc, "exit_code", ExitCode.USAGE))
+    except typer.Abort:  # Click turns an end of input in a prompt into Abort; rbsim has no prompts
+        messages.error("aborted")
+        return int(ExitCode.INVALID)
+    except SystemExit as exc:  # a command that calls sys.exit itself
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else int(ExitCode.INVALID))
+    # standalone_mode=False: a typer.Exit gives its code; a command that ends normally gives None
+    return result if isinstance(result, int) else int(ExitCode.OK)
 
 
 def _exit_now(code: int) -> None:
