@@ -44,7 +44,9 @@ def sweep(
     ),
     fresh: bool = typer.Option(False, "--fresh", help="Discard the folder's earlier results instead of resuming"),
     logs: bool | None = typer.Option(
-        None, "--logs/--no-logs", help="Write each variant's recording to <folder>/logs [default: the file's logs:]"
+        None,
+        "--logs/--no-logs",
+        help="Write each variant's recording to <folder>/logs [default: the sweep file's logs setting]",
     ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar"),
 ) -> None:
