@@ -11,6 +11,8 @@ import atexit
 import os
 import sys
 import threading
+import warnings
+from typing import TextIO
 
 import typer
 
@@ -76,10 +78,24 @@ EXIT_WITHOUT_TEARDOWN = frozenset({"run"})
 
 def main() -> None:
     """Console-script entry point (also `python -m rbcli`): no arguments prints the help (exit 0)."""
+    warnings.showwarning = show_warning
     code = run_app(sys.argv[1:] or ["--help"])
     if sys.argv[1:2] and sys.argv[1] in EXIT_WITHOUT_TEARDOWN:
         _exit_now(code)
     sys.exit(code)
+
+
+def show_warning(  # noqa: PLR0913 - warnings.showwarning's signature
+    message: Warning | str,
+    category: type[Warning],
+    filename: str,
+    lineno: int,
+    file: TextIO | None = None,
+    line: str | None = None,
+) -> None:
+    """A Python warning (from rbsim or a library) as one `warning:` line of the shared format, its source
+    line in brackets at the end (the location slot is for the user's files)."""
+    messages.warning(f"{message} ({category.__name__}, {os.path.basename(filename)}:{lineno})")
 
 
 def run_app(args: list[str]) -> int:

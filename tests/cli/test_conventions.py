@@ -271,3 +271,11 @@ def test_commands_exit_only_with_the_table_codes():
                 bare += [f"{path.name}:{node.lineno} {n}" for n in names if n.startswith("EXIT_")]
     assert bare == []
     assert {int(code) for code in ExitCode} >= {0, 1, 2, 3, 129, 130, 143}
+
+
+def test_python_warnings_print_as_one_warning_line(capsys):
+    from rbcli.cli.app import show_warning
+
+    show_warning(RuntimeWarning("overflow encountered\nin multiply"), RuntimeWarning, "/x/y/energy.py", 12)
+    lines = capsys.readouterr().err.splitlines()
+    assert lines == ["warning: overflow encountered; in multiply (RuntimeWarning, energy.py:12)"]
