@@ -58,15 +58,16 @@ def _root(
     """rbsim: rigid bodies as particle clouds; accurate integrators; every step recorded."""
 
 
-app.command("run")(_run.run)
-app.command("validate")(_validate.validate)
-app.command("replay")(_replay.replay)
-app.command("info")(_info.info)
-app.command("recover")(_recover.recover)
-app.command("integrators")(_integrators.integrators)
-app.command("schema")(_schema.schema)
-app.command("study")(_study.study)
-app.command("sweep")(_sweep.sweep)
+# the one-line summaries `rbsim --help` lists (a command's docstring is its own --help)
+app.command("run", short_help="Integrate a scene and record every step to .mcap or .rrd")(_run.run)
+app.command("validate", short_help="Check scene and sweep files; simulate nothing")(_validate.validate)
+app.command("replay", short_help="Open a recording in the Rerun viewer, serve it (--web) or convert it")(_replay.replay)
+app.command("info", short_help="Summarise a recording or a sweep's results (--json for scripts)")(_info.info)
+app.command("recover", short_help="Rewrite an .mcap cut short as a complete file")(_recover.recover)
+app.command("integrators", short_help="List the integrators (--measure: time them here)")(_integrators.integrators)
+app.command("schema", short_help="Print the scene JSON Schema (for editors)")(_schema.schema)
+app.command("study", short_help="Work-precision study of the integrators on a scene")(_study.study)
+app.command("sweep", short_help="Run every variant of a sweep on Dask into one Parquet table")(_sweep.sweep)
 
 
 # Commands that end the process without the interpreter's teardown (`_exit_now`): after a run has

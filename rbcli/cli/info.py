@@ -114,7 +114,8 @@ def info_text(summary: RunInfo, kinds: dict[str, str], terms: list[str], why: st
             kind = kinds.get(d.name, UNCLASSIFIED)
             label = kind if kind != UNCLASSIFIED else "?"
             lines.append(f"{d.name:<{width}}  {label:<6}  {d.initial:14.6e}  {d.max_abs:12.3e}  {rel}{extra}")
-        lines += ["", f"force terms: {', '.join(terms) if terms else 'none'}"]
+        known = UNCLASSIFIED not in kinds.values()
+        lines += ["", f"force terms: {(', '.join(terms) or 'none') if known else 'unknown'}"]
         lines += [f"{k}: {LEGEND[k]}" for k in (DRIFT, CHANGE) if k in kinds.values()]
         if UNCLASSIFIED in kinds.values():
             lines.append(f"?: {LEGEND[UNCLASSIFIED]} ({why})")
