@@ -25,6 +25,17 @@ OUTPUT_SUFFIXES = (".mcap", ".rrd")  # as record/sinks.py FORMATS
 MAX_BODY_STEPS = 10**10
 
 
+def complete_integrator(incomplete: str) -> list[str]:
+    """Shell completion of --integrator: the registry's names (no kernel is imported)."""
+    from rbcli.api import list_integrators
+
+    return [info.name for info in list_integrators() if info.name.startswith(incomplete)]
+
+
+def complete_compression(incomplete: str) -> list[str]:
+    return [name for name in COMPRESSIONS if name.startswith(incomplete)]
+
+
 def run(
     scene: Path = typer.Argument(..., metavar="SCENE", help="Scene YAML file."),
     output: Path | None = typer.Option(
@@ -40,7 +51,11 @@ def run(
         None, "--duration", metavar="SECONDS", help="Simulated time [s] [default: the scene's]"
     ),
     integrator: str | None = typer.Option(
-        None, "--integrator", metavar="NAME", help="Integrator (`rbsim integrators` lists them) [default: the scene's]"
+        None,
+        "--integrator",
+        metavar="NAME",
+        autocompletion=complete_integrator,
+        help="Integrator (`rbsim integrators` lists them) [default: the scene's]",
     ),
     record_every: int | None = typer.Option(
         None, "--record-every", metavar="N", help="Record every N-th step, N >= 1 [default: the scene's, else 1]"
@@ -56,6 +71,7 @@ def run(
         None,
         "--compression",
         metavar="NAME",
+        autocompletion=complete_compression,
         help="MCAP chunk compression: zstd (smallest), lz4 (a little faster) or none (fastest, ~35% larger) "
         "[default: the scene's, else zstd]",
     ),

@@ -156,6 +156,12 @@ def test_help_shows_units_defaults_flags_and_exit_codes_and_completion(deep):
         assert mark not in root_help + run_help
 
 
+def test_completion_offers_commands_and_closed_sets():
+    env = child_env(_RBSIM_COMPLETE="complete_bash", COMP_WORDS="rbsim run x.yaml --integrator spl", COMP_CWORD="4")
+    done = subprocess.run([sys.executable, "-m", "rbcli"], capture_output=True, text=True, env=env, cwd=ROOT)
+    assert done.returncode == 0 and done.stdout.split() == ["split2", "split4"], done.stderr
+
+
 def test_rbsim_alone_prints_help_and_exits_0():
     done = subprocess.run([sys.executable, "-m", "rbcli"], capture_output=True, text=True, env=child_env(), cwd=ROOT)
     assert done.returncode == 0 and done.stdout.startswith("Usage: rbsim ") and done.stderr == ""
