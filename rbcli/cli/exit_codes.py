@@ -9,7 +9,6 @@ shell's convention, so `$?` reads the same as for a killed process).
 
 from __future__ import annotations
 
-import signal
 from enum import IntEnum
 
 
@@ -20,9 +19,10 @@ class ExitCode(IntEnum):
     INVALID = 1
     USAGE = 2
     DIVERGED = 3
-    SIGHUP = 128 + signal.SIGHUP  # 129: the terminal closed
-    SIGINT = 128 + signal.SIGINT  # 130: Ctrl-C
-    SIGTERM = 128 + signal.SIGTERM  # 143: kill, a job scheduler's or a container's stop
+    # 128 + the POSIX signal number, written out: signal.SIGHUP does not exist on Windows
+    SIGHUP = 129  # 128 + 1: the terminal closed
+    SIGINT = 130  # 128 + 2: Ctrl-C
+    SIGTERM = 143  # 128 + 15: kill, a job scheduler's or a container's stop
 
 
 MEANING: dict[ExitCode, str] = {

@@ -285,3 +285,12 @@ def test_python_warnings_print_as_one_warning_line(capsys):
     show_warning(RuntimeWarning("overflow encountered\nin multiply"), RuntimeWarning, "/x/y/energy.py", 12)
     lines = capsys.readouterr().err.splitlines()
     assert lines == ["warning: overflow encountered; in multiply (RuntimeWarning, energy.py:12)"]
+
+
+def test_signal_statuses_are_128_plus_the_signal():
+    import signal
+
+    from rbcli.cli.exit_codes import signal_exit
+
+    for name in ("SIGHUP", "SIGINT", "SIGTERM"):
+        assert ExitCode[name] == signal_exit(getattr(signal, name)) == 128 + getattr(signal, name)
