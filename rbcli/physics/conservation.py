@@ -5,11 +5,12 @@ the method; any other quantity is changed by the forces themselves (momentum und
 drag), and its change says nothing about accuracy. The rules follow from the exact motion under the
 scene's terms, with F_ext and tau_ext the total external force and torque about the world origin:
 
-- energy_total (T + V): kept when every term is conservative: gravity, springs without damping, fields
-  with a symmetric gradient and no schedule (field.py). Point forces, pure torques, drag, impulses and
-  contact (damping, friction, moving kinematic bodies) do work that no potential accounts for.
+- energy_total (T + V): kept when every term has a potential that V counts (forces/wrench.py
+  potential_energy): gravity, springs without damping, fields with a symmetric gradient and no schedule,
+  unscheduled world-frame point forces. Body-frame or scheduled forces, pure torques, drag, impulses
+  and contact (damping, friction, moving kinematic bodies) do work that no potential accounts for.
 - energy_kinetic: kept only without any term; energy_potential: kept (at 0) when no term has a
-  potential (gravity, springs, fields, contact springs).
+  potential (gravity, springs, fields, point forces, contact springs).
 - momentum_i, the total momentum's component i: dP/dt = F_ext. Gravity adds M g, so P_i is kept when
   g_i = 0; a spring between two bodies pulls both ends equally and oppositely, and a pure torque adds no
   force. Every other term (anchored springs, fields, point forces, drag, impulses, contact) changes all
@@ -31,10 +32,8 @@ from __future__ import annotations
 import numpy as np
 
 from rbcli.physics.forces import ForceTables, force_terms_present
-from rbcli.physics.forces.tables import NO_SCHEDULE
-
-# gradients this close to symmetric are symmetric (field.py SYMMETRY_TOLERANCE, relative)
-_SYMMETRY_TOLERANCE = 1e-12
+from rbcli.physics.forces.field import field_is_conservative
+from rbcli.physics.forces.point_force import point_force_is_conservative
 
 
 def conserved_invariants(forces: ForceTables, names: tuple[str, ...] | list[str]) -> dict[str, bool]:
@@ -50,7 +49,7 @@ def conserved_invariants(forces: ForceTables, names: tuple[str, ...] | list[str]
     kept: dict[str, bool] = {}
     kept["energy_total"] = _conservative(forces, terms)
     kept["energy_kinetic"] = not terms
-    kept["energy_potential"] = not (terms & {"gravity", "spring", "field", "contact"})
+    kept["energy_potential"] = not (terms & {"gravity", "spring", "field", "point_force", "contact"})
     for i, axis in enumerate("xyz"):
         kept[f"momentum_{axis}"] = force_free and g[i] == 0.0
         along_axis = all(g[j] == 0.0 for j in range(3) if j != i)
@@ -61,17 +60,12 @@ def conserved_invariants(forces: ForceTables, names: tuple[str, ...] | list[str]
 
 
 def _conservative(forces: ForceTables, terms: set[str]) -> bool:
-    """Every term has a potential: gravity, undamped springs, unscheduled fields with a symmetric gradient."""
-    if terms - {"gravity", "spring", "field"}:
+    """Every term has a potential, as `forces.wrench.potential_energy` counts them: gravity, undamped
+    springs, unscheduled fields with a symmetric gradient, unscheduled world-frame point forces."""
+    if terms - {"gravity", "spring", "field", "point_force"}:
         return False
     if "spring" in terms and np.any(forces.spring.damping != 0.0):
         return False
-    if "field" in terms:
-        field = forces.field
-        if np.any(field.schedule != NO_SCHEDULE):
-            return False
-        gradient = np.asarray(field.gradient, dtype=np.float64)
-        curl = np.abs(gradient - np.swapaxes(gradient, -1, -2)).max(initial=0.0)
-        if curl > _SYMMETRY_TOLERANCE * max(np.abs(gradient).max(initial=0.0), 1e-300):
-            return False
-    return True
+    if "field" in terms and not np.all(field_is_conservative(forces.field)):
+        return False
+    return not ("point_force" in terms and not np.all(point_force_is_conservative(forces.point_force)))

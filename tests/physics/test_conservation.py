@@ -2,8 +2,9 @@
 
 The rules come from dP/dt = F_ext and dL/dt = tau_ext about the origin: uniform gravity g adds M g to
 dP/dt and M x_com x g to dL/dt, so P_i is kept where g_i = 0 and L_i only along g; internal spring pairs
-cancel in both; damping, drag, pure torques and impulses do work. Two cases are checked against a real
-run as well: what is called kept must stay constant to the integrator's accuracy.
+cancel in both; damping, drag, pure torques, impulses and turning or scheduled forces do work. Three
+cases are checked against a real run as well: what is called kept must stay constant to the
+integrator's accuracy.
 """
 
 from __future__ import annotations
@@ -77,6 +78,17 @@ def test_external_terms_change_what_they_act_on():
     assert kept(scene(forces=torque)) == {"energy_potential", *MOMENTA, "quaternion_norm_defect"}
 
 
+POINT_FORCE = "  - {type: force, body: b0, point: [0.1, 0.2, 0], vector: [0, 2, 1], frame: %s}\n"
+
+
+def test_a_constant_world_force_has_a_potential_and_a_turning_or_scheduled_one_does_not():
+    # V = -f . (x + R r0) for a world-frame force (forces/point_force.py): the total energy is kept
+    assert kept(scene(forces=POINT_FORCE % "world")) == {"energy_total", "quaternion_norm_defect"}
+    assert kept(scene(forces=POINT_FORCE % "body")) == {"quaternion_norm_defect"}
+    scheduled = POINT_FORCE.replace("frame: %s}", "frame: world, schedule: {start: 0.1, stop: 0.2}}")
+    assert kept(scene(forces=scheduled)) == {"quaternion_norm_defect"}
+
+
 def test_force_terms_are_named_as_the_scene_has_them():
     assert force_terms(load_scene_text(scene(gravity="[0, 0, -9.81]", bodies=2, forces=SPRING % 0))) == (
         "gravity",
@@ -86,8 +98,8 @@ def test_force_terms_are_named_as_the_scene_has_them():
 
 @pytest.mark.parametrize(
     "text",
-    [scene(gravity="[0, 0, -9.81]"), scene(bodies=2, forces=SPRING % 0)],
-    ids=["gravity", "internal-spring"],
+    [scene(gravity="[0, 0, -9.81]"), scene(bodies=2, forces=SPRING % 0), scene(forces=POINT_FORCE % "world")],
+    ids=["gravity", "internal-spring", "world-point-force"],
 )
 def test_what_is_called_kept_stays_constant_in_a_run(text):
     # rk4 at dt = 1e-3 over 0.2 s: energy error ~ (omega dt)^4 per unit time, far below 1e-8 relative;
