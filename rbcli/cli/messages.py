@@ -15,6 +15,7 @@ from __future__ import annotations
 import os
 import sys
 from collections.abc import Iterable, Sequence
+from pathlib import Path
 from typing import TYPE_CHECKING, Literal, Protocol, TextIO
 
 from rbcli.cli.exit_codes import ExitCode
@@ -138,6 +139,13 @@ def did_you_mean(word: str, choices: Iterable[str]) -> str | None:
     from rbcli.scene.issues import did_you_mean as closest
 
     return closest(word, choices)
+
+
+def suffix_guess(path: Path, suffixes: Sequence[str]) -> str:
+    """ " (did you mean x.mcap?)" when the file name's extension is a likely typo of one of `suffixes`."""
+    suffix = path.suffix.lower()
+    hint = did_you_mean(suffix, suffixes) if suffix else None
+    return f" (did you mean {path.with_suffix(hint)}?)" if hint else ""
 
 
 def fail_unknown(option: str, value: str, choices: Sequence[str], kind: str) -> typer.Exit:

@@ -63,7 +63,8 @@ def recover(
     if output.is_dir() or str(output).endswith(os.sep):
         raise fail(f"output {str(output)!r} is a folder; give a file name such as {output}/fixed.mcap")
     if target.suffix.lower() != ".mcap":
-        raise fail(f"output {str(output)!r}: recover writes an .mcap file")
+        guess = messages.suffix_guess(output, (".mcap",))
+        raise fail(f"output {str(output)!r}: recover writes an .mcap file{guess}", expected="a name ending in .mcap")
     if target == Path(os.path.realpath(file)) or (target.exists() and os.path.samefile(target, file)):
         raise fail(f"output {str(output)!r} is the input file; recover never overwrites its input: give another name")
     if being_written(file):

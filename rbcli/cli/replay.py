@@ -219,7 +219,8 @@ def _group_alive(group: int) -> bool:
 def _save(file: Path, save: Path) -> None:
     """Convert (MCAP) or copy (RRD) to `save`, which must end in .rrd."""
     if save.suffix.lower() != ".rrd":
-        raise messages.fail(f"--save {str(save)!r}: unknown format", expected="a file name ending in .rrd")
+        guess = messages.suffix_guess(save, (".rrd",))
+        raise messages.fail(f"--save {str(save)!r}: unknown format{guess}", expected="a file name ending in .rrd")
     if save.resolve() == file.resolve():
         raise messages.fail(f"--save {str(save)!r} is the input file", expected="another file name")
     save.parent.mkdir(parents=True, exist_ok=True)

@@ -102,8 +102,7 @@ def run(
     if output is not None and not (output.is_dir() or str(output).endswith(os.sep)):
         suffix = output.suffix.lower()
         if suffix not in OUTPUT_SUFFIXES:
-            hint = messages.did_you_mean(suffix, OUTPUT_SUFFIXES) if suffix else None
-            guess = f" (did you mean {output.with_suffix(hint)}?)" if hint else ""
+            guess = messages.suffix_guess(output, OUTPUT_SUFFIXES)
             raise messages.fail(
                 f"--output {str(output)!r}: unknown format {suffix or '(no extension)'!r}{guess}",
                 expected="a file name ending in .mcap or .rrd",
