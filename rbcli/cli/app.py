@@ -86,7 +86,7 @@ def main() -> None:
     sys.exit(code)
 
 
-def show_warning(  # noqa: PLR0913 - warnings.showwarning's signature
+def show_warning(  # warnings.showwarning's signature
     message: Warning | str,
     category: type[Warning],
     filename: str,
@@ -95,7 +95,7 @@ def show_warning(  # noqa: PLR0913 - warnings.showwarning's signature
     line: str | None = None,
 ) -> None:
     """A Python warning (from rbsim or a library) as one `warning:` line of the shared format, its source
-    line in brackets at the end (the location slot is for the user's files)."""
+    line in parentheses at the end (the location slot is for the user's files)."""
     messages.warning(f"{message} ({category.__name__}, {os.path.basename(filename)}:{lineno})")
 
 
