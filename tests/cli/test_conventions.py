@@ -121,6 +121,8 @@ def error_cases(deep: Path) -> list[tuple[list[str], int, list[str]]]:
          ["error: --compression 'lz5': unknown compression (did you mean 'lz4'?)"]),
         (["sweep", missing], invalid, [f"error: sweep file not found: {missing}"]),
         (["study", missing], invalid, [f"error: scene file not found: {missing}"]),
+        (["study", tut, "-i", "rk5", "--quick", "--out", str(deep / "study")], invalid,
+         ["error: unknown integrator 'rk5' (did you mean 'rk4'?); known: euler-matrix, "]),
         (["run"], usage, ["error: Missing argument 'SCENE'; expected rbsim run [OPTIONS] {SCENE}"]),
         (["run", tut, "--dt", "abc"], usage, ["error: Invalid value for '--dt'"]),
         (["run", tut, "--bogus"], usage, ["error: No such option: --bogus"]),
