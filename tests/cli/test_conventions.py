@@ -205,9 +205,17 @@ def test_integrators_measure_times_every_integrator(monkeypatch):
     assert "ns/body-step (1000 bodies)" in result.output and result.output.count("1234") == len(timed)
 
 
-def test_info_json_labels_drift_and_change_and_the_text_says_so(recording):
-    (code, out, err), (text_code, text, _) = run_cases([["info", "--json", str(recording)], ["info", str(recording)]])
-    assert code == text_code == 0 and err == ""
+def test_info_json_labels_drift_and_change_and_the_text_says_so(recording, tmp_path):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    results = tmp_path / "results.parquet"  # a sweep's table: --json too
+    pq.write_table(pa.table({"variant": [0, 1], "status": ["completed", "diverged"], "message": ["", "x"]}), results)
+    (code, out, err), (text_code, text, _), (sweep_code, sweep, _) = run_cases(
+        [["info", "--json", str(recording)], ["info", str(recording)], ["info", "--json", str(results)]]
+    )
+    assert code == text_code == sweep_code == 0 and err == ""
+    assert json.loads(sweep)["status"] == {"completed": 1, "diverged": 1}
     data = json.loads(out)
     kinds = {entry["name"]: entry["kind"] for entry in data["invariants"]}
     # the tutorial: uniform gravity along -z, nothing else
