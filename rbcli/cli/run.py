@@ -37,7 +37,7 @@ def complete_compression(incomplete: str) -> list[str]:
 
 
 def run(
-    scene: Path = typer.Argument(..., metavar="SCENE", help="Scene YAML file."),
+    scene: Path | None = typer.Argument(None, metavar="SCENE", help="Scene YAML file (omit with --resume)."),
     output: Path | None = typer.Option(
         None,
         "--output",
@@ -79,6 +79,13 @@ def run(
         False, "--allow-large", help=f"Run even when the run plans more than {MAX_BODY_STEPS:.0e} body-steps"
     ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar and no summary line"),
+    resume: Path | None = typer.Option(
+        None,
+        "--resume",
+        metavar="LOG",
+        help="Continue the stopped run this .mcap log holds (a signal, or a kill: its .partial.mcap) from its "
+        "last checkpoint, bit for bit, into a new complete log [default output: <log>.resumed.mcap]",
+    ),
 ) -> None:
     """Integrate SCENE and record it; exits 1 on an invalid scene or output (writing nothing), 3 on divergence."""
     from rbcli.api import integrator_info, list_integrators, prepare
@@ -90,6 +97,20 @@ def run(
     )
     from rbcli.scene.spec import SceneError
 
+    if resume is not None:
+        overrides = {"dt": dt, "duration": duration, "integrator": integrator, "record_every": record_every}
+        fixed = [f"--{k.replace('_', '-')}" for k, v in {**overrides, "tolerance": tolerance}.items() if v is not None]
+        if scene is not None or fixed:
+            extra = ["SCENE"] if scene is not None else []
+            raise messages.fail(
+                f"--resume continues the run as its log recorded it; drop {', '.join(extra + fixed)}",
+                code=ExitCode.USAGE,
+            )
+        _resume(resume, output, compression, quiet)
+        return
+    if scene is None:
+        raise messages.fail("no scene to run", expected="a SCENE, or --resume LOG to continue a stopped run",
+                            code=ExitCode.USAGE)  # fmt: skip
     if not scene.is_file():
         raise messages.fail(f"scene file not found: {scene}", expected="a path to a YAML scene file")
     # the closed sets first, each with a "did you mean": nothing is loaded for a mistyped name
@@ -144,13 +165,53 @@ def run(
         _run_and_report(compiled, target, quiet, stops)
 
 
-def _run_and_report(compiled, target: Path, quiet: bool, stops: _Stops) -> None:  # noqa: ANN001
-    """Run to `target`, then say how the run ended (one line for an interruption: where the log is and up
-    to which step and time it holds); raises typer.Exit with the exit status."""
+def _resume(log: Path, output: Path | None, compression: str | None, quiet: bool) -> None:
+    """`run --resume LOG`: plan from the log alone, check the output, then run as `run` does."""
+    from rbcli.api import resume_to_file
+    from rbcli.record.output_file import OutputError, check_output, expected_run_bytes
+    from rbcli.runner.resume import ResumeError, plan_resume
+    from rbcli.scene.spec import SceneError
+
+    if compression is not None and compression not in COMPRESSIONS:
+        raise messages.fail_unknown("--compression", compression, COMPRESSIONS, "compression")
+    try:
+        plan = plan_resume(log, compression=compression)
+        target = output or resumed_output_path(log)
+        if target.resolve() == log.resolve():
+            raise ValueError(f"{target}: the resumed log must go to another file than the one it resumes")
+        check_output(target, expected_bytes=expected_run_bytes(plan.compiled, target))
+    except SceneError as exc:  # the attached scene no longer loads (a mesh file it names changed or went away)
+        messages.issues(exc.issues, log)
+        raise typer.Exit(ExitCode.INVALID) from None
+    except (ResumeError, OutputError, ValueError, KeyError) as exc:
+        raise messages.fail(str(exc.args[0] if exc.args else exc)) from None
+    if not quiet:
+        t = plan.checkpoint.t
+        messages.status(f"resuming {log} ({plan.log_status}) at step {plan.checkpoint.step} (t = {t:.6g} s)")
+    _warm_up_kernels(plan.compiled, quiet)
+    with _stop_signals() as stops:
+        _run_and_report(
+            plan.compiled, target, quiet, stops,
+            run=lambda path, progress: resume_to_file(plan, path, progress=progress), start=plan.checkpoint.step,
+        )  # fmt: skip
+
+
+def resumed_output_path(log: Path) -> Path:
+    """Where `run --resume LOG` writes by default: outputs/x.mcap and outputs/x.partial.mcap (a killed
+    run's) both give outputs/x.resumed.mcap."""
+    stem = log.name[: -len(log.suffix)] if log.suffix else log.name
+    stem = stem.removesuffix(".partial")
+    return log.with_name(f"{stem}.resumed{log.suffix or '.mcap'}")
+
+
+def _run_and_report(compiled, target: Path, quiet: bool, stops: _Stops, run=None, start: int = 0) -> None:  # noqa: ANN001
+    """Run to `target` (with `run(target, progress)`, default `run_to_file` of `compiled`), then say how
+    the run ended (one line for an interruption: where the log is and up to which step and time it
+    holds); raises typer.Exit with the exit status. start: the step the run starts from."""
     from rbcli.record.output_file import OutputError, partial_path
 
     try:
-        summary, wall = _run_with_progress(compiled, target, quiet, stops)
+        summary, wall = _run_with_progress(compiled, target, quiet, stops, run, start)
     except OutputError as exc:  # the output was taken or went away after the check
         raise messages.fail(str(exc)) from None
     except (OSError, ValueError, KeyboardInterrupt) as exc:  # the disk or a sink failed
@@ -162,9 +223,9 @@ def _run_and_report(compiled, target: Path, quiet: bool, stops: _Stops) -> None:
         raise messages.fail(f"{type(exc).__name__}: {exc}; {note}") from None
     settings = compiled.settings
     if not quiet:
-        rate = summary.steps * compiled.model.body_count / max(wall, 1e-9)
+        rate = (summary.steps - start) * compiled.model.body_count / max(wall, 1e-9)
         messages.status(
-            f"{summary.status}: {summary.steps} steps x {compiled.model.body_count} bodies "
+            f"{summary.status}: {summary.steps - start} steps x {compiled.model.body_count} bodies "
             f"({settings.integrator}, dt = {settings.dt:g} s) in {wall:.2f} s "
             f"({rate:.3g} body-steps/s); {summary.frames} frames -> {target}"
             + (
@@ -274,8 +335,13 @@ def _warm_up_kernels(compiled, quiet: bool) -> None:  # noqa: ANN001
         timer.cancel()
 
 
-def _run_with_progress(compiled, target: Path, quiet: bool, stops: _Stops):  # noqa: ANN001, ANN202
+def _run_with_progress(compiled, target: Path, quiet: bool, stops: _Stops, run=None, start: int = 0):  # noqa: ANN001, ANN202
     from rbcli.api import run_to_file
+
+    if run is None:
+
+        def run(path: Path, progress):  # noqa: ANN001, ANN202
+            return run_to_file(compiled, path, progress=progress)
 
     started = time.perf_counter()
     if quiet or not sys.stderr.isatty():
@@ -284,7 +350,7 @@ def _run_with_progress(compiled, target: Path, quiet: bool, stops: _Stops):  # n
             if stops.received:  # a signal that came before the loop ran: stop after this chunk
                 stops.forward()
 
-        summary = run_to_file(compiled, target, progress=forward_stop)
+        summary = run(target, forward_stop)
         return summary, time.perf_counter() - started
     from rich.console import Console  # only for the bar, on a terminal
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
@@ -293,13 +359,13 @@ def _run_with_progress(compiled, target: Path, quiet: bool, stops: _Stops):  # n
 
     columns = (TextColumn("simulating"), BarColumn(), TextColumn("t = {task.fields[t]:.4g} s"), TimeRemainingColumn())
     with Progress(*columns, console=err, transient=True) as bar:
-        task = bar.add_task("run", total=compiled.settings.steps, t=0.0)
+        task = bar.add_task("run", total=compiled.settings.steps - start, t=start * compiled.settings.dt)
         dt = compiled.settings.dt
 
         def progress(done: int, total: int) -> None:
             if stops.received:
                 stops.forward()
-            bar.update(task, completed=done, t=done * dt)
+            bar.update(task, completed=done, total=total, t=(start + done) * dt)
 
-        summary = run_to_file(compiled, target, progress=progress)
+        summary = run(target, progress)
     return summary, time.perf_counter() - started

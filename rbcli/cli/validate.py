@@ -19,7 +19,7 @@ from rbcli.cli.exit_codes import ExitCode
 
 def validate(
     files: Annotated[
-        list[Path], typer.Argument(metavar="FILE...", help="Scene or sweep files (YAML) to check.", show_default=False)
+        list[Path], typer.Argument(metavar="FILE", help="Scene or sweep files (YAML) to check.", show_default=False)
     ],
     verbose: Annotated[
         bool, typer.Option("-v", "--verbose", help="Also print each body's mass, centre of mass and principal inertia.")
