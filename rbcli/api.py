@@ -157,3 +157,26 @@ def _to_file(compiled: CompiledScene, output: str | Path, run) -> RunSummary:  #
         raise
     out.commit()
     return summary
+
+
+def force_terms(spec: SceneSpec) -> tuple[str, ...]:
+    """The force terms the scene's compiled wrench evaluates (gravity, field, point_force, torque, spring,
+    drag, impulse, contact), in that order."""
+    from rbcli.physics.forces import force_terms_present
+
+    return force_terms_present(_compiled_model(spec).forces)
+
+
+def conserved_invariants(spec: SceneSpec, names: Sequence[str]) -> dict[str, bool]:
+    """For each invariant name (a recording's invariant series), True when the scene's own force terms
+    keep it constant, so that its change is the integrator's drift; False when the terms change it
+    (momentum under gravity, energy under drag): physics/conservation.py has the rules."""
+    from rbcli.physics.conservation import conserved_invariants as _kept
+
+    return _kept(_compiled_model(spec).forces, tuple(names))
+
+
+def _compiled_model(spec: SceneSpec):  # noqa: ANN202 - scene.compile.CompiledModel
+    if spec.compiled_model is None:
+        raise ValueError(f"scene {spec.name!r} has no compiled model")
+    return spec.compiled_model
