@@ -3,9 +3,9 @@
     python benchmarks/bench_validate.py [--particles 160000] [--repeats 3]
 
 In a temporary folder, a scene of one body given by `--particles` explicit positions (nine decimals each,
-8.2 MB at 160,000; tracker issue 20, item 7, measured a 9 MB one) and a scalar mass. Each command is a whole process; its wall
-time and peak RSS (the child's ru_maxrss) are measured, `--repeats` rounds with the commands interleaved
-so that a change of machine load hits them alike, and medians reported:
+8.2 MB at 160,000; tracker issue 20, item 7, measured a 9 MB one) and a scalar mass. Each command is a
+whole process; its wall time, CPU time and peak RSS (the child's ru_maxrss) are measured, `--repeats`
+rounds with the commands interleaved so that a change of machine load hits them alike, medians reported:
   - baseline: `python -c "yaml.safe_load(...)"` (PyYAML's Python loader: what a script would do),
   - baseline C: the same with `yaml.CSafeLoader` (libyaml parses, Python constructs),
   - `python -m rbcli validate scene.yaml` (YAML with locations, JSON Schema, checks, mass properties).

@@ -1,7 +1,8 @@
 """rbsim: rigid-body dynamics from YAML scenes (package `rbcli`).
 
 Public API: `load_scene`, `simulate`, `Simulation` (step, read and write the state, reset, run),
-`BodyState`, `prepare`, `run_to_file`, `Trajectory` (`to_npz`, `from_npz`, `to_csv`), `read_recording`
+`BodyState`, `prepare`, `run_to_file`, `resume_to_file` (continue a stopped .mcap log bit for bit),
+`Trajectory` (`to_npz`, `from_npz`, `to_csv`), `read_recording`
 (a .mcap or .rrd back as a Trajectory), `SimulationDiverged`, `sweep` (a scene over many parameter values,
 on Dask: a pyarrow table), `__version__`. Units are SI throughout
 (m, kg, s, rad); quaternions are (w, x, y, z), world-from-body.
@@ -22,6 +23,7 @@ __all__ = [
     "BodyState",
     "prepare",
     "run_to_file",
+    "resume_to_file",
     "Trajectory",
     "read_recording",
     "SimulationDiverged",
@@ -29,7 +31,16 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:
-    from rbcli.api import BodyState, Simulation, SimulationDiverged, load_scene, prepare, run_to_file, simulate
+    from rbcli.api import (
+        BodyState,
+        Simulation,
+        SimulationDiverged,
+        load_scene,
+        prepare,
+        resume_to_file,
+        run_to_file,
+        simulate,
+    )
     from rbcli.record.memory_sink import Trajectory
     from rbcli.record.read import read_trajectory as read_recording
     from rbcli.sweeps.run import sweep

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from rbcli.physics.integrators import INTEGRATORS, IntegratorInfo, get_integrator
 from rbcli.record.frame import RunSummary, Sink
@@ -21,7 +22,13 @@ from rbcli.runner.simulation import BodyState, Simulation, SimulationDiverged
 from rbcli.scene.compile import CompiledScene, compile_scene
 from rbcli.scene.spec import SceneSpec
 
-__all__ = ["BodyState", "Simulation", "SimulationDiverged", "load_scene", "prepare", "run_to_file", "simulate"]
+if TYPE_CHECKING:
+    from rbcli.runner.resume import ResumePlan
+
+__all__ = [
+    "BodyState", "Simulation", "SimulationDiverged", "load_scene", "prepare", "resume_to_file", "run_to_file",
+    "simulate",
+]  # fmt: skip
 
 
 def load_scene(path: str | Path) -> SceneSpec:
@@ -107,19 +114,69 @@ def run_to_file(compiled: CompiledScene, output: str | Path, *, progress=None) -
     Raises OutputError (a ValueError) before any work when the file cannot be written, another run is
     writing it, or the disk is too full for the estimated size.
     """
+    from rbcli.runner.loop import run
+
+    return _to_file(compiled, output, lambda sinks: run(compiled, sinks, progress=progress))
+
+
+def resume_to_file(
+    log: str | Path | ResumePlan,
+    output: str | Path,
+    *,
+    progress=None,
+    compression: str | None = None,  # noqa: ANN001
+) -> RunSummary:
+    """Continue the run a stopped .mcap log holds (interrupted by a signal, or killed: `log` may be the
+    `x.partial.mcap` a kill left) from its last checkpoint to its planned end, writing a new complete log
+    to `output`: the old frames, then the continued run, bit for bit as if never stopped
+    (runner/resume.py; `log` may also be a plan_resume result). ResumeError (a ValueError) when the log
+    cannot be resumed."""
+    from rbcli.runner.resume import ResumePlan, plan_resume, resume_run
+
+    plan = log if isinstance(log, ResumePlan) else plan_resume(log, compression=compression)
+    log = plan.log
+    if Path(output).resolve() == Path(log).resolve():
+        raise ValueError(f"{output}: the resumed log must go to another file than the one it resumes")
+    return _to_file(plan.compiled, output, lambda sinks: resume_run(plan, sinks, progress=progress))
+
+
+def _to_file(compiled: CompiledScene, output: str | Path, run) -> RunSummary:  # noqa: ANN001
+    """`run(sinks)` streaming to `output` through its partial file (record/output_file.py)."""
     from rbcli.record.output_file import OutputFile, expected_run_bytes
     from rbcli.record.sinks import open_file_sink
-    from rbcli.runner.loop import run
 
     out = OutputFile(output, expected_bytes=expected_run_bytes(compiled, output))
     partial = out.open()
     sink = None
     try:
         sink = open_file_sink(partial, compression=compiled.settings.compression)
-        summary = run(compiled, [sink], progress=progress)
+        summary = run([sink])
     except BaseException:
         # frames written: the sink closed the partial, a readable log up to the error; keep it
         out.abandon(keep=getattr(sink, "frames_written", 0) > 0)
         raise
     out.commit()
     return summary
+
+
+def force_terms(spec: SceneSpec) -> tuple[str, ...]:
+    """The force terms the scene's compiled wrench evaluates (gravity, field, point_force, torque, spring,
+    drag, impulse, contact), in that order."""
+    from rbcli.physics.forces import force_terms_present
+
+    return force_terms_present(_compiled_model(spec).forces)
+
+
+def conserved_invariants(spec: SceneSpec, names: Sequence[str]) -> dict[str, bool]:
+    """For each invariant name (a recording's invariant series), True when the scene's own force terms
+    keep it constant, so that its change is the integrator's drift; False when the terms change it
+    (momentum under gravity, energy under drag): physics/conservation.py has the rules."""
+    from rbcli.physics.conservation import conserved_invariants as _kept
+
+    return _kept(_compiled_model(spec).forces, tuple(names))
+
+
+def _compiled_model(spec: SceneSpec):  # noqa: ANN202 - scene.compile.CompiledModel
+    if spec.compiled_model is None:
+        raise ValueError(f"scene {spec.name!r} has no compiled model")
+    return spec.compiled_model

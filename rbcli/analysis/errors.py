@@ -19,6 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from rbcli.analysis.exact import quat_geodesic_angle
+from rbcli.physics.conservation import conserved_invariants
+from rbcli.physics.energy import INVARIANT_NAMES
 from rbcli.physics.forces import force_terms_present
 from rbcli.physics.frames import body_angular_velocity, body_velocity, user_orientation
 from rbcli.physics.rotation import quat_to_matrix
@@ -136,21 +138,20 @@ def admits_exact_solution(compiled: CompiledScene) -> bool:
 
 
 def conserved_quantities(compiled: CompiledScene) -> tuple[str, ...]:
-    """Which invariants the exact motion keeps.
-
-    energy: every term conservative (gravity, undamped springs); total momentum and angular momentum
-    about the origin: no external force (no term at all, or only undamped or damped springs between
-    two bodies, whose pair forces are equal, opposite and along the line joining their ends).
+    """Which invariants the exact motion keeps, whole: "energy" (the total), "momentum" and
+    "angular_momentum" (about the origin) when every component is kept. The rules per component are
+    `physics/conservation.py` (the labels `rbsim info` shows): energy with conservative terms only
+    (gravity, undamped springs, unscheduled fields with a symmetric gradient); momentum without external
+    force (springs between two bodies, pure torques); angular momentum without external torque.
     """
-    terms = set(force_terms_present(compiled.forces))
-    spring = compiled.forces.spring
-    undamped = not np.any(spring.damping != 0.0)
-    internal_only = bool(np.all(spring.body_b >= 0))
+    kept = conserved_invariants(compiled.forces, INVARIANT_NAMES)
     conserved = []
-    if terms <= {"gravity", "spring"} and undamped:
+    if kept["energy_total"]:
         conserved.append("energy")
-    if terms <= {"spring"} and internal_only:
-        conserved += ["momentum", "angular_momentum"]
+    if all(kept[f"momentum_{axis}"] for axis in "xyz"):
+        conserved.append("momentum")
+    if all(kept[f"angular_momentum_{axis}"] for axis in "xyz"):
+        conserved.append("angular_momentum")
     return tuple(conserved)
 
 

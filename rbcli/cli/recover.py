@@ -20,31 +20,34 @@ from typing import Annotated
 
 import typer
 
-EXIT_INVALID = 1
+from rbcli.cli import messages
+
 COMPRESSIONS = ("zstd", "lz4", "none")
 
 
 def recover(
-    file: Annotated[Path, typer.Argument(help="An .mcap cut short, such as the x.partial.mcap a killed run leaves.")],
+    file: Annotated[
+        Path,
+        typer.Argument(metavar="FILE", help="An .mcap cut short, such as the x.partial.mcap a killed run leaves."),
+    ],
     output: Annotated[
-        Path, typer.Option("--output", "-o", help="The complete .mcap to write (a new name: FILE is never changed).")
+        Path,
+        typer.Option(
+            "--output",
+            "-o",
+            metavar="FIXED.mcap",
+            help="The complete .mcap to write (a new name: FILE is never changed)",
+        ),
     ],
     compression: Annotated[
-        str, typer.Option("--compression", help="Chunk compression of the new file: zstd, lz4 or none.")
+        str, typer.Option("--compression", metavar="NAME", help="Chunk compression of the new file: zstd, lz4 or none")
     ] = "zstd",
 ) -> None:
     """Rewrite what FILE holds (every complete frame) as a complete MCAP with a summary and index."""
-    from rich.console import Console
-    from rich.markup import escape
-
     from rbcli.record.mcap_sink import recover_mcap
     from rbcli.record.output_file import being_written
 
-    err = Console(stderr=True, highlight=False, soft_wrap=True)
-
-    def fail(message: str) -> typer.Exit:
-        err.print(f"[red]error:[/] {escape(message)}")
-        return typer.Exit(EXIT_INVALID)
+    fail = messages.fail
 
     if not file.is_file():
         raise fail(f"recording not found: {file}" if not file.exists() else f"{file} is not a file")
@@ -55,12 +58,13 @@ def recover(
             else f"{file}: not an .mcap file"
         )
     if compression not in COMPRESSIONS:
-        raise fail(f"--compression {compression!r}: expected one of {', '.join(COMPRESSIONS)}")
+        raise messages.fail_unknown("--compression", compression, COMPRESSIONS, "compression")
     target = Path(os.path.realpath(output))
     if output.is_dir() or str(output).endswith(os.sep):
         raise fail(f"output {str(output)!r} is a folder; give a file name such as {output}/fixed.mcap")
     if target.suffix.lower() != ".mcap":
-        raise fail(f"output {str(output)!r}: recover writes an .mcap file")
+        guess = messages.suffix_guess(output, (".mcap",))
+        raise fail(f"output {str(output)!r}: recover writes an .mcap file{guess}", expected="a name ending in .mcap")
     if target == Path(os.path.realpath(file)) or (target.exists() and os.path.samefile(target, file)):
         raise fail(f"output {str(output)!r} is the input file; recover never overwrites its input: give another name")
     if being_written(file):
@@ -97,7 +101,7 @@ def recover(
         how = "the file was complete (nothing was cut)"
     else:
         how = f"{prefix.readable_bytes:,} of {prefix.size:,} bytes readable: {prefix.problem}"
-    err.print(f"recovered {held} from {file} ({how}) -> {output}", markup=False)
+    messages.status(f"recovered {held} from {file} ({how}) -> {output}")
 
 
 def _umask() -> int:

@@ -4,22 +4,32 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import shutil
 import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
-from typing import Annotated
+from typing import IO, Annotated
 
 import typer
 
-EXIT_INVALID = 1
+from rbcli.cli import messages
+from rbcli.cli.exit_codes import signal_exit
+
 WEB_PORT = 9090  # the web viewer's HTTP port (rerun's default)
 GRPC_PORT = 9876  # the gRPC server the web viewer reads the recording from (rerun's default)
 _STOP_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
 STOP_GRACE_SECONDS = 5.0  # how long the viewer gets to exit after SIGTERM before SIGKILL
+# The Rerun viewer logs through Rust's `tracing` (coloured "2026-...Z  INFO target: text" lines on its
+# stderr, even into a pipe): it runs with RUST_LOG=warn unless the user set RUST_LOG, and its stderr is
+# read back line by line, colours stripped and INFO/DEBUG/TRACE lines dropped (_forward_viewer_log).
+VIEWER_LOG_LEVEL = "warn"
+_ANSI = re.compile(r"\x1b\[[0-9;?]*[ -/]*[@-~]")
+_TRACING_LINE = re.compile(r"^\S+Z\s+(TRACE|DEBUG|INFO|WARN|ERROR)\s+(\S+?):\s?(.*)$")
 
 
 def has_display() -> bool:
@@ -30,59 +40,53 @@ def has_display() -> bool:
 
 
 def replay(
-    file: Annotated[Path, typer.Argument(help="A recording: .rrd, or .mcap (the Rerun viewer reads both).")],
+    file: Annotated[
+        Path, typer.Argument(metavar="FILE", help="A recording: .rrd, or .mcap (the Rerun viewer reads both).")
+    ],
     web: Annotated[
-        bool, typer.Option("--web", help=f"Serve a web viewer on http://127.0.0.1:{WEB_PORT} instead of a window.")
+        bool, typer.Option("--web", help="Serve a web viewer on http://127.0.0.1:PORT instead of opening a window")
     ] = False,
-    save: Annotated[Path | None, typer.Option("--save", help="Write the recording as an .rrd file and exit.")] = None,
-    port: Annotated[int, typer.Option("--port", help="--web: the web viewer's HTTP port.")] = WEB_PORT,
+    save: Annotated[
+        Path | None, typer.Option("--save", metavar="FILE.rrd", help="Write the recording as an .rrd file and exit")
+    ] = None,
+    port: Annotated[int, typer.Option("--port", metavar="PORT", help="--web: the web viewer's HTTP port")] = WEB_PORT,
     grpc_port: Annotated[
-        int, typer.Option("--grpc-port", help="--web: the port of the gRPC server the viewer reads from.")
+        int, typer.Option("--grpc-port", metavar="PORT", help="--web: the port of the gRPC server the viewer reads")
     ] = GRPC_PORT,
 ) -> None:
     """Open FILE in the Rerun viewer shipped with rerun-sdk; --web serves it locally (until Ctrl-C, SIGTERM or
     SIGHUP: the server and its ports are then freed, exit 128 + the signal); --save converts."""
-    from rich.console import Console
-    from rich.markup import escape
-
-    err = Console(stderr=True, highlight=False, soft_wrap=True)
-    file_text = escape(str(file))
     suffix = file.suffix.lower()
     if not file.is_file():
-        err.print(f"[red]error:[/] recording not found: {file_text}")
-        raise typer.Exit(EXIT_INVALID)
+        raise messages.fail(f"recording not found: {file}", expected="a .mcap or .rrd file")
     if suffix not in (".mcap", ".rrd"):
-        err.print(f"[red]error:[/] {file_text}: not a recording (expected a .mcap or .rrd file)")
-        raise typer.Exit(EXIT_INVALID)
+        raise messages.fail(f"{file}: not a recording", expected="a .mcap or .rrd file")
     from rbcli.record.read import RecordingTooNew, refuse_newer_recording
 
     try:
         refuse_newer_recording(file)
     except RecordingTooNew as exc:
-        err.print(f"[red]error:[/] {escape(str(exc))}")
-        raise typer.Exit(EXIT_INVALID) from None
+        raise messages.fail(str(exc), expected="a newer rbsim (pip install -U rbsim)") from None
 
     if save is not None:
-        _save(file, save, err)
+        _save(file, save)
         return
 
     from rbcli.record.rerun_sink import open_viewer_command
 
     if web:
         command = [*open_viewer_command(file, web=True), "--web-viewer-port", str(port), "--port", str(grpc_port)]
-        _serve_web(file, command, (port, grpc_port), err)
+        _serve_web(file, command, (port, grpc_port))
         return
 
     if not has_display():
-        err.print(
-            "[red]error:[/] no display (DISPLAY and WAYLAND_DISPLAY are unset), so the Rerun viewer cannot "
-            "open a window. Instead:\n"
-            f"  rbsim replay {file_text} --web            serve a web viewer on http://127.0.0.1:{WEB_PORT}\n"
-            f"  rbsim replay {file_text} --save out.rrd   write an .rrd to open where there is a display"
+        raise messages.fail(
+            "no display (DISPLAY and WAYLAND_DISPLAY are unset), so the Rerun viewer cannot open a window",
+            expected=f"`rbsim replay {file} --web` (a web viewer on http://127.0.0.1:{WEB_PORT}) or "
+            f"`rbsim replay {file} --save out.rrd` (an .rrd to open where there is a display)",
         )
-        raise typer.Exit(EXIT_INVALID)
     process = subprocess.Popen(open_viewer_command(file), start_new_session=True)
-    err.print(f"opened {file} in the Rerun viewer (pid {process.pid})", markup=False)
+    messages.status(f"opened {file} in the Rerun viewer (pid {process.pid})")
 
 
 class _Stop(Exception):
@@ -93,7 +97,7 @@ class _Stop(Exception):
         self.signum = signum
 
 
-def _serve_web(file: Path, command: list[str], ports: tuple[int, int], err) -> None:  # noqa: ANN001
+def _serve_web(file: Path, command: list[str], ports: tuple[int, int]) -> None:
     """Run the Rerun web viewer until it exits or a stop signal comes, and leave nothing behind.
 
     The viewer (`python -m rerun`, which starts the `rerun` binary as its own child) runs in a process
@@ -102,16 +106,13 @@ def _serve_web(file: Path, command: list[str], ports: tuple[int, int], err) -> N
     STOP_GRACE_SECONDS, and rbsim waits until no process of the group is left (so its ports are free),
     then exits 128 + the signal. Before, SIGTERM killed rbsim alone and the rerun server kept running at
     100 % of a core, holding both ports. (SIGKILL of rbsim itself cannot be handled.)"""
-    from rich.markup import escape
-
     web, grpc = ports
     for number, what in ((web, "--port"), (grpc, "--grpc-port")):
         if not _port_free(number):
-            err.print(
-                f"[red]error:[/] port {number} on 127.0.0.1 is in use (another `rbsim replay --web`?); "
-                f"stop that server or choose another with {what}"
+            raise messages.fail(
+                f"port {number} on 127.0.0.1 is in use (another `rbsim replay --web`?)",
+                expected=f"a free port: stop that server or choose another with {what}",
             )
-            raise typer.Exit(EXIT_INVALID)
 
     def stop(signum: int, frame: object) -> None:
         raise _Stop(signum)
@@ -122,11 +123,15 @@ def _serve_web(file: Path, command: list[str], ports: tuple[int, int], err) -> N
     stopped_by = 0
     try:
         try:
-            process = subprocess.Popen(command, start_new_session=True)
-            err.print(
+            env = dict(os.environ)
+            quiet = "RUST_LOG" not in env  # a RUST_LOG the user set is theirs: every line is forwarded
+            env.setdefault("RUST_LOG", VIEWER_LOG_LEVEL)
+            process = subprocess.Popen(command, start_new_session=True, env=env, stderr=subprocess.PIPE)
+            forward = threading.Thread(target=_forward_viewer_log, args=(process.stderr, quiet), daemon=True)
+            forward.start()
+            messages.status(
                 f"serving {file} at http://127.0.0.1:{web} (bound to 127.0.0.1 only; recording on port {grpc}); "
-                "Ctrl-C to stop",
-                markup=False,
+                "Ctrl-C to stop"
             )
             code = process.wait()
         except _Stop as exc:
@@ -144,11 +149,27 @@ def _serve_web(file: Path, command: list[str], ports: tuple[int, int], err) -> N
                 signal.signal(number, handler)
     if stopped_by:
         name = signal.Signals(stopped_by).name
-        err.print(f"stopped the web viewer ({name}); ports {web} and {grpc} are free again", markup=False)
-        raise typer.Exit(128 + int(stopped_by))
+        messages.status(f"stopped the web viewer ({name}); ports {web} and {grpc} are free again")
+        raise typer.Exit(signal_exit(stopped_by))
     if code:
-        err.print(f"[red]error:[/] the Rerun web viewer exited with code {escape(str(code))}")
-        raise typer.Exit(EXIT_INVALID)
+        raise messages.fail(f"the Rerun web viewer exited with code {code}")
+
+
+def _forward_viewer_log(stream: IO[bytes] | None, quiet: bool) -> None:
+    """Copy the viewer's stderr to rbsim's as plain lines: ANSI colours stripped, Rust `tracing` lines
+    below WARN dropped when `quiet`, WARN and ERROR lines through the shared formatter (`warning: rerun: ...`)."""
+    if stream is None:
+        return
+    with contextlib.suppress(OSError, ValueError):  # the pipe closes when the viewer ends
+        for raw in stream:
+            line = _ANSI.sub("", raw.decode("utf-8", "replace")).rstrip()
+            if not line:
+                continue
+            traced = _TRACING_LINE.match(line)
+            if traced is None or (not quiet and traced[1] not in ("WARN", "ERROR")):
+                messages.status(f"rerun: {line}")
+            elif traced[1] in ("WARN", "ERROR"):
+                messages.emit("warning" if traced[1] == "WARN" else "error", f"rerun: {traced[3]}")
 
 
 def _port_free(port: int) -> bool:
@@ -201,26 +222,22 @@ def _group_alive(group: int) -> bool:
     return True
 
 
-def _save(file: Path, save: Path, err) -> None:  # noqa: ANN001 - a rich Console
+def _save(file: Path, save: Path) -> None:
     """Convert (MCAP) or copy (RRD) to `save`, which must end in .rrd."""
-    from rich.markup import escape
-
     if save.suffix.lower() != ".rrd":
-        err.print(f"[red]error:[/] --save writes an .rrd file; got {escape(str(save))}")
-        raise typer.Exit(EXIT_INVALID)
+        guess = messages.suffix_guess(save, (".rrd",))
+        raise messages.fail(f"--save {str(save)!r}: unknown format{guess}", expected="a file name ending in .rrd")
     if save.resolve() == file.resolve():
-        err.print(f"[red]error:[/] --save {escape(str(save))} is the input file")
-        raise typer.Exit(EXIT_INVALID)
+        raise messages.fail(f"--save {str(save)!r} is the input file", expected="another file name")
     save.parent.mkdir(parents=True, exist_ok=True)
     if file.suffix.lower() == ".rrd":
         shutil.copyfile(file, save)
-        err.print(f"{file} is already an .rrd; copied to {save}", markup=False)
+        messages.status(f"{file} is already an .rrd; copied to {save}")
         return
     from rbcli.record.convert import mcap_to_rrd
 
     try:
         frames = mcap_to_rrd(file, save)
     except Exception as exc:  # a corrupt or foreign file: say so, never a traceback
-        err.print(f"[red]error:[/] cannot convert {escape(str(file))}: {escape(str(exc))}")
-        raise typer.Exit(EXIT_INVALID) from None
-    err.print(f"wrote {save}: {frames} frames from {file}", markup=False)
+        raise messages.fail(f"cannot convert {file}: {exc}") from None
+    messages.status(f"wrote {save}: {frames} frames from {file}")

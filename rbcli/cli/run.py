@@ -14,47 +14,81 @@ from types import FrameType
 
 import typer
 
-EXIT_INVALID = 1
-EXIT_DIVERGED = 3
-EXIT_INTERRUPTED = 130  # 128 + the signal's number: 130 SIGINT, 143 SIGTERM, 129 SIGHUP
+from rbcli.cli import messages
+from rbcli.cli.exit_codes import ExitCode, signal_exit
+
 _STOP_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")  # each ends a run at a step boundary (_stop_signals)
 COMPRESSIONS = ("zstd", "lz4", "none")  # as schemas/scene.schema.json's record.compression
+OUTPUT_SUFFIXES = (".mcap", ".rrd")  # as record/sinks.py FORMATS
 # Planned work above which `run` asks for --allow-large: 1e10 body-steps is hours on one core at the
 # rates of docs/performance.md; a mistyped --dt or --duration (1e-300, 1e9) plans far more.
 MAX_BODY_STEPS = 10**10
 
 
+def complete_integrator(incomplete: str) -> list[str]:
+    """Shell completion of --integrator: the registry's names (no kernel is imported)."""
+    from rbcli.api import list_integrators
+
+    return [info.name for info in list_integrators() if info.name.startswith(incomplete)]
+
+
+def complete_compression(incomplete: str) -> list[str]:
+    return [name for name in COMPRESSIONS if name.startswith(incomplete)]
+
+
 def run(
-    scene: Path = typer.Argument(..., help="Scene YAML file."),
+    scene: Path | None = typer.Argument(None, metavar="SCENE", help="Scene YAML file (omit with --resume)."),
     output: Path | None = typer.Option(
         None,
         "--output",
         "-o",
+        metavar="FILE",
         help="Output file, .mcap or .rrd, written as <name>.partial.<ext> and renamed when the run ends "
-        "[default: the scene's output, else outputs/<name>.rrd].",
+        "[default: the scene's simulation.output, else outputs/<scene name>.rrd]",
     ),
-    dt: float | None = typer.Option(None, "--dt", help="Override the time step [s]."),
-    duration: float | None = typer.Option(None, "--duration", help="Override the duration [s]."),
-    integrator: str | None = typer.Option(None, "--integrator", help="Override the integrator (see docs)."),
-    record_every: int | None = typer.Option(None, "--record-every", help="Record every N-th step (N >= 1)."),
+    dt: float | None = typer.Option(None, "--dt", metavar="SECONDS", help="Time step [s] [default: the scene's]"),
+    duration: float | None = typer.Option(
+        None, "--duration", metavar="SECONDS", help="Simulated time [s] [default: the scene's]"
+    ),
+    integrator: str | None = typer.Option(
+        None,
+        "--integrator",
+        metavar="NAME",
+        autocompletion=complete_integrator,
+        help="Integrator (`rbsim integrators` lists them) [default: the scene's]",
+    ),
+    record_every: int | None = typer.Option(
+        None, "--record-every", metavar="N", help="Record every N-th step, N >= 1 [default: the scene's, else 1]"
+    ),
     tolerance: float | None = typer.Option(
-        None, "--tolerance", help="Adaptive stepping with this error budget (dopri5); dt = output spacing."
+        None,
+        "--tolerance",
+        metavar="TOL",
+        help="Adaptive stepping (dopri5) with this error budget per step [dimensionless]; dt becomes the "
+        "spacing of the recorded times [default: the scene's, else fixed steps]",
     ),
     compression: str | None = typer.Option(
         None,
         "--compression",
-        help="MCAP chunk compression: zstd (default, smallest), lz4 (a little faster) or none (fastest, ~35% larger).",
+        metavar="NAME",
+        autocompletion=complete_compression,
+        help="MCAP chunk compression: zstd (smallest), lz4 (a little faster) or none (fastest, ~35% larger) "
+        "[default: the scene's, else zstd]",
     ),
     allow_large: bool = typer.Option(
-        False, "--allow-large", help=f"Run even when the run plans more than {MAX_BODY_STEPS:.0e} body-steps."
+        False, "--allow-large", help=f"Run even when the run plans more than {MAX_BODY_STEPS:.0e} body-steps"
     ),
-    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar or summary."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar and no summary line"),
+    resume: Path | None = typer.Option(
+        None,
+        "--resume",
+        metavar="LOG",
+        help="Continue the stopped run this .mcap log holds (a signal, or a kill: its .partial.mcap) from its "
+        "last checkpoint, bit for bit, into a new complete log [default output: <log>.resumed.mcap]",
+    ),
 ) -> None:
     """Integrate SCENE and record it; exits 1 on an invalid scene or output (writing nothing), 3 on divergence."""
-    from rich.console import Console
-    from rich.markup import escape
-
-    from rbcli.api import integrator_info, prepare
+    from rbcli.api import integrator_info, list_integrators, prepare
     from rbcli.record.output_file import (
         OutputError,
         check_output,
@@ -63,13 +97,38 @@ def run(
     )
     from rbcli.scene.spec import SceneError
 
-    err = Console(stderr=True, highlight=False, soft_wrap=True)  # soft_wrap: one message, one line
+    if resume is not None:
+        overrides = {"dt": dt, "duration": duration, "integrator": integrator, "record_every": record_every}
+        fixed = [f"--{k.replace('_', '-')}" for k, v in {**overrides, "tolerance": tolerance}.items() if v is not None]
+        if scene is not None or fixed:
+            extra = ["SCENE"] if scene is not None else []
+            raise messages.fail(
+                f"--resume continues the run as its log recorded it; drop {', '.join(extra + fixed)}",
+                code=ExitCode.USAGE,
+            )
+        _resume(resume, output, compression, quiet)
+        return
+    if scene is None:
+        raise messages.fail("no scene to run", expected="a SCENE, or --resume LOG to continue a stopped run",
+                            code=ExitCode.USAGE)  # fmt: skip
     if not scene.is_file():
-        err.print(f"[red]error:[/] scene file not found: {escape(str(scene))}")
-        raise typer.Exit(EXIT_INVALID)
+        raise messages.fail(f"scene file not found: {scene}", expected="a path to a YAML scene file")
+    # the closed sets first, each with a "did you mean": nothing is loaded for a mistyped name
+    if integrator is not None:
+        names = [info.name for info in list_integrators()]
+        if integrator not in names:
+            raise messages.fail_unknown("--integrator", integrator, names, "integrator")
+    if compression is not None and compression not in COMPRESSIONS:
+        raise messages.fail_unknown("--compression", compression, COMPRESSIONS, "compression")
+    if output is not None and not (output.is_dir() or str(output).endswith(os.sep)):
+        suffix = output.suffix.lower()
+        if suffix not in OUTPUT_SUFFIXES:
+            guess = messages.suffix_guess(output, OUTPUT_SUFFIXES)
+            raise messages.fail(
+                f"--output {str(output)!r}: unknown format {suffix or '(no extension)'!r}{guess}",
+                expected="a file name ending in .mcap or .rrd",
+            )
     try:
-        if compression is not None and compression not in COMPRESSIONS:
-            raise ValueError(f"--compression {compression!r}: expected one of {', '.join(COMPRESSIONS)}")
         compiled = prepare(
             scene,
             dt=dt,
@@ -92,47 +151,81 @@ def run(
         if not allow_large:
             _check_planned_work(compiled, dt=dt, duration=duration)
     except SceneError as exc:
-        for issue in exc.issues:
-            err.print(str(issue), markup=False)
-        raise typer.Exit(EXIT_INVALID) from None
+        messages.issues(exc.issues, scene)
+        raise typer.Exit(ExitCode.INVALID) from None
     except (KeyError, ValueError) as exc:
         given = {"dt": dt, "duration": duration, "integrator": integrator, "record_every": record_every}
         message = _name_the_option(str(exc.args[0] if exc.args else exc), {**given, "tolerance": tolerance})
-        err.print(f"[red]error:[/] {escape(message)}")
-        raise typer.Exit(EXIT_INVALID) from None
+        raise messages.fail(message) from None
 
     for warning in compiled.warnings:
-        err.print(str(warning), markup=False)
-    _warm_up_kernels(compiled, err, quiet)
+        messages.issue(warning, scene)
+    _warm_up_kernels(compiled, quiet)
     with _stop_signals() as stops:  # the whole rest of the command: a late signal never cuts the log short
-        _run_and_report(compiled, target, err, quiet, stops)
+        _run_and_report(compiled, target, quiet, stops)
 
 
-def _run_and_report(compiled, target: Path, err, quiet: bool, stops: _Stops) -> None:  # noqa: ANN001
-    """Run to `target`, then say how the run ended (one line for an interruption: where the log is and up
-    to which step and time it holds); raises typer.Exit with the exit status."""
-    from rich.markup import escape
+def _resume(log: Path, output: Path | None, compression: str | None, quiet: bool) -> None:
+    """`run --resume LOG`: plan from the log alone, check the output, then run as `run` does."""
+    from rbcli.api import resume_to_file
+    from rbcli.record.output_file import OutputError, check_output, expected_run_bytes
+    from rbcli.runner.resume import ResumeError, plan_resume
+    from rbcli.scene.spec import SceneError
 
+    if compression is not None and compression not in COMPRESSIONS:
+        raise messages.fail_unknown("--compression", compression, COMPRESSIONS, "compression")
+    try:
+        plan = plan_resume(log, compression=compression)
+        target = output or resumed_output_path(log)
+        if target.resolve() == log.resolve():
+            raise ValueError(f"{target}: the resumed log must go to another file than the one it resumes")
+        check_output(target, expected_bytes=expected_run_bytes(plan.compiled, target))
+    except SceneError as exc:  # the attached scene no longer loads (a mesh file it names changed or went away)
+        messages.issues(exc.issues, log)
+        raise typer.Exit(ExitCode.INVALID) from None
+    except (ResumeError, OutputError, ValueError, KeyError) as exc:
+        raise messages.fail(str(exc.args[0] if exc.args else exc)) from None
+    if not quiet:
+        t = plan.checkpoint.t
+        messages.status(f"resuming {log} ({plan.log_status}) at step {plan.checkpoint.step} (t = {t:.6g} s)")
+    _warm_up_kernels(plan.compiled, quiet)
+    with _stop_signals() as stops:
+        _run_and_report(
+            plan.compiled, target, quiet, stops,
+            run=lambda path, progress: resume_to_file(plan, path, progress=progress), start=plan.checkpoint.step,
+        )  # fmt: skip
+
+
+def resumed_output_path(log: Path) -> Path:
+    """Where `run --resume LOG` writes by default: outputs/x.mcap and outputs/x.partial.mcap (a killed
+    run's) both give outputs/x.resumed.mcap."""
+    stem = log.name[: -len(log.suffix)] if log.suffix else log.name
+    stem = stem.removesuffix(".partial")
+    return log.with_name(f"{stem}.resumed{log.suffix or '.mcap'}")
+
+
+def _run_and_report(compiled, target: Path, quiet: bool, stops: _Stops, run=None, start: int = 0) -> None:  # noqa: ANN001
+    """Run to `target` (with `run(target, progress)`, default `run_to_file` of `compiled`), then say how
+    the run ended (one line for an interruption: where the log is and up to which step and time it
+    holds); raises typer.Exit with the exit status. start: the step the run starts from."""
     from rbcli.record.output_file import OutputError, partial_path
 
     try:
-        summary, wall = _run_with_progress(compiled, target, err, quiet, stops)
+        summary, wall = _run_with_progress(compiled, target, quiet, stops, run, start)
     except OutputError as exc:  # the output was taken or went away after the check
-        err.print(f"[red]error:[/] {escape(str(exc))}")
-        raise typer.Exit(EXIT_INVALID) from None
+        raise messages.fail(str(exc)) from None
     except (OSError, ValueError, KeyboardInterrupt) as exc:  # the disk or a sink failed
         kept = partial_path(os.path.realpath(target))
         note = f"the log up to the stop is in {kept}" if kept.is_file() else f"{target} is unchanged"
         if isinstance(exc, KeyboardInterrupt):
-            err.print(f"[yellow]interrupted[/]; {escape(note)}")
+            messages.status(f"interrupted; {note}")
             raise typer.Exit(stops.exit_status()) from None
-        err.print(f"[red]error:[/] {escape(f'{type(exc).__name__}: {exc}; {note}')}")
-        raise typer.Exit(EXIT_INVALID) from None
+        raise messages.fail(f"{type(exc).__name__}: {exc}; {note}") from None
     settings = compiled.settings
     if not quiet:
-        rate = summary.steps * compiled.model.body_count / max(wall, 1e-9)
-        err.print(
-            f"{summary.status}: {summary.steps} steps x {compiled.model.body_count} bodies "
+        rate = (summary.steps - start) * compiled.model.body_count / max(wall, 1e-9)
+        messages.status(
+            f"{summary.status}: {summary.steps - start} steps x {compiled.model.body_count} bodies "
             f"({settings.integrator}, dt = {settings.dt:g} s) in {wall:.2f} s "
             f"({rate:.3g} body-steps/s); {summary.frames} frames -> {target}"
             + (
@@ -140,20 +233,15 @@ def _run_and_report(compiled, target: Path, err, quiet: bool, stops: _Stops) -> 
                 if summary.steps_accepted is not None
                 else ""
             )
-            + (f"; {compiled.contact.describe(settings.substeps)}" if compiled.contact is not None else ""),
-            markup=False,
+            + (f"; {compiled.contact.describe(settings.substeps)}" if compiled.contact is not None else "")
         )
     if summary.status == "diverged":
-        err.print(
-            f"[red]error:[/] {escape(summary.message)}; the log up to that point is complete: {escape(str(target))}"
-        )
-        raise typer.Exit(EXIT_DIVERGED)
+        messages.error(f"{summary.message}; the log up to that point is complete: {target}")
+        raise typer.Exit(ExitCode.DIVERGED)
     if summary.status == "interrupted":
         # a Ctrl-C in the loop goes to the loop's own handler, so only SIGINT is missing from `received`
         by = f" by {signal.Signals(stops.received[0]).name}" if stops.received else " by SIGINT"
-        err.print(
-            f"[yellow]{escape(summary.message)}{by}[/]; the log up to that point is complete: {escape(str(target))}"
-        )
+        messages.status(f"{summary.message}{by}; the log up to that point is complete: {target}")
         raise typer.Exit(stops.exit_status())
 
 
@@ -163,6 +251,9 @@ def _name_the_option(message: str, given: dict[str, object]) -> str:
         if value is not None and message.startswith(f"{key}="):
             shown = f"{value:g}" if isinstance(value, float) else str(value)
             return f"--{key.replace('_', '-')} {shown}: {message.split(': ', 1)[-1]}"
+    tolerance = given.get("tolerance")
+    if tolerance is not None and message.startswith("a tolerance needs"):  # the fixed-step integrator case
+        return f"--tolerance {tolerance:g}: {message}"
     return message
 
 
@@ -198,7 +289,7 @@ class _Stops:
 
     def exit_status(self) -> int:
         """128 + the first stop signal (130 SIGINT, 143 SIGTERM, 129 SIGHUP); 130 for Ctrl-C in the loop."""
-        return 128 + self.received[0] if self.received else EXIT_INTERRUPTED
+        return signal_exit(self.received[0]) if self.received else int(ExitCode.SIGINT)
 
 
 @contextlib.contextmanager
@@ -232,11 +323,11 @@ def _stop_signals() -> Iterator[_Stops]:
             signal.signal(number, signal.SIG_IGN if stops.received else handler)
 
 
-def _warm_up_kernels(compiled, err, quiet: bool) -> None:  # noqa: ANN001
+def _warm_up_kernels(compiled, quiet: bool) -> None:  # noqa: ANN001
     """Compile (or load from cache) the step kernels, saying so if it takes noticeable time."""
     from rbcli.runner.loop import warm_up
 
-    timer = threading.Timer(0.5, lambda: err.print("compiling kernels (first run only)…") if not quiet else None)
+    timer = threading.Timer(0.5, lambda: messages.status("compiling kernels (first run only)…") if not quiet else None)
     timer.start()
     try:
         warm_up(compiled)
@@ -244,8 +335,13 @@ def _warm_up_kernels(compiled, err, quiet: bool) -> None:  # noqa: ANN001
         timer.cancel()
 
 
-def _run_with_progress(compiled, target: Path, err, quiet: bool, stops: _Stops):  # noqa: ANN001, ANN202
+def _run_with_progress(compiled, target: Path, quiet: bool, stops: _Stops, run=None, start: int = 0):  # noqa: ANN001, ANN202
     from rbcli.api import run_to_file
+
+    if run is None:
+
+        def run(path: Path, progress):  # noqa: ANN001, ANN202
+            return run_to_file(compiled, path, progress=progress)
 
     started = time.perf_counter()
     if quiet or not sys.stderr.isatty():
@@ -254,19 +350,22 @@ def _run_with_progress(compiled, target: Path, err, quiet: bool, stops: _Stops):
             if stops.received:  # a signal that came before the loop ran: stop after this chunk
                 stops.forward()
 
-        summary = run_to_file(compiled, target, progress=forward_stop)
+        summary = run(target, forward_stop)
         return summary, time.perf_counter() - started
-    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn  # only for the bar
+    from rich.console import Console  # only for the bar, on a terminal
+    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+    err = Console(stderr=True, highlight=False, soft_wrap=True)
 
     columns = (TextColumn("simulating"), BarColumn(), TextColumn("t = {task.fields[t]:.4g} s"), TimeRemainingColumn())
     with Progress(*columns, console=err, transient=True) as bar:
-        task = bar.add_task("run", total=compiled.settings.steps, t=0.0)
+        task = bar.add_task("run", total=compiled.settings.steps - start, t=start * compiled.settings.dt)
         dt = compiled.settings.dt
 
         def progress(done: int, total: int) -> None:
             if stops.received:
                 stops.forward()
-            bar.update(task, completed=done, t=done * dt)
+            bar.update(task, completed=done, total=total, t=(start + done) * dt)
 
-        summary = run_to_file(compiled, target, progress=progress)
+        summary = run(target, progress)
     return summary, time.perf_counter() - started

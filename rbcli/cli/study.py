@@ -15,12 +15,15 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
+from rbcli.cli import messages
+from rbcli.cli.exit_codes import ExitCode
+
 if TYPE_CHECKING:
     from rich.table import Table
 
     from rbcli.runner.study import StudyResult
 
-EXIT_INVALID = 1
+EXIT_INVALID = ExitCode.INVALID
 # --quick: three steps (dt, dt/2, dt/4), at most this many coarse steps, one timing repeat: the whole
 # command in a few seconds once kernels are cached.
 QUICK_DT_EXPONENTS = (0, -1, -2)
@@ -53,14 +56,14 @@ def study(
     scene: Annotated[Path, typer.Argument(help="Scene YAML file.")],
     integrator: Annotated[
         list[str] | None,
-        typer.Option("--integrator", "-i", help="Integrator to study (repeat for several) \\[default: all]."),
+        typer.Option("--integrator", "-i", help="Integrator to study (repeat for several) [default: all]."),
     ] = None,
     dt: Annotated[
         list[float] | None,
-        typer.Option("--dt", help="Step size \\[s] (repeat; ratios powers of 2) \\[default: scene dt x 2^(3..-3)]."),
+        typer.Option("--dt", help="Step size [s] (repeat; ratios powers of 2) [default: scene dt x 2^(3..-3)]."),
     ] = None,
     duration: Annotated[
-        float | None, typer.Option("--duration", help="Simulated time \\[s] \\[default: the scene's].")
+        float | None, typer.Option("--duration", help="Simulated time [s] [default: the scene's].")
     ] = None,
     out: Annotated[Path, typer.Option("--out", help="Folder for the CSV, JSON and plots.")] = Path("outputs"),
     quick: Annotated[
@@ -82,13 +85,13 @@ def study(
     if not console.is_terminal:
         console = Console(highlight=False, width=REPORT_WIDTH)
     if not scene.is_file():
-        err.print(f"[red]error:[/] scene file not found: {scene}")
+        messages.error(f"scene file not found: {scene}", expected="a path to a YAML scene file")
         raise typer.Exit(EXIT_INVALID)
     try:
         spec = load_scene(scene)
     except SceneError as exc:
         for issue in exc.issues:
-            err.print(str(issue), markup=False)
+            messages.issue(issue, scene)
         raise typer.Exit(EXIT_INVALID) from None
     dts = list(dt) if dt else None
     repeats, tolerances = 3, None
@@ -113,7 +116,7 @@ def study(
                 progress=progress,
             )
     except (KeyError, ValueError, RuntimeError) as exc:  # unknown integrator, bad steps, failed reference
-        err.print(f"error: {exc.args[0] if exc.args else exc}", markup=False)
+        messages.error(str(exc.args[0] if exc.args else exc))
         raise typer.Exit(EXIT_INVALID) from None
 
     table = render_table(result)
@@ -124,7 +127,7 @@ def study(
     csv_path, json_path = write_study_files(result, out)
     png, svg = plot_work_precision(result, out / f"{result.scene_name}-study")
     for path in (csv_path, json_path, png, svg):
-        err.print(f"wrote {path}", markup=False)
+        messages.status(f"wrote {path}")
 
 
 @contextmanager

@@ -1,8 +1,9 @@
-"""`rbsim validate`: check scene files (and sweep files, docs/sweeps.md) and print every issue as
-`file:line:col: error: message — expected ...`.
+"""`rbsim validate`: check scene files (and sweep files, docs/sweeps.md) and print every issue on
+stderr as `file:line:col: error: message; expected ...` (cli/messages.py); the verdict per file
+("ok (...)", the mass properties with -v) goes to stdout.
 
 Nothing is simulated or written. Exit status: 0 when every file is valid (warnings allowed), 1 when any
-file has errors or cannot be read, 2 for usage errors (Typer's own).
+file has errors or cannot be read, 2 for usage errors (cli/exit_codes.py).
 """
 
 from __future__ import annotations
@@ -12,9 +13,14 @@ from typing import Annotated
 
 import typer
 
+from rbcli.cli import messages
+from rbcli.cli.exit_codes import ExitCode
+
 
 def validate(
-    files: Annotated[list[Path], typer.Argument(help="Scene files (YAML) to check.", show_default=False)],
+    files: Annotated[
+        list[Path], typer.Argument(metavar="FILE", help="Scene or sweep files (YAML) to check.", show_default=False)
+    ],
     verbose: Annotated[
         bool, typer.Option("-v", "--verbose", help="Also print each body's mass, centre of mass and principal inertia.")
     ] = False,
@@ -28,19 +34,14 @@ def validate(
     for file in files:
         if not file.is_file():
             what = "is a directory, not a scene file" if file.is_dir() else "does not exist"
-            typer.echo(f"{file}: error: scene file {what} — expected a path to a YAML scene file")
+            messages.error(f"scene file {what}", expected="a path to a YAML scene file", where=file)
             failed += 1
             continue
         if is_sweep_file(file):
             failed += 0 if _validate_sweep(file) else 1
             continue
         spec, issues = analyse_scene(file)
-        for issue in issues:
-            if issue.location is None:
-                tail = f" — expected {issue.expected}" if issue.expected else ""
-                typer.echo(f"{file}: {issue.severity}: {issue.message}{tail}")
-            else:
-                typer.echo(str(issue))
+        messages.issues(issues, file)
         if spec is None:
             failed += 1
             continue
@@ -62,7 +63,7 @@ def validate(
     if len(files) > 1:
         typer.echo(f"{len(files) - failed} of {len(files)} scene files valid")
     if failed:
-        raise typer.Exit(1)
+        raise typer.Exit(ExitCode.INVALID)
 
 
 def _validate_sweep(file: Path) -> bool:
@@ -70,8 +71,7 @@ def _validate_sweep(file: Path) -> bool:
     from rbcli.sweeps.load import analyse_sweep
 
     sweep, issues = analyse_sweep(file)
-    for issue in issues:
-        typer.echo(str(issue) if issue.location is not None else f"{file}: {issue.severity}: {issue.message}")
+    messages.issues(issues, file)
     if sweep is None:
         return False
     axes = f"{len(sweep.axes)} ax{'is' if len(sweep.axes) == 1 else 'es'}"

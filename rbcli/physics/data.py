@@ -62,6 +62,42 @@ class Data:
         s = self.state
         return KernelData(s.x, s.q, s.P, s.L, self.F, self.tau, self.scratch, self.force, int(self.substeps))
 
+    def carried(self) -> dict[str, np.ndarray]:
+        """Every array a step reads that an earlier step wrote, by name: what an exact continuation
+        needs (`Simulation.checkpoint`, `rbsim run --resume`). The state in the internal principal frame,
+        the integrator's carried work (scratch, F, tau), the stage counters, the contact history and
+        statistics, the adaptive controller's arrays. The contact grid and trial arrays are not carried:
+        every force evaluation rebuilds them. Views, not copies."""
+        s = self.state
+        arrays = {"x": s.x, "q": s.q, "P": s.P, "L": s.L, "F": self.F, "tau": self.tau, "scratch": self.scratch}
+        arrays["term_evaluations"] = self.force.term_evaluations
+        contact = self.force.contact
+        if contact is not None:
+            for name in ("hist_count", "hist_partner", "hist_xi", "stats", "counters"):
+                arrays[f"contact.{name}"] = getattr(contact, name)
+        for name in ("work", "control", "counters"):
+            array = getattr(self, f"adaptive_{name}")
+            if array is not None:
+                arrays[f"adaptive.{name}"] = array
+        return arrays
+
+    def restore_carried(self, arrays: dict[str, np.ndarray]) -> None:
+        """Write arrays taken by `carried` (of a Data of the same scene and run settings) back, bit for
+        bit; ValueError naming the first array that is missing, unexpected or of another shape or type."""
+        mine = self.carried()
+        if set(arrays) != set(mine):
+            missing, extra = sorted(set(mine) - set(arrays)), sorted(set(arrays) - set(mine))
+            raise ValueError(f"checkpoint arrays do not fit this run: missing {missing}, unexpected {extra}")
+        for name, target in mine.items():
+            value = np.asarray(arrays[name])
+            if value.shape != target.shape or value.dtype != target.dtype:
+                raise ValueError(
+                    f"checkpoint array {name!r} is {value.dtype}{list(value.shape)}, "
+                    f"this run needs {target.dtype}{list(target.shape)}"
+                )
+        for name, target in mine.items():
+            target[...] = arrays[name]
+
     def clear_work(self) -> None:
         """Forget everything carried between steps but the state (after the state is set from outside):
         the adaptive controller then chooses its first step afresh, as at the start of a run."""

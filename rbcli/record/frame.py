@@ -41,6 +41,7 @@ class RunHeader:
     rbsim_version: str
     seed: int = 0
     invariant_names: tuple[str, ...] = ()
+    tolerance: float | None = None  # [-] adaptive runs' error budget (None: fixed step)
     units: str = "SI (m, kg, s, rad)"
     quaternion_order: str = "wxyz"
 
@@ -65,7 +66,22 @@ class RunHeader:
             "body_names": json.dumps(list(self.body_names)),
             "body_mass": json.dumps([float(m) for m in np.asarray(self.body_mass, dtype=np.float64)]),
             "invariant_names": json.dumps(list(self.invariant_names)),
+            "tolerance": "" if self.tolerance is None else repr(float(self.tolerance)),
         }
+
+
+@dataclass(frozen=True)
+class Checkpoint:
+    """Everything a run carries from one step to the next, at one step: what continues it bit for bit.
+
+    arrays: name -> array (Data.carried: the state in the internal principal frame, the integrator's and
+    the contact stage's carried work, the adaptive controller); copies, taken between chunks. Recorded in
+    .mcap logs (docs/robustness.md "Resume") and read by `rbsim run --resume`.
+    """
+
+    step: int
+    t: float  # [s]
+    arrays: dict[str, np.ndarray]
 
 
 @dataclass
@@ -130,3 +146,10 @@ class Sink(Protocol):
     def write(self, block: FrameBlock) -> None: ...
 
     def close(self, summary: RunSummary) -> None: ...
+
+
+class CheckpointSink(Protocol):
+    """A sink that also stores checkpoints (the MCAP sink): `write_checkpoint` follows the block whose
+    frames precede the checkpoint's step, in the same thread and order as `write`."""
+
+    def write_checkpoint(self, checkpoint: Checkpoint) -> None: ...

@@ -7,6 +7,8 @@ Topics; log_time = publish_time = simulated time [ns], so identical runs give by
     /bodies/<name>/particles   foxglove.PointCloud once at t = 0, in the body's frame (frame_id = name)
     /rbsim/invariants          rbsim.Invariants per recorded step (only when the run has invariants)
     /particles                 foxglove.PointCloud of all particles, world frame (only with that stream)
+    /rbsim/checkpoint          rbsim.Checkpoint: what the run carries between steps, at most every
+                               10 s of wall time and when it stops (`rbsim run --resume`)
 
 Channel ids are 16-bit in MCAP, so a file holds at most 65,535 channels. A scene with more bodies than
 fit beside the fixed channels (BODY_CHANNELS_MAX) puts every body's cloud on one channel instead,
@@ -42,7 +44,7 @@ from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 from mcap_protobuf.schema import build_file_descriptor_set
 
-from rbcli.record.frame import RECORDING_FORMAT_VERSION, FrameBlock, RunHeader, RunSummary
+from rbcli.record.frame import RECORDING_FORMAT_VERSION, Checkpoint, FrameBlock, RunHeader, RunSummary
 from rbcli.record.mcap_writer import COMPRESSIONS, MAX_ID, ZSTD_LEVEL, McapChunkWriter
 
 # A run's file is fsynced after a chunk when the last fsync is this old [s] (docs/robustness.md "Crashes").
@@ -52,6 +54,7 @@ TOPIC_STATE = "/rbsim/state"
 TOPIC_TF = "/tf"
 TOPIC_INVARIANTS = "/rbsim/invariants"
 TOPIC_PARTICLES = "/particles"
+TOPIC_CHECKPOINT = "/rbsim/checkpoint"
 TOPIC_BODY_PARTICLES = "/bodies/particles"  # every body's cloud, when one channel per body would not fit
 WORLD_FRAME = "world"
 METADATA_RUN = "rbsim"
@@ -70,9 +73,9 @@ STATE_FIELDS = (
 )
 
 
-# Channels besides the per-body clouds: /rbsim/state, /tf, /rbsim/invariants, /particles.
-FIXED_CHANNELS = 4
-BODY_CHANNELS_MAX = MAX_ID - FIXED_CHANNELS  # 65,531 bodies still get a channel each
+# Channels besides the per-body clouds: /rbsim/state, /tf, /rbsim/invariants, /particles, /rbsim/checkpoint.
+FIXED_CHANNELS = 5
+BODY_CHANNELS_MAX = MAX_ID - FIXED_CHANNELS  # 65,530 bodies still get a channel each
 
 
 def particle_topic(body_name: str) -> str:
@@ -124,6 +127,36 @@ def state_file_proto() -> descriptor_pb2.FileDescriptorProto:
     fields = [("step", 1, _FDP.TYPE_UINT64, _FDP.LABEL_OPTIONAL), ("time", 2, _FDP.TYPE_DOUBLE, _FDP.LABEL_OPTIONAL)]
     fields += [(name, num, _FDP.TYPE_DOUBLE, _FDP.LABEL_REPEATED) for _, name, num, _ in STATE_FIELDS]
     return _file_proto("rbsim/state.proto", "State", fields)
+
+
+def checkpoint_file_proto() -> descriptor_pb2.FileDescriptorProto:
+    """rbsim/checkpoint.proto as a descriptor (text: schemas/rbsim_checkpoint.proto)."""
+    fields = [("step", 1, _FDP.TYPE_UINT64, _FDP.LABEL_OPTIONAL), ("time", 2, _FDP.TYPE_DOUBLE, _FDP.LABEL_OPTIONAL)]
+    lists = ("names", "dtypes", "shapes")
+    fields += [(name, 3 + i, _FDP.TYPE_STRING, _FDP.LABEL_REPEATED) for i, name in enumerate(lists)]
+    fields += [("data", 6, _FDP.TYPE_BYTES, _FDP.LABEL_REPEATED)]
+    return _file_proto("rbsim/checkpoint.proto", "Checkpoint", fields)
+
+
+def encode_checkpoint(checkpoint: Checkpoint) -> bytes:
+    """A Checkpoint as an rbsim.Checkpoint message (arrays little endian, C order)."""
+    message = message_class(checkpoint_file_proto())(step=int(checkpoint.step), time=float(checkpoint.t))
+    for name, array in checkpoint.arrays.items():
+        a = np.ascontiguousarray(array)
+        a = a.astype(a.dtype.newbyteorder("<"), copy=False)
+        message.names.append(name)
+        message.dtypes.append(a.dtype.str)
+        message.shapes.append(json.dumps(list(a.shape)))
+        message.data.append(a.tobytes())
+    return message.SerializeToString()
+
+
+def decode_checkpoint(message: Any) -> Checkpoint:
+    """A decoded rbsim.Checkpoint message back as a Checkpoint (writable copies)."""
+    arrays = {}
+    for name, dtype, shape, data in zip(message.names, message.dtypes, message.shapes, message.data, strict=True):
+        arrays[name] = np.frombuffer(data, dtype=np.dtype(dtype)).reshape(json.loads(shape)).copy()
+    return Checkpoint(step=int(message.step), t=float(message.time), arrays=arrays)
 
 
 def invariants_file_proto(invariant_names: Sequence[str]) -> descriptor_pb2.FileDescriptorProto:
@@ -414,6 +447,7 @@ class SinkMcap:
             meta = {"invariant_names": json.dumps(list(self._invariant_names))}
             self._ch_inv = self._channel(TOPIC_INVARIANTS, fdp, meta)
         self._ch_particles: int | None = None
+        self._ch_checkpoint: int | None = None
         w.add_metadata(METADATA_RUN, run_metadata(header))
         w.add_attachment(0, 0, SCENE_ATTACHMENT, "application/yaml", header.scene_text.encode())
         shared: int | None = None
@@ -463,6 +497,17 @@ class SinkMcap:
                 self._add(self._ch_particles, ns[k], cloud, seq)
         self._writer.flush_chunk()  # no frame waits in the open chunk for the next block
         self.frames_written += k_count
+
+    def write_checkpoint(self, checkpoint: Checkpoint) -> None:
+        """Store a checkpoint on /rbsim/checkpoint, in a chunk of its own right after the block it follows
+        (so a killed run keeps every checkpoint written before the kill)."""
+        if self._writer is None or self._closed:
+            raise RuntimeError("SinkMcap.write_checkpoint before open() or after close()")
+        if self._ch_checkpoint is None:
+            self._ch_checkpoint = self._channel(TOPIC_CHECKPOINT, checkpoint_file_proto())
+        ns = int(_time_ns(np.array([checkpoint.t]))[0])
+        self._add(self._ch_checkpoint, ns, encode_checkpoint(checkpoint), checkpoint.step & 0xFFFFFFFF)
+        self._writer.flush_chunk()
 
     def close(self, summary: RunSummary) -> None:
         """Write the summary metadata, the index and the footer; safe to call more than once."""
@@ -859,3 +904,94 @@ def recover_mcap(source: str | Path, stream: IO[bytes], *, compression: str = "z
         writer.add_metadata(METADATA_SUMMARY, truncated_summary(prefix, Path(source).name).fields(prefix.frames))
     writer.finish()
     return prefix
+
+
+# --- resuming a run from its log -------------------------------------------------------------------
+
+
+@dataclass
+class McapResumePoint:
+    """What `rbsim run --resume` needs from a log, read front to back (a complete file or one cut short):
+    the run metadata, the scene text, and the last checkpoint (None when the run wrote none)."""
+
+    metadata: dict[str, dict[str, str]]
+    scene_text: str
+    checkpoint: Checkpoint | None
+    complete: bool
+    problem: str
+
+
+def read_mcap_resume_point(path: str | Path) -> McapResumePoint:
+    """The last readable checkpoint of an rbsim MCAP log, with its metadata and scene (see McapResumePoint);
+    ValueError when the file is not an MCAP file."""
+    from mcap.records import Attachment, Channel, Message, Metadata, Schema
+
+    cut = _Cut()
+    metadata: dict[str, dict[str, str]] = {}
+    scene = ""
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    last: Message | None = None
+    for record in _prefix_records(path, cut):
+        if isinstance(record, Message):
+            channel = channels.get(record.channel_id)
+            if channel is not None and channel.topic == TOPIC_CHECKPOINT:
+                last = record
+        elif isinstance(record, Channel):
+            channels[record.id] = record
+        elif isinstance(record, Schema):
+            schemas[record.id] = record
+        elif isinstance(record, Metadata):
+            metadata[record.name] = dict(record.metadata)
+        elif isinstance(record, Attachment) and record.name == SCENE_ATTACHMENT:
+            scene = record.data.decode(errors="replace")
+    checkpoint = None
+    if last is not None:
+        channel = channels[last.channel_id]
+        decode = DecoderFactory().decoder_for(channel.message_encoding, schemas.get(channel.schema_id))
+        if decode is None:
+            raise ValueError(f"no decoder for {TOPIC_CHECKPOINT} ({channel.message_encoding})")
+        checkpoint = decode_checkpoint(decode(last.data))
+    return McapResumePoint(metadata, scene, checkpoint, cut.complete, cut.problem)
+
+
+def iter_mcap_frames_before(path: str | Path, step: int, block_frames: int = 256) -> Iterator[FrameBlock]:
+    """The recorded frames of an rbsim MCAP log (complete or cut short) with step < `step`, as FrameBlocks
+    decoded from /rbsim/state and /rbsim/invariants: bit for bit what was recorded."""
+    from mcap.records import Channel, Message, Schema
+
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    decoders: dict[int, Any] = {}
+    factory = DecoderFactory()
+    inv_names: tuple[str, ...] = ()
+    rows: list[Any] = []
+    inv_rows: dict[int, Any] = {}
+    for record in _prefix_records(path, _Cut()):
+        if isinstance(record, Channel):
+            channels[record.id] = record
+            if record.topic == TOPIC_INVARIANTS:
+                inv_names = tuple(json.loads(record.metadata.get("invariant_names", "[]")))
+            continue
+        if isinstance(record, Schema):
+            schemas[record.id] = record
+            continue
+        if not isinstance(record, Message):
+            continue
+        channel = channels.get(record.channel_id)
+        if channel is None or channel.topic not in (TOPIC_STATE, TOPIC_INVARIANTS):
+            continue
+        if record.channel_id not in decoders:
+            decoders[record.channel_id] = factory.decoder_for(channel.message_encoding, schemas.get(channel.schema_id))
+        msg = decoders[record.channel_id](record.data)
+        if msg.step >= step:
+            continue  # frames at and after the resume point come from the resumed run
+        if channel.topic == TOPIC_INVARIANTS:
+            inv_rows[msg.step] = msg
+            continue
+        if len(rows) == block_frames:  # a step's invariants follow its state: emit at the next state
+            yield _block_from_messages(rows, inv_rows, inv_names, invariant_field_names(inv_names))
+            rows = []
+        rows.append(msg)
+    if rows:
+        yield _block_from_messages(rows, inv_rows, inv_names, invariant_field_names(inv_names))

@@ -186,6 +186,7 @@ def header_from_parameters(
         rbsim_version=p.get("rbsim_version", ""),
         seed=int(p.get("seed", "0")),
         invariant_names=names("invariant_names"),
+        tolerance=float(p["tolerance"]) if p.get("tolerance") else None,
         units=p.get("units", RunHeader.units),
         quaternion_order="wxyz",
     )

@@ -9,7 +9,7 @@ from __future__ import annotations
 import signal
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from types import FrameType
 from typing import TYPE_CHECKING, Any
 
@@ -17,7 +17,7 @@ import numpy as np
 
 from rbcli._version import __version__
 from rbcli.physics.energy import CONTACT_INVARIANT_NAMES, INVARIANT_NAMES
-from rbcli.record.frame import RunHeader, RunSummary, Sink
+from rbcli.record.frame import FrameBlock, RunHeader, RunSummary, Sink
 from rbcli.runner.divergence import GUARD_STEPS, JUMP_FACTOR, EnergyGuard, explain, likely_cause
 from rbcli.runner.recorder import Recorder
 from rbcli.scene.compile import CompiledScene
@@ -31,6 +31,9 @@ MAX_BLOCK_FRAMES = 1024
 # frames computed are handed to the recorder at least this often (the loss bound of a killed run)
 HAND_OVER_SECONDS = 1.0
 CHUNK_SECONDS = 0.2
+# a checkpoint (everything carried between steps, for `rbsim run --resume`) goes with a handed-over block
+# at most this often, and always with the last block: ~13 float64 per body each, small beside the frames
+CHECKPOINT_SECONDS = 10.0
 
 ProgressCallback = Callable[[int, int], None]
 
@@ -64,6 +67,7 @@ def run_header(compiled: CompiledScene, *, steps: int | None = None, record_ever
         streams=settings.streams,
         rbsim_version=__version__,
         seed=settings.seed,
+        tolerance=settings.tolerance,
         invariant_names=(
             (*INVARIANT_NAMES, *(CONTACT_INVARIANT_NAMES if compiled.contact is not None else ()))
             if "invariants" in settings.streams
@@ -122,9 +126,16 @@ def run_simulation(
     record_every: int,
     progress: ProgressCallback | None = None,
     threaded: bool = True,
+    prefix: Iterable[FrameBlock] = (),
+    header_steps: int | None = None,
+    record_first: bool = True,
 ) -> RunSummary:
     """Advance `sim` by `steps` grid steps from its current state, recording its current state, every
-    `record_every`-th grid step and the last state; always closes the sinks."""
+    `record_every`-th grid step and the last state; always closes the sinks.
+
+    A resumed run (runner/resume.py) passes the frames its log already holds as `prefix` (written first),
+    the whole run's step count as `header_steps` (the header's duration), and record_first False when
+    the state it starts from is not on the recording grid (the uninterrupted run has no frame there)."""
     from rbcli.physics.adaptive import STATUS_STEP_TOO_SMALL
     from rbcli.physics.step import STATUS_DIVERGED, STATUS_NO_ROOM
 
@@ -135,7 +146,8 @@ def run_simulation(
     recorder = Recorder(compiled, sinks, capacity, threaded=threaded)
     guard = EnergyGuard(compiled)
     guard_every = every * max(1, -(-GUARD_STEPS // every))  # a multiple of every near GUARD_STEPS
-    recorder.open(run_header(compiled, steps=steps, record_every=every))
+    recorder.open(run_header(compiled, steps=steps if header_steps is None else header_steps, record_every=every))
+    recorder.write_blocks(prefix)
     buf = recorder.buffer()
 
     def record_current(frames: int) -> int:
@@ -146,20 +158,24 @@ def run_simulation(
         buf.contact[frames] = contact.stats if contact is not None else 0.0  # the last evaluation's (0 at start)
         return frames + 1
 
-    handed_at = time.perf_counter()
+    handed_at = checkpointed_at = time.perf_counter()
 
     def hand_over(frames: int) -> int:
-        """Submit a buffer and take a fresh one; returns the frames now in the buffer (0)."""
-        nonlocal buf, handed_at
-        recorder.submit(buf, frames)
-        buf = recorder.buffer()
+        """Submit a buffer (with a checkpoint when one is due) and take a fresh one; returns the frames
+        now in the buffer (0)."""
+        nonlocal buf, handed_at, checkpointed_at
         handed_at = time.perf_counter()
+        checkpoint = None
+        if frames and handed_at - checkpointed_at >= CHECKPOINT_SECONDS:
+            checkpoint, checkpointed_at = sim.checkpoint(), handed_at
+        recorder.submit(buf, frames, checkpoint=checkpoint)
+        buf = recorder.buffer()
         return 0
 
     status, message = "completed", ""
     stopped_at: int | None = None  # the step the guard stopped at (the state itself ran on to the chunk's end)
     try:
-        frames = record_current(0)  # the current state is the first frame
+        frames = record_current(0) if record_first else 0  # the current state is the first frame
         chunk_steps = max(1, min(steps, 64))
         with _InterruptFlag() as interrupted:
             while state.step < total:
@@ -231,7 +247,9 @@ def run_simulation(
                 if frames == capacity:
                     frames = hand_over(frames)
                 frames = record_current(frames)  # always record the final state
-            recorder.submit(buf, frames, last=True)
+            # the last block carries the state the run stopped at, so an interrupted run can resume from it
+            last_checkpoint = sim.checkpoint() if status != "diverged" else None
+            recorder.submit(buf, frames, last=True, checkpoint=last_checkpoint)
             recorder.finish()
     except BaseException as exc:  # a failing sink or an unexpected error: still leave readable files
         try:

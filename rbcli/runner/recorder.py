@@ -23,12 +23,12 @@ from __future__ import annotations
 
 import queue
 import threading
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 
 from rbcli.physics.step import FrameBuffers, empty_buffers
-from rbcli.record.frame import RunHeader, RunSummary, Sink
+from rbcli.record.frame import Checkpoint, FrameBlock, RunHeader, RunSummary, Sink
 from rbcli.runner.blocks import make_block
 from rbcli.scene.compile import CompiledScene
 
@@ -48,7 +48,7 @@ class Recorder:
         self._free: queue.Queue[FrameBuffers] = queue.Queue()
         for _ in range(POOL_BUFFERS if threaded else 1):
             self._free.put(empty_buffers(capacity, n))
-        self._todo: queue.Queue[tuple[FrameBuffers, int] | None] = queue.Queue()
+        self._todo: queue.Queue[tuple[FrameBuffers, int, Checkpoint | None] | None] = queue.Queue()
         self._thread: threading.Thread | None = None
         self._error: BaseException | None = None
         self.frames_written = 0
@@ -67,19 +67,33 @@ class Recorder:
             except queue.Empty:
                 continue
 
-    def submit(self, buffers: FrameBuffers, frames: int, *, last: bool = False) -> None:
+    def write_blocks(self, blocks: Iterable[FrameBlock]) -> None:
+        """Write ready-made blocks to every sink, in this thread, before any buffer is submitted (a
+        resumed run's frames copied from its log)."""
+        if self._thread is not None:
+            raise RuntimeError("write_blocks after the recording thread started")
+        for block in blocks:
+            for sink in self._sinks:
+                sink.write(block)
+            self.frames_written += len(block)
+
+    def submit(
+        self, buffers: FrameBuffers, frames: int, *, last: bool = False, checkpoint: Checkpoint | None = None
+    ) -> None:
         """Hand over the first `frames` frames of a buffer; the buffer must not be touched afterwards.
-        last: no buffer follows (a run's final block is written inline when no thread was needed)."""
+        last: no buffer follows (a run's final block is written inline when no thread was needed).
+        checkpoint: the run's carried state now (at or after the buffer's last frame), written after the
+        block to the sinks that keep checkpoints (record.frame.CheckpointSink)."""
         self._raise_if_failed()
         if self._threaded and self._thread is None and not last and frames:
             self._thread = threading.Thread(target=self._work, name="rbsim-recorder", daemon=True)
             self._thread.start()
-        if frames == 0:
+        if frames == 0 and checkpoint is None:
             self._free.put(buffers)
         elif self._thread is not None:
-            self._todo.put((buffers, frames))
+            self._todo.put((buffers, frames, checkpoint))
         else:
-            self._write(buffers, frames)
+            self._write(buffers, frames, checkpoint)
             self._free.put(buffers)
 
     def finish(self) -> None:
@@ -101,7 +115,16 @@ class Recorder:
         if failure is not None:
             raise failure
 
-    def _write(self, buffers: FrameBuffers, frames: int) -> None:
+    def _write(self, buffers: FrameBuffers, frames: int, checkpoint: Checkpoint | None = None) -> None:
+        if frames:
+            self._write_block(buffers, frames)
+        if checkpoint is not None:
+            for sink in self._sinks:
+                write = getattr(sink, "write_checkpoint", None)
+                if write is not None:
+                    write(checkpoint)
+
+    def _write_block(self, buffers: FrameBuffers, frames: int) -> None:
         b = buffers
         # the last frames before a divergence hold huge numbers whose squares overflow to inf in the
         # invariants: that is what the log should show, without numpy warnings on the terminal
@@ -116,10 +139,10 @@ class Recorder:
 
     def _work(self) -> None:
         while (item := self._todo.get()) is not None:
-            buffers, frames = item
+            buffers, frames, checkpoint = item
             try:
                 if self._error is None:
-                    self._write(buffers, frames)
+                    self._write(buffers, frames, checkpoint)
             except BaseException as exc:  # noqa: BLE001 - handed to the runner's thread
                 self._error = exc
             finally:

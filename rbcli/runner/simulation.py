@@ -6,6 +6,7 @@
     sim.state.omega                # (N, 3) [rad/s], world frame
     sim.set_state(omega=...)       # in the user's frames; the internal principal-frame state follows
     sim.reset()
+    saved = sim.checkpoint()       # everything carried between steps; sim.restore(saved) continues bitwise
     summary = sim.run(2.0, sinks=[...])   # the CLI's run: chunks, recording, interrupts
 
 A Simulation owns the compiled scene (constant Model and force tables, runner settings) and one Data
@@ -29,7 +30,7 @@ from rbcli.physics.rotation import quat_rotate, quat_rotate_inverse
 from rbcli.scene.compile import CompiledScene
 
 if TYPE_CHECKING:
-    from rbcli.record.frame import RunSummary, Sink
+    from rbcli.record.frame import Checkpoint, RunSummary, Sink
     from rbcli.runner.loop import ProgressCallback
     from rbcli.scene.spec import SceneSpec
 
@@ -273,6 +274,24 @@ class Simulation:
                 raise ValueError(f"step must be >= 0, got {step}")
             s.step = int(step)
         self.data.clear_work()
+
+    def checkpoint(self) -> Checkpoint:
+        """A copy of everything the run carries between steps (Checkpoint): `restore` it into a
+        Simulation of the same scene and settings and the steps that follow are bit for bit those this
+        one would take. `state` / `set_state` are the user's view instead: rounded through the user
+        frame, and setting them clears the carried work."""
+        from rbcli.record.frame import Checkpoint
+
+        arrays = {name: array.copy() for name, array in self.data.carried().items()}
+        return Checkpoint(step=int(self.data.state.step), t=self.time, arrays=arrays)
+
+    def restore(self, checkpoint: Checkpoint) -> None:
+        """Continue from a `checkpoint` of this scene and settings (ValueError when its arrays do not
+        fit this run: another scene, integrator or contact layout)."""
+        if checkpoint.step < 0:
+            raise ValueError(f"checkpoint step must be >= 0, got {checkpoint.step}")
+        self.data.restore_carried(checkpoint.arrays)
+        self.data.state.step = int(checkpoint.step)
 
     def reset(self) -> None:
         """Back to the scene's initial state at step 0, with cleared work arrays."""

@@ -14,6 +14,7 @@ from typer.testing import CliRunner
 import rbcli.cli.run as cli_run
 from rbcli.api import prepare
 from rbcli.cli.app import app
+from rbcli.cli.exit_codes import ExitCode
 
 ROOT = Path(__file__).resolve().parents[2]
 TUTORIAL = ROOT / "scenes" / "tutorial.yaml"  # dt 0.001 s, 5 s, one body, euler-matrix
@@ -24,7 +25,7 @@ def _refused(tmp_path: Path, *args: str) -> str:
     """Run with these options; assert exit 1, one error line, no traceback, nothing written; the line."""
     out = tmp_path / "out" / "run.mcap"
     result = runner.invoke(app, ["run", str(TUTORIAL), "-o", str(out), "-q", *args])
-    assert result.exit_code == cli_run.EXIT_INVALID, result.output
+    assert result.exit_code == ExitCode.INVALID, result.output
     lines = result.output.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: "), result.output
     assert "Traceback" not in result.output
@@ -44,8 +45,8 @@ def _refused(tmp_path: Path, *args: str) -> str:
         (["--dt", "10"], "error: --dt 10: dt = 10 s is longer than duration = 5 s"),
         (["--duration", "1e-6"], "error: --duration 1e-06: dt = 0.001 s is longer than duration = 1e-06 s"),
         (["--dt", "1e-300", "--duration", "1e300"], "error: --dt 1e-300: duration / dt overflows float64"),
-        (["--integrator", "split"], "error: --integrator split: unknown integrator (did you mean 'split4'?)"),
-        (["--integrator", ""], "error: --integrator : unknown integrator"),
+        (["--integrator", "split"], "error: --integrator 'split': unknown integrator (did you mean 'split4'?)"),
+        (["--integrator", ""], "error: --integrator '': unknown integrator"),
         (["--tolerance", "0"], "error: --tolerance 0: must be a positive, finite number"),
         (["--tolerance", "nan", "--integrator", "dopri5"], "error: --tolerance nan: must be a positive, finite"),
         (["--tolerance", "-1e-6", "--integrator", "dopri5"], "error: --tolerance -1e-06: must be a positive"),

@@ -109,6 +109,7 @@ def test_a_stop_signal_leaves_no_process_and_no_bound_port(tmp_path, recording, 
     assert proc.returncode == status, text
     assert f"stopped the web viewer ({signal.Signals(signum).name}); ports {web} and {grpc} are free" in text
     assert [p for p in below if alive(p)] == []  # no child, no grandchild left running
+    assert "\x1b[" not in text and " INFO " not in text  # rerun's coloured log is not forwarded
     assert can_bind(web) and can_bind(grpc) and not listening(web) and not listening(grpc)
 
 

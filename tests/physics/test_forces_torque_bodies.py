@@ -165,13 +165,14 @@ def test_per_body_torque_path_is_bitwise_the_all_bodies_path(name):
     the free ones (their tau is exactly 0, and a zero kick is the identity in every method: split2's
     T_c(h/2) after a zero kick recomputes the very (cos, sin) it reuses without one)."""
     compiled = _mixed(name)
-    all_bodies = compiled.forces._replace(torque_body=np.ones(compiled.model.body_count, dtype=np.bool_))
-    per_body = _run_chunk(name, compiled, compiled.forces, 200)
+    tables = compiled.forces.kernel()  # as Simulation passes them: only the stages the scene has compile
+    all_bodies = tables._replace(torque_body=np.ones(compiled.model.body_count, dtype=np.bool_))
+    per_body = _run_chunk(name, compiled, tables, 200)
     old = _run_chunk(name, compiled, all_bodies, 200)
     assert np.array_equal(_bits(per_body), _bits(old))
     # and the flagged body really takes the torque path: with the torque switched off scene-wide (no
     # flag involved) its L comes out otherwise, while the free bodies' L does not notice
-    no_torque = _run_chunk(name, compiled, compiled.forces._replace(has_torque=False), 200)
+    no_torque = _run_chunk(name, compiled, tables._replace(has_torque=False), 200)
     assert not np.allclose(per_body.L[0], no_torque.L[0], rtol=1e-6, atol=0)
     assert np.array_equal(per_body.L[1:], no_torque.L[1:])
 
@@ -185,8 +186,8 @@ def test_free_bodies_of_a_torque_scene_move_as_in_a_torque_free_scene(name):
     compiled = _mixed(name)
     torque_free = replace(compiled, forces=build_force_tables(G, body_count=5))
     assert not torque_free.forces.has_torque
-    mixed = _run_chunk(name, compiled, compiled.forces, 200)
-    alone = _run_chunk(name, torque_free, torque_free.forces, 200)
+    mixed = _run_chunk(name, compiled, compiled.forces.kernel(), 200)
+    alone = _run_chunk(name, torque_free, torque_free.forces.kernel(), 200)
     for field in "xqPL":
         a, b = getattr(mixed, field)[2:], getattr(alone, field)[2:]
         if name.startswith("exact"):
@@ -199,9 +200,10 @@ def test_adaptive_dopri5_per_body_torque_path_is_bitwise_the_all_bodies_path():
     """The error-controlled chunk (dopri5's begin / advance / error_norm): same steps, same bits; and
     not the result without torques."""
     compiled = _mixed("dopri5")
-    all_bodies = compiled.forces._replace(torque_body=np.ones(5, dtype=np.bool_))
+    tables = compiled.forces.kernel()
+    all_bodies = tables._replace(torque_body=np.ones(5, dtype=np.bool_))
     results = []
-    for forces in (compiled.forces, all_bodies, compiled.forces._replace(has_torque=False)):
+    for forces in (tables, all_bodies, tables._replace(has_torque=False)):
         s = compiled.initial_state.copy()
         F, tau, extra = np.zeros((5, 3)), np.zeros((5, 3)), adaptive_work(5)
         done, _, status = run_adaptive_chunk(

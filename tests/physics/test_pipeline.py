@@ -84,7 +84,7 @@ def test_a_stage_added_to_the_list_runs_in_the_generated_loop(tmp_path, name):
     frames = empty_buffers(4, 3)
     steps = 12
     done, filled, status = pushed.run_chunk(
-        compiled.model.kernel(), compiled.forces, data.kernel(), 1e-3, 0, steps, 5, frames, 0
+        compiled.model.kernel(), compiled.forces.kernel(), data.kernel(), 1e-3, 0, steps, 5, frames, 0
     )
     assert (done, filled, status) == (steps, 2, 0)
     assert np.array_equal(data.state.P[:, 0], P0[:, 0] + steps * PUSH)

@@ -70,6 +70,16 @@ def test_newer_format_is_refused_clearly(tmp_path, suffix):
             mcap_to_rrd(path, tmp_path / "converted.rrd")
 
 
+def test_resume_refuses_a_newer_log(tmp_path):
+    """`rbsim run --resume`: a newer layout's checkpoint could be misread, so the log is refused first."""
+    from rbcli.runner.resume import ResumeError, plan_resume
+
+    path = tmp_path / "new.mcap"
+    write(path, frame.RECORDING_FORMAT_VERSION + 1)
+    with pytest.raises(ResumeError, match=f"recording format version {frame.RECORDING_FORMAT_VERSION + 1}"):
+        plan_resume(path)
+
+
 def test_the_cli_refuses_a_newer_recording_before_any_work(tmp_path):
     """`rbsim info` and `rbsim replay` (before any viewer starts; with --save, before converting): exit 1
     and the reason, one subprocess per command and format pair that matters."""

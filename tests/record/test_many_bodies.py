@@ -19,7 +19,7 @@ import pytest
 from conftest import make_body, make_scene
 from mcap.reader import make_reader
 
-from rbcli.record.frame import FrameBlock, RunHeader, RunSummary
+from rbcli.record.frame import Checkpoint, FrameBlock, RunHeader, RunSummary
 from rbcli.record.mcap_sink import (
     BODY_CHANNELS_MAX,
     TOPIC_BODY_PARTICLES,
@@ -61,7 +61,7 @@ def big_run(tmp_path_factory):
 
 
 def test_the_scene_is_past_both_limits():
-    assert particle_channels_shared(BODIES) and not particle_channels_shared(BODIES - 5)
+    assert particle_channels_shared(BODIES) and not particle_channels_shared(BODIES - 6)
     assert bodies_in_one_entity(BODIES)
 
 
@@ -90,7 +90,9 @@ def test_mcap_of_65536_bodies_with_the_mcap_library(big_run):
         assert summary is not None and summary.statistics is not None
         topics = {c.id: c.topic for c in summary.channels.values()}
         assert max(topics) <= MAX_ID
-        assert sorted(topics.values()) == sorted(["/rbsim/state", "/tf", "/rbsim/invariants", TOPIC_BODY_PARTICLES])
+        assert sorted(topics.values()) == sorted(
+            ["/rbsim/state", "/tf", "/rbsim/invariants", TOPIC_BODY_PARTICLES, "/rbsim/checkpoint"]
+        )
         counts = {topics[c]: n for c, n in summary.statistics.channel_message_counts.items()}
         assert counts[TOPIC_BODY_PARTICLES] == BODIES and counts["/rbsim/state"] == 4
         from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
@@ -156,6 +158,8 @@ def _write(sink, header: RunHeader, frames: int = 2) -> FrameBlock:
         block.particle_position = rng.normal(size=(frames, 3, 3))
     sink.open(header)
     sink.write(block)
+    if hasattr(sink, "write_checkpoint"):  # as a run's last block has: the checkpoint channel too
+        sink.write_checkpoint(Checkpoint(frames - 1, 0.01 * (frames - 1), {"x": x[-1]}))
     sink.close(RunSummary("completed", frames - 1, frames, 0.01 * (frames - 1)))
     return block
 

@@ -169,7 +169,7 @@ def _proto_fields(text: str) -> dict[str, list[tuple[str, str, int, bool]]]:
 
 
 def _descriptor_fields(fdp) -> list[tuple[str, str, int, bool]]:
-    names = {1: "double", 4: "uint64"}  # FieldDescriptorProto.Type numbers
+    names = {1: "double", 4: "uint64", 9: "string", 12: "bytes"}  # FieldDescriptorProto.Type numbers
     return [(names[f.type], f.name, f.number, f.label == 3) for f in fdp.message_type[0].field]
 
 
@@ -177,6 +177,11 @@ def test_state_proto_text_matches_the_runtime_descriptor():
     text = (SCHEMAS / "rbsim_state.proto").read_text()
     assert "package rbsim;" in text and 'syntax = "proto3";' in text
     assert _proto_fields(text) == {"State": _descriptor_fields(mcap_sink.state_file_proto())}
+
+
+def test_checkpoint_proto_text_matches_the_runtime_descriptor():
+    text = (SCHEMAS / "rbsim_checkpoint.proto").read_text()
+    assert _proto_fields(text) == {"Checkpoint": _descriptor_fields(mcap_sink.checkpoint_file_proto())}
 
 
 def test_invariants_proto_text_matches_the_runtime_descriptor():

@@ -46,7 +46,7 @@ def test_invalid_file_exits_1_with_located_issues(tmp_path):
     result = runner.invoke(app, ["validate", str(bad)])
     assert result.exit_code == 1
     lines = result.output.splitlines()
-    assert f"{bad}:1:18: error: simulation.dt: -1 is out of range — expected a value > 0 (time step [s])" in lines
+    assert f"{bad}:1:18: error: simulation.dt: -1 is out of range; expected a value > 0 (time step [s])" in lines
     assert any(line.startswith(f"{bad}:6:7: error: bodies[0].particles.mases: unknown key 'mases'") for line in lines)
 
 
@@ -62,7 +62,7 @@ def test_every_file_is_checked_and_any_failure_exits_1(tmp_path):
 def test_missing_file_exits_1_naming_it(tmp_path):
     result = runner.invoke(app, ["validate", str(tmp_path / "nope.yaml")])
     assert result.exit_code == 1
-    assert f"{tmp_path / 'nope.yaml'}: error: scene file does not exist" in result.output
+    assert f"{tmp_path / 'nope.yaml'}: error: scene file does not exist; expected" in result.output
 
 
 def test_usage_errors_exit_2():

@@ -54,9 +54,14 @@ def point_force_numpy(
     return F, tau
 
 
+def point_force_is_conservative(point_force: PointForceTable) -> np.ndarray:
+    """Rows with a potential: unscheduled and fixed in the world frame, (row_count,) bool."""
+    return (point_force.schedule == NO_SCHEDULE) & ~point_force.body_frame
+
+
 def point_force_potential(point_force: PointForceTable, x: np.ndarray, q: np.ndarray) -> np.ndarray:
     """V = -f . (x + R r0) [J] summed over unscheduled world-frame rows; x (..., body_count, 3) -> (...)."""
-    keep = (point_force.schedule == NO_SCHEDULE) & ~point_force.body_frame
+    keep = point_force_is_conservative(point_force)
     body, f = point_force.body[keep], point_force.vector[keep]
     pos = x[..., body, :] + np.einsum("...rij,rj->...ri", quat_to_matrix(q[..., body, :]), point_force.point[keep])
     return -np.einsum("ri,...ri->...", f, pos)

@@ -13,6 +13,7 @@ methods flagged `adaptive`. docs/integrators.md has the measured orders, errors 
 
 from __future__ import annotations
 
+import difflib
 import importlib
 from dataclasses import dataclass
 from types import ModuleType
@@ -166,11 +167,14 @@ DEFAULT_INTEGRATOR = "euler-matrix"
 
 
 def get_integrator(name: str) -> IntegratorInfo:
-    """Look an integrator up by name; KeyError lists the known ones."""
+    """Look an integrator up by name; KeyError lists the known ones, with the closest as a likely typo
+    (difflib's ratio >= 0.6, the rule of the scene keys' "did you mean")."""
     try:
         return INTEGRATORS[name]
     except KeyError:
-        raise KeyError(f"unknown integrator {name!r}; known: {', '.join(INTEGRATORS)}") from None
+        close = difflib.get_close_matches(str(name), list(INTEGRATORS), n=1, cutoff=0.6)
+        guess = f" (did you mean {close[0]!r}?)" if close else ""
+        raise KeyError(f"unknown integrator {name!r}{guess}; known: {', '.join(INTEGRATORS)}") from None
 
 
 def integrator_names() -> tuple[str, ...]:
