@@ -74,8 +74,8 @@ def study(
         typer.Option(
             "--min-time",
             min=0.0,
-            help="Wall time \\[s] spent timing each (integrator, dt) point, serially in this process; the median "
-            "and the spread over samples are reported \\[default: 0.2; 0.05 with --quick].",
+            help="Time \\[s] spent timing each (integrator, dt) point (CPU time of the run's thread, serially in "
+            "this process); the median and the spread over samples are reported \\[default: 0.2; 0.05 with --quick].",
         ),
     ] = None,
     mujoco: Annotated[
