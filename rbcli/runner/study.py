@@ -29,6 +29,7 @@ import dataclasses
 import io
 import json
 import math
+import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -168,7 +169,9 @@ class StudyResult:
     """Everything a study measured; `primary_error` ("rotation", or "position" when nothing rotates)
     is the error the table's fitted order and the plot's first panel use. min_time [s]: the timing
     spent per point; mujoco_version: the MuJoCo that ran the MuJoCo rows (None: not installed or not
-    asked); mujoco_skipped: why there are no MuJoCo rows (None when there are)."""
+    asked); mujoco_skipped: why there are no MuJoCo rows (None when there are); load_average: the
+    machine's 1-minute load average at the start (None where the platform has none): a spread above
+    the target at a load above the core count is the machine's."""
 
     scene_name: str
     body_count: int
@@ -184,6 +187,7 @@ class StudyResult:
     notes: list[str] = field(default_factory=list)
     mujoco_version: str | None = None
     mujoco_skipped: str | None = None
+    load_average: float | None = None  # the machine's 1-minute load average when the study began
 
     def fitted_order(self, integrator: str) -> float | None:
         """Fitted order of the primary error for an integrator (None when not enough points)."""
@@ -203,7 +207,7 @@ class StudyResult:
                 "duration": self.duration,
                 "output_interval": self.output_interval,
                 "frame_count": self.frame_count,
-                "timing": {"min_time": self.min_time, "clock": TIMING_CLOCK},
+                "timing": {"min_time": self.min_time, "clock": TIMING_CLOCK, "load_average": self.load_average},
                 "mujoco": {"version": self.mujoco_version, "skipped": self.mujoco_skipped},
                 "reference": dataclasses.asdict(self.reference),
                 "conserved": list(self.conserved),
@@ -414,6 +418,7 @@ def study(
 
     if not (min_time >= 0 and math.isfinite(min_time)):
         raise ValueError(f"the minimum timing must be >= 0 s, got {min_time}")
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
     spec = _study_spec(scene)
     names = tuple(integrators) if integrators else applicable_integrators()
     infos = [get_integrator(name) for name in names]  # KeyError names the known ones
@@ -518,6 +523,7 @@ def study(
         notes=notes,
         mujoco_version=version,
         mujoco_skipped=mujoco_reason,
+        load_average=load,
     )
     if not (np.any(base.initial_state.L != 0.0) or base.forces.has_torque):
         result.primary_error = "position"  # nothing rotates: rotation errors are all zero

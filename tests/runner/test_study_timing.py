@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import subprocess
+import sys
 import time
 
 import numpy as np
@@ -75,7 +76,7 @@ def test_costs_rise_monotonically_as_dt_halves_in_the_json(timed_study):
 def test_every_point_reports_its_spread(timed_study):
     """min <= median <= max over >= MIN_SAMPLES samples that together took at least min_time of CPU."""
     result, data = timed_study
-    assert data["timing"]["min_time"] == MIN_TIME
+    assert data["timing"]["min_time"] == MIN_TIME and data["timing"]["load_average"] >= 0.0
     for run, row in zip(result.runs, data["runs"], strict=True):
         assert 0 < row["seconds_per_step_min"] <= row["seconds_per_step"] <= row["seconds_per_step_max"]
         assert row["cost_spread"] == pytest.approx(row["seconds_per_step_max"] / row["seconds_per_step_min"])
@@ -180,3 +181,15 @@ def test_rerun_option_needs_an_rrd_path(tmp_path):
     scene.write_text(SPIN_SCENE)
     result = CliRunner().invoke(_app(), ["study", str(scene), "--quick", "--rerun", str(tmp_path / "x.mcap")])
     assert result.exit_code == 1 and ".rrd" in result.output
+
+
+def test_without_mujoco_the_study_runs_and_says_so(monkeypatch):
+    """mujoco unimportable (as without the [bench] extra): no MuJoCo rows and a note by default; asking
+    for them is an error that names the extra."""
+    monkeypatch.setitem(sys.modules, "mujoco", None)  # `import mujoco` now raises ImportError
+    assert mujoco_version() is None
+    result = study(thrown_plate(duration=0.2), integrators=["split2"], dts=STEPS[:2], min_time=0.0)
+    assert [r.engine for r in result.runs] == ["rbsim", "rbsim"]
+    assert "not installed" in result.mujoco_skipped and any("[bench]" in note for note in result.notes)
+    with pytest.raises(ValueError, match=r"\[bench\]"):
+        study(thrown_plate(duration=0.2), integrators=["split2"], dts=STEPS[:2], min_time=0.0, mujoco=True)
