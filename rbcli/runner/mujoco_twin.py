@@ -14,10 +14,16 @@ row built on a different model would compare two problems instead of two integra
 MuJoCo's "Euler" is semi-implicit Euler (velocities first, then positions with the new velocities:
 order 1); "RK4" is the classic fourth-order Runge-Kutta on (qpos, qvel). mujoco is imported lazily by
 this module alone (the `[bench]` extra): rbcli works without it.
+
+MuJoCo's default warning handler prints and appends to MUJOCO_LOG.TXT in the working directory (a
+diverging run warns at every step); runs go through `quiet_warnings()`, which swallows the messages for
+its duration; the warnings are still counted in `MjData.warning`, which `diverged` reads.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -135,6 +141,18 @@ class MujocoTwin:
         self._warnings = [int(getattr(mujoco.mjtWarning, w)) for w in _DIVERGENCE_WARNINGS]
         self.reset()
 
+    @contextmanager
+    def quiet_warnings(self) -> Iterator[None]:
+        """MuJoCo's warnings neither printed nor logged to MUJOCO_LOG.TXT meanwhile (process-wide; the
+        previous handler is restored)."""
+        mujoco = self._mujoco
+        previous = mujoco.get_mju_user_warning()
+        mujoco.set_mju_user_warning(_ignore_warning)
+        try:
+            yield
+        finally:
+            mujoco.set_mju_user_warning(previous)
+
     def reset(self) -> None:
         """Back to the scene's initial state at t = 0, MuJoCo's warnings cleared."""
         self._mujoco.mj_resetData(self.m, self.d)
@@ -171,12 +189,13 @@ class MujocoTwin:
         if marks[-1] != steps:
             marks.append(steps)
         frames, done, status = [self._state()], 0, "completed"
-        for mark in marks[1:]:
-            done += self.advance(mark - done)
-            if self.diverged():
-                status = "diverged"
-                break
-            frames.append(self._state())
+        with self.quiet_warnings():
+            for mark in marks[1:]:
+                done += self.advance(mark - done)
+                if self.diverged():
+                    status = "diverged"
+                    break
+                frames.append(self._state())
         x, q, P, L = (np.stack(parts) for parts in zip(*frames, strict=True))
         omega = body_angular_velocity(model, q, L)
         index = np.array(marks[: len(frames)], dtype=np.int64)
@@ -193,3 +212,7 @@ class MujocoTwin:
             invariants=invariants(model, forces, x, q, P, L, omega),
             summary=RunSummary(status=status, steps=done, frames=len(frames), t_end=done * dt),
         )
+
+
+def _ignore_warning(message: str) -> None:
+    """A MuJoCo warning handler that drops the message (the counters in MjData.warning remain)."""

@@ -193,3 +193,25 @@ def test_without_mujoco_the_study_runs_and_says_so(monkeypatch):
     assert "not installed" in result.mujoco_skipped and any("[bench]" in note for note in result.notes)
     with pytest.raises(ValueError, match=r"\[bench\]"):
         study(thrown_plate(duration=0.2), integrators=["split2"], dts=STEPS[:2], min_time=0.0, mujoco=True)
+
+
+def test_a_diverging_mujoco_run_is_reported_and_logs_nothing(tmp_path, monkeypatch):
+    """The fast spin (omega0 = (60, 40, 80) rad/s) under MuJoCo's Euler at dt = 1/60 s blows up; MuJoCo
+    resets a bad state and warns instead of stopping: the twin reports "diverged" from the warning
+    counters, and MuJoCo's own handler (which appends to MUJOCO_LOG.TXT in the working directory) is
+    kept quiet."""
+    from rbcli.api import load_scene
+    from rbcli.runner.mujoco_twin import MUJOCO_METHODS, MujocoTwin
+    from rbcli.scene.compile import compile_scene
+
+    compiled = compile_scene(load_scene("scenes/verification/fast_spin.yaml"))
+    monkeypatch.chdir(tmp_path)
+    if mujoco_version() is None:
+        with pytest.raises(ImportError):
+            MujocoTwin(compiled, MUJOCO_METHODS["mujoco-euler"])
+        return
+    twin = MujocoTwin(compiled, MUJOCO_METHODS["mujoco-euler"])
+    traj = twin.trajectory(compiled.settings.steps, 1)
+    assert traj.status == "diverged" and traj.summary.steps < compiled.settings.steps
+    assert np.isfinite(traj.q).all()  # frames up to the blow-up only
+    assert not list(tmp_path.iterdir()), list(tmp_path.iterdir())
