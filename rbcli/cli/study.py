@@ -1,8 +1,10 @@
 """`rbsim study SCENE`: work-precision study of every integrator on a scene (error against cost).
 
-Writes <out>/<scene>-study.csv and .json (every number), and a work-precision plot as .png and .svg;
-prints a table. matplotlib, numba and the study itself are imported inside the functions so that
-`rbsim --help` stays instant.
+Writes <out>/<scene>-study.csv and .json (every number), and a work-precision plot as .png and .svg
+(cost bars: the fastest to the slowest timing sample); prints a table; with `--rerun x.rrd` also the
+study for the Rerun viewer (`record/rerun_sink.py: write_study_rrd`). MuJoCo's rows come from
+`runner/mujoco_twin.py` when mujoco is installed. matplotlib, numba, rerun and the study itself are
+imported inside the functions so that `rbsim --help` stays instant.
 """
 
 from __future__ import annotations
