@@ -1,13 +1,14 @@
 """Timing a compiled run honestly: serial, in this process, the kernel and not the Python around it.
 
 `time_kernel(reset, advance, steps, min_time)` times whole runs of `steps` steps from the initial
-state. Runs are gathered into samples of about min_time / TIMING_SAMPLES seconds (as many whole runs as
-fill that), and samples are taken until min_time seconds of runs are spent and at least MIN_SAMPLES
-samples exist. Inside each sample the same number of 0-step calls is timed right after the runs: their
-mean is the per-call overhead (argument unboxing of the chunk loop, the binding's dispatch), taken off
-the sample, so a run of 25 steps of one body (tens of microseconds, of which ~10 us is the call) is
-billed for its steps alone. Interleaving the two in every sample makes a change of machine load hit
-both alike. Reported: the median per-step time over samples and the fastest and slowest sample.
+state. Each run is followed by a 0-step call of the same loop (argument unboxing of the chunk loop, the
+binding's dispatch: ~10-20 us for rbsim's loops, ~0.5 us for `mj_step`), and the run's kernel time is
+its time minus that call's, so a run of 10 steps of one body (~5 us of steps inside ~20 us) is billed
+for its steps alone; pairing each run with its own call makes a drift of the machine's speed hit both
+alike. Runs are gathered into samples of about min_time / TIMING_SAMPLES seconds (as many whole runs as
+fill that); a sample's value is the median over its runs (an interrupt or a page fault charged to one
+run is not the kernel's cost), and samples are taken until min_time seconds of runs are spent and at
+least MIN_SAMPLES exist. Reported: the median over samples and the fastest and slowest sample.
 
 The clock is the CPU time of the calling thread (`time.thread_time`): the chunk loops and MuJoCo's
 `mj_step` are single-threaded and run in the caller's thread, so on a quiet machine this is the wall
@@ -21,6 +22,7 @@ once already. Timings are never taken on pool or Dask workers that share cores w
 
 from __future__ import annotations
 
+import gc
 import math
 import time
 from collections.abc import Callable
@@ -34,6 +36,8 @@ from rbcli.physics.step import STATUS_DIVERGED, STATUS_OK, empty_buffers
 TIMING_SAMPLES = 7
 # ... and never fewer than this (a median and a spread need three).
 MIN_SAMPLES = 3
+# A sample whose runs measure at or below the call overhead keeps this fraction of its whole time.
+KERNEL_FLOOR = 0.05
 # Frame buffers of the timed loop hold at most this many bytes (13 float64 per body and frame): a run
 # whose frames do not fit hands the full buffer back and continues, as the runner does.
 TIMING_BUFFER_BYTES = 16 * 1024 * 1024
@@ -62,39 +66,60 @@ class KernelTiming:
 
 def time_kernel(reset: Callable[[], None], advance: Callable[[int], int], steps: int, min_time: float) -> KernelTiming:
     """Time `advance(steps)` runs from `reset()` (see the module docstring); advance returns the steps it
-    did (fewer when a run diverges: the time is per step done). reset is outside the timed calls."""
+    did (fewer when a run diverges: the time is per step done) and must make its call into compiled code
+    also for 0 steps (that call is the overhead taken off). reset is outside the timed calls."""
     cpu, wall = time.thread_time, time.perf_counter
 
-    def batch(count: int, runs: int) -> tuple[float, float, int]:
-        total, total_wall, done = 0.0, 0.0, 0
-        for _ in range(runs):
+    def batch(count: int, runs: int) -> tuple[float, float, float, float, float]:
+        """`runs` runs, each followed by a 0-step call (so a drift of the machine's speed hits both alike):
+        the median over runs of (run - its call) per step, in CPU and wall seconds (a median: an
+        interrupt or page fault charged to one run is not the kernel's), the CPU seconds of the runs,
+        the mean CPU seconds of a call, and the steps per run."""
+        kernel = np.empty(runs)
+        kernel_wall = np.empty(runs)
+        total, calls, done = 0.0, 0.0, 0
+        for i in range(runs):
             reset()
             started, started_wall = cpu(), wall()
-            done += advance(count)
-            total += cpu() - started
-            total_wall += wall() - started_wall
-        return total, total_wall, done
+            steps_done = advance(count)
+            run, run_wall = cpu() - started, wall() - started_wall
+            reset()
+            started, started_wall = cpu(), wall()
+            advance(0)
+            call, call_wall = cpu() - started, wall() - started_wall
+            kernel[i] = _kernel_per_step(run, call, steps_done)
+            kernel_wall[i] = _kernel_per_step(run_wall, call_wall, steps_done)
+            total, calls, done = total + run, calls + call, done + steps_done
+        return float(np.median(kernel)), float(np.median(kernel_wall)), total, calls / runs, done / runs
 
-    # the first run touches the data and warms the caches: not a sample; when it alone fills a sample,
-    # first-touch costs are noise next to it and it serves as the estimate (a long run is not repeated)
-    one = batch(steps, 1)[0]
-    if one < min_time / TIMING_SAMPLES:
-        one = batch(steps, 1)[0]
-    runs = max(1, math.ceil(min_time / TIMING_SAMPLES / max(one, 1e-7)))
+    # the first run touches the data and warms the caches (and may load the kernel from numba's cache):
+    # not a sample, and an estimate only when it alone is longer than min_time (then a second first-touch
+    # cost is noise next to it, and the run is not repeated just to estimate it)
+    target = min_time / TIMING_SAMPLES
+    one = batch(steps, 1)[2]
+    if one < min_time:
+        one = min(one, batch(steps, 1)[2])
+    runs = max(1, math.ceil(target / max(one, 1e-7)))
     samples: list[float] = []
     samples_wall: list[float] = []
     overheads: list[float] = []
     spent, total_runs = 0.0, 0
-    while len(samples) < MIN_SAMPLES or spent < min_time:
-        whole, whole_wall, done = batch(steps, runs)
-        empty, empty_wall, _ = batch(0, runs)
-        spent += whole
-        total_runs += runs
-        # a run shorter than the clock's resolution can come out at or below its own call overhead: keep
-        # the whole time then rather than a zero or negative cost
-        samples.append((whole - empty if whole > empty else whole) / max(done, 1))
-        samples_wall.append((whole_wall - empty_wall if whole_wall > empty_wall else whole_wall) / max(done, 1))
-        overheads.append(empty / runs)
+    collecting = gc.isenabled()
+    gc.disable()  # as timeit does: a collection inside a timed call is not the kernel's cost
+    try:
+        while len(samples) < MIN_SAMPLES or spent < min_time:
+            per_step, per_step_wall, seconds, overhead, _ = batch(steps, runs)
+            if seconds < 0.5 * target:  # the estimate ran slow (a hiccup): not a sample; size them again
+                runs = math.ceil(runs * target / max(seconds, 1e-7))
+                continue
+            spent += seconds
+            samples.append(per_step)
+            total_runs += runs
+            samples_wall.append(per_step_wall)
+            overheads.append(overhead)
+    finally:
+        if collecting:
+            gc.enable()
     return KernelTiming(
         median=float(np.median(samples)),
         low=float(min(samples)),
@@ -107,6 +132,13 @@ def time_kernel(reset: Callable[[], None], advance: Callable[[int], int], steps:
     )
 
 
+def _kernel_per_step(whole: float, calls: float, steps: int) -> float:
+    """(time of a run - time of its 0-step call) / steps done. A run whose kernel time is below the noise
+    of its call overhead can come out at or below it: it keeps KERNEL_FLOOR of its whole time (a
+    positive, visibly tiny cost) instead of a zero or negative one."""
+    return max(whole - calls, KERNEL_FLOOR * whole) / max(steps, 1)
+
+
 def simulation_advance(sim, record_every: int) -> Callable[[int], int]:  # noqa: ANN001 - Simulation
     """advance(n) for `time_kernel`: n steps of the simulation's compiled loop from its current step,
     recording every `record_every` steps into reused frame buffers (the study's cadence, so a method
@@ -117,12 +149,11 @@ def simulation_advance(sim, record_every: int) -> Callable[[int], int]:  # noqa:
 
     def advance(n: int) -> int:
         done = 0
-        while done < n:
+        while True:  # at least one call, also for n = 0: that call is the overhead time_kernel takes off
             steps, _, status = sim.advance(n - done, record_every, frames, 0)
             sim.data.state.step += int(steps)
             done += int(steps)
-            if status == STATUS_DIVERGED or (status != STATUS_OK and steps == 0):
-                break
-        return done
+            if done >= n or status == STATUS_DIVERGED or (status != STATUS_OK and steps == 0):
+                return done
 
     return advance
