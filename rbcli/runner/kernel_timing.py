@@ -14,7 +14,8 @@ The clock is the CPU time of the calling thread (`time.thread_time`): the chunk 
 `mj_step` are single-threaded and run in the caller's thread, so on a quiet machine this is the wall
 time, and on a shared one it leaves out the time the core was given to other processes (measured on
 this project's 2-core machine at load 6.7, 1 body, 500 rk4 steps: wall 1,220-2,000 ns/step, a 1.64x
-spread; thread CPU time 465-572 ns/step, 1.23x). The wall time is measured beside it and reported.
+spread; thread CPU time 465-572 ns/step, 1.23x). The wall time is measured beside it and reported; it
+is the clock where the thread clock is coarser than a microsecond.
 
 Nothing is compiled inside a timing: the caller hands a `Simulation` (or a MuJoCo twin) that has run
 once already. Timings are never taken on pool or Dask workers that share cores with other work.
@@ -68,7 +69,10 @@ def time_kernel(reset: Callable[[], None], advance: Callable[[int], int], steps:
     """Time `advance(steps)` runs from `reset()` (see the module docstring); advance returns the steps it
     did (fewer when a run diverges: the time is per step done) and must make its call into compiled code
     also for 0 steps (that call is the overhead taken off). reset is outside the timed calls."""
-    cpu, wall = time.thread_time, time.perf_counter
+    wall = time.perf_counter
+    # a thread clock coarser than a microsecond (some platforms tick it at the scheduler's 1-16 ms)
+    # cannot time a short run: the wall clock then, whose samples include other processes' time
+    cpu = time.thread_time if time.get_clock_info("thread_time").resolution <= 1e-6 else wall
 
     def batch(count: int, runs: int) -> tuple[float, float, float, float, float]:
         """`runs` runs, each followed by a 0-step call (so a drift of the machine's speed hits both alike):
