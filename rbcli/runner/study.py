@@ -3,11 +3,11 @@
 For each (integrator, dt) the scene is run once for accuracy (recorded at a cadence common to all
 runs, so every run is compared at the same times) and then timed (`time_kernel`): serially, in this
 process, on one compiled `Simulation` reused across repeats (no compilation inside a timing), the chunk
-loop alone at the study's recording cadence (no sink, no Python per step). Repeats are gathered into
-samples of about min_time / TIMING_SAMPLES seconds each until min_time [s] is spent (and at least
-MIN_SAMPLES samples); each sample's per-call overhead (a 0-step call of the same loop, interleaved, so
-a change of machine load hits both) is taken off, so small scenes are billed for the kernel and not for
-argument unboxing. Reported: the median seconds per step and the spread (min and max over samples).
+loop alone at the study's recording cadence (no sink, no Python per step), CPU time of the running
+thread. Each run's own 0-step call of the same loop is taken off it, so small scenes are billed for the
+kernel and not for argument unboxing; runs are gathered into samples (the median over a sample's runs)
+until min_time [s] is spent (`runner/kernel_timing.py`). Reported: the median seconds per step and the
+spread (the fastest and slowest sample).
 
 When MuJoCo is installed (the `[bench]` extra) and the scene is free bodies under uniform gravity,
 MuJoCo's Euler and RK4 run the same scene (`runner/mujoco_twin.py`) as extra rows, measured the same way.
