@@ -159,9 +159,9 @@ class MujocoTwin:
         self.d.qpos[:], self.d.qvel[:] = self._qpos0, self._qvel0
 
     def advance(self, steps: int) -> int:
-        """`steps` MuJoCo steps (none for 0); returns the steps done."""
-        if steps > 0:
-            self._mujoco.mj_step(self.m, self.d, nstep=int(steps))
+        """`mj_step(m, d, nstep=steps)`; returns the steps done. nstep = 0 steps nothing but still makes the
+        call (the binding's overhead, which the study's timing takes off)."""
+        self._mujoco.mj_step(self.m, self.d, nstep=int(steps))
         return int(steps)
 
     def diverged(self) -> bool:
