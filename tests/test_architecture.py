@@ -33,6 +33,13 @@ ALLOWED_IMPORTS: dict[str, frozenset[str]] = {
 }
 
 
+# Optional third-party engines: the one module of rbcli that may import each, always inside a function
+# (lazily), so rbcli imports and runs without them (mujoco is the `[bench]` extra: the study's MuJoCo rows).
+OPTIONAL_ENGINE_OWNERS: dict[str, str] = {
+    "mujoco": "rbcli/runner/mujoco_twin.py",
+}
+
+
 def _parts() -> set[str]:
     """rbcli's subpackages and top-level modules, from the tree."""
     packages = {p.name for p in PACKAGE.iterdir() if p.is_dir() and (p / "__init__.py").is_file()}
@@ -155,3 +162,23 @@ def test_package_type_checks():
     """mypy on rbcli/ (settings in pyproject.toml), as STYLE.md asks."""
     out = subprocess.run([sys.executable, "-m", "mypy"], capture_output=True, text=True, cwd=ROOT)
     assert out.returncode == 0, out.stdout[-4000:]
+
+
+@pytest.mark.parametrize("engine", sorted(OPTIONAL_ENGINE_OWNERS))
+def test_optional_engines_are_imported_by_their_owner_only_and_lazily(engine):
+    """Static: only the owner imports the engine, and only inside a function body; at run time: the
+    owner and the study import without loading it."""
+    owner = OPTIONAL_ENGINE_OWNERS[engine]
+    for path in sorted(PACKAGE.rglob("*.py")):
+        rel = path.relative_to(ROOT).as_posix()
+        tree = ast.parse(path.read_text(encoding="utf-8"), filename=rel)
+        top_level = {id(node) for node in tree.body}
+        for node in ast.walk(tree):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else []
+            if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                names = [node.module]
+            if any(name.split(".")[0] == engine for name in names):
+                assert rel == owner, f"{rel}:{node.lineno} imports {engine}; only {owner} may"
+                assert id(node) not in top_level, f"{rel}:{node.lineno} imports {engine} at module level"
+    module = owner.removesuffix(".py").replace("/", ".")
+    assert engine not in _modules_after(f"import {module}, rbcli.runner.study, rbcli.cli.study")

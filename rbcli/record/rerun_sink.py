@@ -568,3 +568,148 @@ def open_viewer_command(path: str | Path, *, web: bool = False) -> list[str]:
 
     cmd = [sys.executable, "-m", "rerun", str(path)]
     return cmd + ["--web-viewer", "--bind", "127.0.0.1"] if web else cmd
+
+
+# --- work-precision study (`rbsim study --rerun`) ---------------------------------------------------
+#
+#     study/<error>/<series>        Scalars: the error of each run (max over bodies and recorded times)
+#     study/log10_<error>/<series>  Scalars: log10 of it (the viewer's plots have linear axes)
+#     study/cost/<series>           Scalars: wall seconds per simulated second, [min, median, max] over
+#                                   the timing samples (three lines: the spread)
+#     plot                          static EncodedImage: the PNG the command wrote (log-log, error bars)
+#     study                         static TextDocument (markdown): reference, notes, every run's row
+#
+# Each row is logged on two duration timelines: `dt` (the step; for adaptive series the mean accepted
+# step) and `cost` (CPU time per simulated second, as a duration), so choosing the `cost` timeline
+# shows error against cost and `dt` error and cost against the step; and on the sequence `run`, the
+# row's index in the study's table (and JSON), which orders the rows when a dt or a cost repeats. A
+# series is one integrator (MuJoCo's rows are `mujoco-euler`, `mujoco-rk4`; an adaptive method by
+# tolerance is `<name>-adaptive`).
+
+STUDY_TIMELINE_DT = "dt"
+STUDY_TIMELINE_COST = "cost"
+STUDY_TIMELINE_RUN = "run"
+STUDY_COST_SAMPLES = ("min", "median", "max")
+
+
+@dataclass(frozen=True)
+class StudySeries:
+    """One line of a work-precision study: a run per row.
+
+    run (n,): each row's index in the study's table; dt (n,) [s]; cost (n, 3) [s/s] CPU seconds per
+    simulated second (min, median, max over samples); errors: name -> (n,) (e.g. rotation_error_max
+    [rad]); non-finite errors (diverged runs) are skipped.
+    """
+
+    name: str
+    run: np.ndarray
+    dt: np.ndarray
+    cost: np.ndarray
+    errors: dict[str, np.ndarray]
+
+
+def _study_indexes(run: np.ndarray, dt: np.ndarray, cost: np.ndarray) -> list[rr.TimeColumn]:
+    """The `run`, `dt` and `cost` timelines of some rows; durations as integer ns, rounded (TimeColumn
+    would truncate seconds * 1e9)."""
+
+    def ns(seconds: np.ndarray) -> np.ndarray:
+        return np.rint(np.asarray(seconds, dtype=np.float64) * 1e9).astype(np.int64).astype("timedelta64[ns]")
+
+    return [
+        rr.TimeColumn(STUDY_TIMELINE_RUN, sequence=np.asarray(run, dtype=np.int64)),
+        rr.TimeColumn(STUDY_TIMELINE_DT, duration=ns(dt)),
+        rr.TimeColumn(STUDY_TIMELINE_COST, duration=ns(cost)),
+    ]
+
+
+def write_study_rrd(
+    path: str | Path, title: str, series: Sequence[StudySeries], plot_png: bytes, text_markdown: str
+) -> None:
+    """Write a study as an .rrd (layout above); `title` names the recording."""
+    rec = rr.RecordingStream(f"{APPLICATION_ID}-study", recording_id=uuid.uuid4(), send_properties=False)
+    names = [rr.escape_entity_path_part(s.name) for s in series]
+    error_names = list(dict.fromkeys(e for s in series for e in s.errors))
+    blueprint = rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Spatial2DView(origin="plot", name="work-precision plot"),
+            rrb.Vertical(
+                *[rrb.TimeSeriesView(origin=f"study/log10_{e}", name=f"log10 {e}") for e in error_names],
+                rrb.TimeSeriesView(origin="study/cost", name="cost [s per simulated s]"),
+                rrb.TextDocumentView(origin="study", name="study"),
+            ),
+            column_shares=[3, 2],
+        ),
+        collapse_panels=False,
+    )
+    rec.save(path, default_blueprint=blueprint)
+    rec.send_recording_name(title)
+    rec.log("plot", rr.EncodedImage(contents=plot_png, media_type="image/png"), static=True)
+    rec.log("study", rr.TextDocument(text_markdown, media_type=rr.MediaType.MARKDOWN), static=True)
+    for line, s in zip(names, series, strict=True):
+        dt, cost = np.asarray(s.dt, dtype=np.float64), np.asarray(s.cost, dtype=np.float64).reshape(-1, 3)
+        run = np.asarray(s.run, dtype=np.int64)
+        rec.log(f"study/cost/{line}", rr.SeriesLines(names=[f"{s.name} {k}" for k in STUDY_COST_SAMPLES]), static=True)
+        rec.send_columns(
+            f"study/cost/{line}",
+            indexes=_study_indexes(run, dt, cost[:, 1]),
+            columns=rr.Scalars.columns(scalars=cost).partition([3] * len(dt)),
+        )
+        for error, values in s.errors.items():
+            values = np.asarray(values, dtype=np.float64)
+            keep = np.isfinite(values) & np.isfinite(cost[:, 1])
+            if not keep.any():
+                continue
+            indexes = _study_indexes(run[keep], dt[keep], cost[keep, 1])
+            rec.send_columns(f"study/{error}/{line}", indexes=indexes, columns=rr.Scalars.columns(scalars=values[keep]))
+            # log10 of an exact zero (round-off below the last bit) would be -inf: drawn at 1e-300 instead
+            logs = np.log10(np.maximum(values[keep], 1e-300))
+            rec.send_columns(f"study/log10_{error}/{line}", indexes=indexes, columns=rr.Scalars.columns(scalars=logs))
+    rec.flush()
+    rec.disconnect()
+
+
+@dataclass
+class RrdStudy:
+    """A study .rrd read back: per scalar entity its timelines (`run` the row index, `dt` and `cost`
+    [s]) and values, rows in the study's order; the static images (entity -> (bytes, media type)) and
+    text documents."""
+
+    timelines: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)  # entity -> timeline -> (n,)
+    values: dict[str, np.ndarray] = field(default_factory=dict)  # entity -> (n, k)
+    images: dict[str, tuple[bytes, str]] = field(default_factory=dict)
+    texts: dict[str, str] = field(default_factory=dict)
+
+
+def read_study_rrd(path: str | Path) -> RrdStudy:
+    """Read a file of `write_study_rrd` with rerun's own chunk reader (rerun.chunk.RrdReader)."""
+    from rerun.chunk import RrdReader
+
+    out = RrdStudy()
+    parts: dict[str, dict[str, list[np.ndarray]]] = {}
+    for chunk in RrdReader(path).stream():
+        entity = chunk.entity_path.lstrip("/")
+        batch = chunk.to_record_batch()
+        names = batch.schema.names
+        if "EncodedImage:blob" in names:
+            blob = batch.column("EncodedImage:blob").to_pylist()[-1][0]
+            media = (
+                batch.column("EncodedImage:media_type").to_pylist()[-1][0] if "EncodedImage:media_type" in names else ""
+            )
+            out.images[entity] = (bytes(blob), media)
+        if "TextDocument:text" in names:
+            out.texts[entity] = batch.column("TextDocument:text").to_pylist()[-1][0]
+        if chunk.is_static or "Scalars:scalars" not in names:
+            continue
+        acc = parts.setdefault(entity, {})
+        width = len(batch.column("Scalars:scalars")[0].values) if batch.num_rows else 1
+        acc.setdefault("values", []).append(_flat(batch.column("Scalars:scalars"), width))
+        acc.setdefault(STUDY_TIMELINE_RUN, []).append(batch.column(STUDY_TIMELINE_RUN).to_numpy())
+        for timeline in (STUDY_TIMELINE_DT, STUDY_TIMELINE_COST):
+            if timeline in names:
+                acc.setdefault(timeline, []).append(batch.column(timeline).cast("int64").to_numpy() * 1e-9)
+    for entity, acc in parts.items():
+        cat = {k: np.concatenate(v) for k, v in acc.items()}
+        order = np.argsort(cat[STUDY_TIMELINE_RUN], kind="stable")
+        out.values[entity] = cat.pop("values")[order]
+        out.timelines[entity] = {k: v[order] for k, v in cat.items()}
+    return out

@@ -1,8 +1,16 @@
 """Work-precision study: every integrator at a range of step sizes, error against cost.
 
 For each (integrator, dt) the scene is run once for accuracy (recorded at a cadence common to all
-runs, so every run is compared at the same times) and `repeats` more times for cost (the compiled
-step loop alone, kernels warmed up first so compilation is excluded; the median is kept).
+runs, so every run is compared at the same times) and then timed (`time_kernel`): serially, in this
+process, on one compiled `Simulation` reused across repeats (no compilation inside a timing), the chunk
+loop alone at the study's recording cadence (no sink, no Python per step), CPU time of the running
+thread. Each run's own 0-step call of the same loop is taken off it, so small scenes are billed for the
+kernel and not for argument unboxing; runs are gathered into samples (the median over a sample's runs)
+until min_time [s] is spent (`runner/kernel_timing.py`). Reported: the median seconds per step and the
+spread (the fastest and slowest sample).
+
+When MuJoCo is installed (the `[bench]` extra) and the scene is free bodies under uniform gravity,
+MuJoCo's Euler and RK4 run the same scene (`runner/mujoco_twin.py`) as extra rows, measured the same way.
 
 Reference: when the compiled scene has no force term other than uniform gravity, every body's motion
 is known exactly: its centre of mass moves as x0 + v0 t + g t^2 / 2 and it rotates torque-free
@@ -21,11 +29,13 @@ import dataclasses
 import io
 import json
 import math
+import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -43,8 +53,12 @@ from rbcli.analysis.errors import (
 )
 from rbcli.physics.integrators import INTEGRATORS, IntegratorInfo, get_integrator
 from rbcli.record.memory_sink import Trajectory
+from rbcli.runner.kernel_timing import KernelTiming, simulation_advance, time_kernel
 from rbcli.scene.compile import CompiledScene, compile_scene
 from rbcli.scene.spec import RecordSpec, SceneSpec
+
+if TYPE_CHECKING:
+    from rbcli.runner.mujoco_twin import MujocoMethod
 
 # Default step sizes: 7 values dt_scene * 2^(3..-3), 1.8 decades centred on the scene's dt.
 DEFAULT_DT_EXPONENTS = (3, 2, 1, 0, -1, -2, -3)
@@ -57,9 +71,10 @@ TARGET_FRAMES = 400
 REFERENCE_REFINEMENT = 16
 # Among methods of the highest registered order, the reference is the first of these.
 REFERENCE_PREFERENCE = ("split4", "exact4", "rk4", "split2", "euler-matrix")
-# A timed measurement shorter than this is repeated within the measurement (timer resolution and
-# call overhead stay below ~1 %).
-MIN_TIMED_SECONDS = 0.01
+# Timing: each (integrator, dt) point is timed until this much wall time [s] is spent on its runs
+# (`runner/kernel_timing.py`: samples, overhead, spread).
+DEFAULT_MIN_TIME = 0.2
+TIMING_CLOCK = "CPU time of the serial run's thread; median and min/max over samples; call overhead taken off"
 BASELINE_INTEGRATOR = "euler-matrix"
 EXACT_INTEGRATOR = "exact"
 
@@ -73,9 +88,14 @@ class StudyRun:
     Errors are maxima over bodies and recorded times (…_max) and at the final time (…_final):
     rotation [rad] (geodesic angle), position [m] (centre of mass). Drifts are relative,
     max_t |I(t) - I(0)| / |I(0)|, and None where the scene does not conserve the quantity.
-    seconds_per_step [s] is the median wall time of the compiled step loop; ns_per_body_step divides
-    by the body count; cost_per_sim_second [s/s] = wall seconds per simulated second. Adaptive runs
-    (tolerance set): steps are the accepted steps, dt their mean, rejected_steps the others (which
+    seconds_per_step [s] is the median over timing samples of the compiled step loop's time per step
+    (`runner/kernel_timing.py`: CPU time of the serial run's thread), seconds_per_step_min / _max the
+    fastest and slowest sample (the spread), over timing_samples samples of timed_runs whole runs in
+    all; wall_seconds_per_step the median of the same samples in wall time (above the CPU time only
+    when other processes held the core); ns_per_body_step divides the median by the body count;
+    cost_per_sim_second [s/s] = seconds of the run per simulated second (median). engine:
+    "rbsim", or "mujoco" for the MuJoCo rows; nominal_order: the method's order as registered. Adaptive
+    runs (tolerance set): steps are the accepted steps, dt their mean, rejected_steps the others (which
     cost force evaluations and time too).
     """
 
@@ -95,7 +115,25 @@ class StudyRun:
     seconds_per_step: float
     ns_per_body_step: float
     cost_per_sim_second: float
+    seconds_per_step_min: float
+    seconds_per_step_max: float
+    wall_seconds_per_step: float
+    timing_samples: int
+    timed_runs: int
+    nominal_order: int
+    engine: str = "rbsim"
     rejected_steps: int = 0
+
+    @property
+    def cost_spread(self) -> float:
+        """Slowest over fastest timing sample (1.0 = no spread)."""
+        return self.seconds_per_step_max / self.seconds_per_step_min if self.seconds_per_step_min > 0 else math.inf
+
+    @property
+    def cost_per_sim_second_range(self) -> tuple[float, float]:
+        """(fastest, slowest) sample as wall seconds per simulated second [s/s]."""
+        per_step = self.cost_per_sim_second / self.seconds_per_step if self.seconds_per_step > 0 else 0.0
+        return self.seconds_per_step_min * per_step, self.seconds_per_step_max * per_step
 
 
 @dataclass(frozen=True)
@@ -129,20 +167,27 @@ class IntegratorFit:
 @dataclass
 class StudyResult:
     """Everything a study measured; `primary_error` ("rotation", or "position" when nothing rotates)
-    is the error the table's fitted order and the plot's first panel use."""
+    is the error the table's fitted order and the plot's first panel use. min_time [s]: the timing
+    spent per point; mujoco_version: the MuJoCo that ran the MuJoCo rows (None: not installed or not
+    asked); mujoco_skipped: why there are no MuJoCo rows (None when there are); load_average: the
+    machine's 1-minute load average at the start (None where the platform has none): a spread above
+    the target at a load above the core count is the machine's."""
 
     scene_name: str
     body_count: int
     duration: float
     output_interval: float
     frame_count: int
-    repeats: int
+    min_time: float
     reference: ReferenceInfo
     conserved: tuple[str, ...]
     primary_error: str
     runs: list[StudyRun] = field(default_factory=list)
     fits: dict[str, IntegratorFit] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    mujoco_version: str | None = None
+    mujoco_skipped: str | None = None
+    load_average: float | None = None  # the machine's 1-minute load average when the study began
 
     def fitted_order(self, integrator: str) -> float | None:
         """Fitted order of the primary error for an integrator (None when not enough points)."""
@@ -162,12 +207,16 @@ class StudyResult:
                 "duration": self.duration,
                 "output_interval": self.output_interval,
                 "frame_count": self.frame_count,
-                "repeats": self.repeats,
+                "timing": {"min_time": self.min_time, "clock": TIMING_CLOCK, "load_average": self.load_average},
+                "mujoco": {"version": self.mujoco_version, "skipped": self.mujoco_skipped},
                 "reference": dataclasses.asdict(self.reference),
                 "conserved": list(self.conserved),
                 "primary_error": self.primary_error,
                 "notes": list(self.notes),
-                "runs": [dataclasses.asdict(r) | {"fitted_order": self.run_fitted_order(r)} for r in self.runs],
+                "runs": [
+                    dataclasses.asdict(r) | {"fitted_order": self.run_fitted_order(r), "cost_spread": r.cost_spread}
+                    for r in self.runs
+                ],
                 "fits": {
                     name: {
                         "nominal_order": f.nominal_order,
@@ -294,34 +343,15 @@ def _simulate(compiled: CompiledScene) -> Trajectory:
     return memory.trajectory()
 
 
-def seconds_per_step(compiled: CompiledScene, repeats: int) -> float:
-    """Median wall time [s] of one step of the compiled chunk loop (no recording), over `repeats`
-    measurements; the kernel must already be compiled (`runner.loop.warm_up`).
-
-    Each measurement runs the whole run from the initial state, repeated within the measurement when
-    one run is shorter than MIN_TIMED_SECONDS; the call overhead (a 0-step call: argument unboxing)
-    is measured the same way and taken off, so short runs are not billed for it.
-    """
+def time_run(compiled: CompiledScene, min_time: float) -> KernelTiming:
+    """Per-step time of the compiled scene's chunk loop (`kernel_timing.time_kernel`): one Simulation
+    reused across repeats, recording at the scene's cadence into reused buffers, no sink. The kernel
+    must be compiled already (`runner.loop.warm_up`) or the first untimed run compiles it."""
     from rbcli.runner.simulation import Simulation
 
     sim = Simulation(compiled)
-    steps = compiled.settings.steps
-
-    def timed(count: int, times: int) -> float:
-        started = time.perf_counter()
-        for _ in range(times):
-            sim.reset()
-            sim.advance(count)  # records nothing: the loop is the steps alone
-        return (time.perf_counter() - started) / times
-
-    def median(count: int) -> float:
-        inner = max(1, math.ceil(MIN_TIMED_SECONDS / max(timed(count, 1), 1e-9)))
-        return float(np.median([timed(count, inner) for _ in range(max(1, repeats))]))
-
-    whole = median(steps)
-    overhead = median(0)
-    # on a busy machine the difference of two medians can come out <= 0 for very short runs
-    return (whole - overhead) / steps if whole > overhead else whole / steps
+    return time_kernel(sim.reset, simulation_advance(sim, compiled.settings.record_every), compiled.settings.steps,
+                       min_time)  # fmt: skip
 
 
 def measure_cost(name: str, body_count: int, steps: int, *, repeats: int = 3, seed: int = 0) -> float:
@@ -370,17 +400,25 @@ def study(
     dts: Sequence[float] | None = None,
     tolerances: Sequence[float] | None = None,
     duration: float | None = None,
-    repeats: int = 3,
+    min_time: float = DEFAULT_MIN_TIME,
     progress: Progress | None = None,
+    mujoco: bool | None = None,
 ) -> StudyResult:
     """Run every integrator at every step size (adaptive ones at every tolerance) and measure error
     against the reference, invariant drift and cost; fit each integrator's empirical order.
 
     dts default to the scene's dt 2^(3..-3); duration to the scene's (rounded up to a whole number of
-    the coarsest step). progress(done, total, label) is called as work completes (units: steps).
+    the coarsest step). min_time [s]: wall time spent timing each point (0: MIN_SAMPLES single runs).
+    mujoco: add MuJoCo's Euler and RK4 rows (None: when mujoco is installed and the scene is free bodies
+    under uniform gravity; True: raise ValueError if mujoco is not installed; False: never).
+    progress(done, total, label) is called as points complete (units: points).
     """
     from rbcli.runner.loop import warm_up
+    from rbcli.runner.mujoco_twin import MUJOCO_METHODS, mujoco_version, refusal
 
+    if not (min_time >= 0 and math.isfinite(min_time)):
+        raise ValueError(f"the minimum timing must be >= 0 s, got {min_time}")
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
     spec = _study_spec(scene)
     names = tuple(integrators) if integrators else applicable_integrators()
     infos = [get_integrator(name) for name in names]  # KeyError names the known ones
@@ -393,6 +431,19 @@ def study(
     base = compile_scene(spec, duration=grid.duration)
     exact = admits_exact_solution(base)
     conserved = conserved_quantities(base)
+    notes: list[str] = []
+
+    version = mujoco_version() if mujoco is not False else None
+    if mujoco is True and version is None:
+        raise ValueError("MuJoCo rows asked for, but mujoco is not installed (pip install 'rbcli[bench]')")
+    mujoco_reason = refusal(base) if version is not None else None
+    if mujoco is None and version is None:
+        mujoco_reason = "mujoco is not installed (pip install 'rbcli[bench]' adds MuJoCo's Euler and RK4 rows)"
+    elif mujoco is False:
+        mujoco_reason = "left out (mujoco=False)"
+    if mujoco_reason is not None and mujoco is not False:
+        notes.append(f"no MuJoCo rows: {mujoco_reason}")
+    mujoco_methods = list(MUJOCO_METHODS.values()) if mujoco_reason is None else []
 
     def compiled_for(name: str, dt: float, scale: int = 1) -> CompiledScene:
         every = grid.every_base * round(grid.base / dt) * scale
@@ -401,19 +452,17 @@ def study(
     ref_name = None if exact else reference_integrator()
     dt_ref = min(dts) / REFERENCE_REFINEMENT
     tolerances = tuple(tolerances or DEFAULT_TOLERANCES)
-    planned = [(i, dt) for i in infos for dt in dts] + [(i, grid.base) for i in adaptive for _ in tolerances]
-    total = float(sum(grid.steps_per_base(dt) * grid.base_steps * (1 + repeats) for _, dt in planned))
-    if ref_name is not None:
-        total += 1.5 * REFERENCE_REFINEMENT * grid.steps_per_base(min(dts)) * grid.base_steps
+    total = float(len(dts) * (len(infos) + len(mujoco_methods)) + len(adaptive) * len(tolerances) + 1)
     done = 0.0
 
-    def report(amount: float, label: str) -> None:
+    def report(label: str) -> None:
         nonlocal done
-        done += amount
+        done += 1.0
         if progress is not None:
             progress(done, total, label)
 
-    report(0.0, "reference")
+    if progress is not None:
+        progress(0.0, total, "reference")
     if exact:
         reference = ReferenceInfo("exact", "exact: free flight under uniform gravity and torque-free rotation")
         ref_path = exact_reference(base, times)
@@ -423,7 +472,6 @@ def study(
         coarse_c = compiled_for(ref_name, min(dts), REFERENCE_REFINEMENT // 2)
         warm_up(fine_c)
         fine, coarse = _simulate(fine_c), _simulate(coarse_c)
-        report(1.5 * fine_c.settings.steps, "reference")
         if fine.status != "completed" or coarse.status != "completed":
             raise RuntimeError(f"the reference run ({ref_name}, dt = {dt_ref:g} s) {fine.status}")
         ref_path = ReferencePath(fine.x, fine.q)
@@ -437,22 +485,29 @@ def study(
             rot_est,
             pos_est,
         )
+    report("reference")
 
     runs: list[StudyRun] = []
     for info in infos:
         warm_up(compiled_for(info.name, dts[0]))
         for dt in dts:
             compiled = compiled_for(info.name, dt)
-            runs.append(_measure(compiled, info, ref_path, times, conserved, repeats))
-            report(compiled.settings.steps * (1 + repeats), f"{info.name} dt={dt:.3g}")
-    notes: list[str] = []
+            traj = _simulate(compiled)
+            timing = time_run(compiled, min_time)
+            runs.append(_study_run(info.name, info.order, compiled, traj, times, ref_path, conserved, timing,
+                                   force_evals=compiled.settings.steps * info.force_evals))  # fmt: skip
+            report(f"{info.name} dt={dt:.3g}")
+    for method in mujoco_methods:
+        for dt in dts:
+            runs.append(_measure_mujoco(method, compiled_for(names[0], dt), times, ref_path, conserved, min_time))
+            report(f"{method.name} dt={dt:.3g}")
     asked = float(duration if duration is not None else spec.simulation.duration)
     if abs(grid.duration - asked) > 1e-9 * asked:
         notes.append(f"duration {asked:g} s rounded up to {grid.duration:g} s, a whole number of the coarsest step")
     for info in adaptive:
         for tol in tolerances:
-            runs.append(_measure_adaptive(spec, info, tol, grid, ref_path, conserved, repeats))
-            report(grid.base_steps * (1 + repeats), f"{info.name} tol={tol:.0e}")
+            runs.append(_measure_adaptive(spec, info, tol, grid, ref_path, conserved, min_time))
+            report(f"{info.name} tol={tol:.0e}")
 
     result = StudyResult(
         scene_name=scene.name,
@@ -460,49 +515,56 @@ def study(
         duration=grid.duration,
         output_interval=grid.output_interval,
         frame_count=int(times.size),
-        repeats=repeats,
+        min_time=min_time,
         reference=reference,
         conserved=conserved,
         primary_error="rotation",
         runs=runs,
         notes=notes,
+        mujoco_version=version,
+        mujoco_skipped=mujoco_reason,
+        load_average=load,
     )
     if not (np.any(base.initial_state.L != 0.0) or base.forces.has_torque):
         result.primary_error = "position"  # nothing rotates: rotation errors are all zero
     length_scale = max(float(np.abs(ref_path.x).max(initial=0.0)), 1e-3)
-    for info in infos:
-        fixed_runs = [r for r in runs if r.integrator == info.name and r.tolerance is None]
-        result.fits[info.name] = _fit(info, fixed_runs, length_scale)
+    fitted = [(i.name, i.order, i.symplectic) for i in infos] + [(m.name, m.order, False) for m in mujoco_methods]
+    for name, order, symplectic in fitted:
+        fixed_runs = [r for r in runs if r.integrator == name and r.tolerance is None]
+        result.fits[name] = _fit(name, order, symplectic, fixed_runs, length_scale)
     return result
 
 
-def _measure(
+def _study_run(
+    name: str,
+    order: int,
     compiled: CompiledScene,
-    info: IntegratorInfo,
-    ref: ReferencePath,
+    traj: Trajectory,
     times: np.ndarray,
+    ref: ReferencePath,
     conserved: tuple[str, ...],
-    repeats: int,
+    timing: KernelTiming,
+    *,
+    force_evals: int,
+    engine: str = "rbsim",
 ) -> StudyRun:
-    """Accuracy run plus timing runs of one fixed-step (integrator, dt)."""
+    """The row of one fixed-step (integrator, dt): errors of its recorded run and its timing."""
     settings = compiled.settings
-    traj = _simulate(compiled)
     nan = float("nan")
     if traj.status == "completed":
         if traj.t.size != times.size or not np.allclose(traj.t, times, rtol=1e-9, atol=0.0):
-            raise RuntimeError(f"{info.name} at dt = {settings.dt:g} s recorded at other times than the grid")
+            raise RuntimeError(f"{name} at dt = {settings.dt:g} s recorded at other times than the grid")
         errors = run_errors(traj, ref)
         drifts = invariant_drifts(traj, conserved)
     else:  # diverged: errors are meaningless past the blow-up
         errors = (nan, nan, nan, nan)
         drifts = (None, None, None)
-    per_step = seconds_per_step(compiled, repeats)
     return StudyRun(
-        integrator=info.name,
+        integrator=name,
         dt=settings.dt,
         tolerance=None,
         steps=settings.steps,
-        force_evals=settings.steps * info.force_evals,
+        force_evals=force_evals,
         status=traj.status,
         rotation_error_max=errors[0],
         position_error_max=errors[1],
@@ -511,10 +573,39 @@ def _measure(
         energy_drift=drifts[0],
         momentum_drift=drifts[1],
         angular_momentum_drift=drifts[2],
-        seconds_per_step=per_step,
-        ns_per_body_step=per_step / compiled.model.body_count * 1e9,
-        cost_per_sim_second=per_step / settings.dt,
+        seconds_per_step=timing.median,
+        ns_per_body_step=timing.median / compiled.model.body_count * 1e9,
+        cost_per_sim_second=timing.median / settings.dt,
+        seconds_per_step_min=timing.low,
+        seconds_per_step_max=timing.high,
+        wall_seconds_per_step=timing.wall,
+        timing_samples=timing.samples,
+        timed_runs=timing.runs,
+        nominal_order=order,
+        engine=engine,
     )
+
+
+def _measure_mujoco(
+    method: MujocoMethod,
+    compiled: CompiledScene,
+    times: np.ndarray,
+    ref: ReferencePath,
+    conserved: tuple[str, ...],
+    min_time: float,
+) -> StudyRun:
+    """A MuJoCo row: the twin recorded at the study's cadence, then `mj_step(nstep=steps)` timed as
+    rbsim's loop is (same samples, the 0-step call's overhead taken off)."""
+    from rbcli.runner.mujoco_twin import MujocoTwin
+
+    twin = MujocoTwin(compiled, method)
+    traj = twin.trajectory(compiled.settings.steps, compiled.settings.record_every)
+    with twin.quiet_warnings():  # a diverging run warns at every step of every repeat
+        timing = time_kernel(twin.reset, twin.advance, compiled.settings.steps, min_time)
+    # MuJoCo's RK4 evaluates the dynamics 4 times a step, Euler once
+    evals = compiled.settings.steps * (4 if method.order == 4 else 1)
+    return _study_run(method.name, method.order, compiled, traj, times, ref, conserved, timing, force_evals=evals,
+                      engine="mujoco")  # fmt: skip
 
 
 def run_adaptive(
@@ -524,12 +615,16 @@ def run_adaptive(
     (dt = the grid spacing, record_every as compiled), through the runner like `rbsim run --tolerance`.
     Returns the trajectory (None when not asked for) and the accepted and rejected step counts.
     """
-    adaptive = dataclasses.replace(compiled, settings=dataclasses.replace(compiled.settings, tolerance=tolerance))
+    adaptive = _with_tolerance(compiled, tolerance)
     traj = _simulate(adaptive)
     summary = traj.summary
     assert summary is not None, "run() closes every sink with a summary when it returns"
     counts = int(summary.steps_accepted or 0), int(summary.steps_rejected or 0)
     return (traj if trajectory else None), *counts
+
+
+def _with_tolerance(compiled: CompiledScene, tolerance: float) -> CompiledScene:
+    return dataclasses.replace(compiled, settings=dataclasses.replace(compiled.settings, tolerance=tolerance))
 
 
 def _measure_adaptive(
@@ -539,27 +634,23 @@ def _measure_adaptive(
     grid: OutputGrid,
     ref: ReferencePath,
     conserved: tuple[str, ...],
-    repeats: int,
+    min_time: float,
 ) -> StudyRun:
     """Accuracy and cost of an adaptive method at one tolerance: `steps` counts accepted steps, force
-    evaluations every attempt; the timing covers whole runs with their ~TARGET_FRAMES frame copies
-    (the accuracy run compiled the kernel)."""
+    evaluations every attempt; the timing (`time_run`, the adaptive chunk over the output grid at the
+    study's cadence) is per attempted step (the accuracy run compiled the kernel)."""
     compiled = compile_scene(
         spec, dt=grid.base, duration=grid.duration, integrator=info.name, record_every=grid.every_base
     )
     traj, accepted, rejected = run_adaptive(compiled, tolerance)
     assert traj is not None
-    samples = []
-    for _ in range(max(1, repeats)):
-        started = time.perf_counter()
-        run_adaptive(compiled, tolerance, trajectory=False)
-        samples.append(time.perf_counter() - started)
-    wall = float(np.median(samples))
+    per_grid_step = time_run(_with_tolerance(compiled, tolerance), min_time)  # seconds per output-grid step
+    attempts = max(accepted + rejected, 1)
+    scale = grid.base_steps / attempts  # grid steps per attempted step
     nan = float("nan")
     ok = traj.status == "completed" and traj.t.size == grid.times.size
     errors = run_errors(traj, ref) if ok else (nan, nan, nan, nan)
     drifts = invariant_drifts(traj, conserved) if ok else (None, None, None)
-    attempts = max(accepted + rejected, 1)
     return StudyRun(
         integrator=info.name,
         dt=grid.duration / max(accepted, 1),
@@ -574,23 +665,29 @@ def _measure_adaptive(
         energy_drift=drifts[0],
         momentum_drift=drifts[1],
         angular_momentum_drift=drifts[2],
-        seconds_per_step=wall / attempts,
-        ns_per_body_step=wall / attempts / compiled.model.body_count * 1e9,
-        cost_per_sim_second=wall / grid.duration,
+        seconds_per_step=per_grid_step.median * scale,
+        ns_per_body_step=per_grid_step.median * scale / compiled.model.body_count * 1e9,
+        cost_per_sim_second=per_grid_step.median * grid.base_steps / grid.duration,
+        seconds_per_step_min=per_grid_step.low * scale,
+        seconds_per_step_max=per_grid_step.high * scale,
+        wall_seconds_per_step=per_grid_step.wall * scale,
+        timing_samples=per_grid_step.samples,
+        timed_runs=per_grid_step.runs,
+        nominal_order=info.order,
         rejected_steps=rejected,
     )
 
 
-def _fit(info: IntegratorInfo, runs: list[StudyRun], length_scale: float) -> IntegratorFit:
+def _fit(name: str, order: int, symplectic: bool, runs: list[StudyRun], length_scale: float) -> IntegratorFit:
     """Fitted orders of the rotation and position errors over the asymptotic range."""
     dt = np.array([r.dt for r in runs])
     steps = np.array([r.steps for r in runs])
     rot = np.array([r.rotation_error_max for r in runs])
     pos = np.array([r.position_error_max for r in runs])
     return IntegratorFit(
-        info.name,
-        info.order,
-        info.symplectic,
+        name,
+        order,
+        symplectic,
         fit_order(dt, rot, roundoff_floor(steps), ROTATION_SATURATION),
         # position round-off is relative to the size of the coordinates themselves
         fit_order(dt, pos, roundoff_floor(steps, length_scale)),
@@ -618,6 +715,13 @@ CSV_COLUMNS = (
     "seconds_per_step",
     "ns_per_body_step",
     "cost_per_sim_second",
+    "seconds_per_step_min",
+    "seconds_per_step_max",
+    "wall_seconds_per_step",
+    "cost_spread",
+    "timing_samples",
+    "timed_runs",
+    "engine",
     "fitted_order",
     "nominal_order",
 )
@@ -629,10 +733,7 @@ def csv_text(result: StudyResult) -> str:
     writer = csv.writer(out, lineterminator="\n")
     writer.writerow(CSV_COLUMNS)
     for run in result.runs:
-        row = dataclasses.asdict(run) | {
-            "fitted_order": result.run_fitted_order(run),
-            "nominal_order": get_integrator(run.integrator).order,
-        }
+        row = dataclasses.asdict(run) | {"fitted_order": result.run_fitted_order(run), "cost_spread": run.cost_spread}
         writer.writerow(["" if row[c] is None else row[c] for c in CSV_COLUMNS])
     return out.getvalue()
 

@@ -1,5 +1,6 @@
 """Work-precision study: exact reference and fitted orders, numerical reference with its error
-estimate, files that match the table, the plot, and `rbsim study --quick`."""
+estimate, files that match the table, the plot, and `rbsim study --quick`. Timing, MuJoCo rows and the
+.rrd output: tests/runner/test_study_timing.py."""
 
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from rbcli.analysis.errors import fit_order, rotation_error
 from rbcli.cli.study import PLOT_DPI, PLOT_SIZE_INCHES, plot_work_precision, table_rows
 from rbcli.cli.study import study as study_command
 from rbcli.physics.integrators import INTEGRATORS
+from rbcli.runner.mujoco_twin import refusal
 from rbcli.runner.study import admits_exact_solution, output_grid, study, write_study_files
 from rbcli.scene.compile import compile_scene
 from rbcli.scene.force_specs import BodyPoint, ForceSpring
@@ -41,7 +43,7 @@ def tumbling_scene(**kw):
 
 @pytest.fixture(scope="module")
 def torque_free_study():
-    return study(tumbling_scene(), integrators=FIXED_STEP, dts=ORDER_DTS, repeats=1)
+    return study(tumbling_scene(), integrators=FIXED_STEP, dts=ORDER_DTS, min_time=0.0, mujoco=False)
 
 
 def test_torque_free_scene_uses_the_exact_reference(torque_free_study):
@@ -69,7 +71,7 @@ def test_adaptive_method_fits_its_fixed_step_order_and_follows_its_tolerance():
     """dopri5 at fixed steps is order 5 (steps 0.1 2^-k: errors 1e-9 .. 1e-12 rad, above round-off);
     with a tolerance (its own rows, no fitted order) a tighter tolerance takes more steps and errs less."""
     result = study(tumbling_scene(), integrators=["dopri5"], dts=[0.1 * 2.0**-k for k in range(4)],
-                   tolerances=[1e-4, 1e-8], repeats=1)  # fmt: skip
+                   tolerances=[1e-4, 1e-8], min_time=0.0, mujoco=False)  # fmt: skip
     fit = result.fits["dopri5"].rotation
     assert fit.order is not None and abs(fit.order - 5) < 0.2, fit
     loose, tight = [r for r in result.runs if r.tolerance is not None]
@@ -101,13 +103,17 @@ def test_forced_scene_reports_a_reference_error_below_the_errors_it_ranks():
     scene = type(sim)(**{**sim.__dict__, "forces": (spring,)})
     assert not admits_exact_solution(compile_scene(scene))
     names = [n for n in ("euler-matrix", "split2") if n in INTEGRATORS]
-    result = study(scene, integrators=names, dts=[0.02, 0.01, 0.005], repeats=1)
+    result = study(scene, integrators=names, dts=[0.02, 0.01, 0.005], min_time=0.0)
     ref = result.reference
     assert ref.kind == "numerical" and ref.dt == pytest.approx(0.005 / 16)
     assert result.conserved == ("energy",)
     assert ref.rotation_error_estimate < min(r.rotation_error_max for r in result.runs)
     assert ref.position_error_estimate < min(r.position_error_max for r in result.runs)
     assert result.fits["euler-matrix"].position.order == pytest.approx(1.0, abs=0.3)
+    # MuJoCo's twin would be a different problem (its tendons are not rbsim's springs): no rows, and why
+    assert "spring" in refusal(compile_scene(scene))
+    assert not [r for r in result.runs if r.engine == "mujoco"]
+    assert result.mujoco_skipped and f"no MuJoCo rows: {result.mujoco_skipped}" in result.notes
 
 
 def test_files_match_the_table(tmp_path, torque_free_study):
@@ -148,7 +154,7 @@ def test_quick_cli_run_writes_table_files_and_plot(tmp_path):
     app.command("study")(study_command)
     app.command("other")(lambda: None)  # two commands, so "study" is a subcommand as in rbsim
     out = tmp_path / "out"
-    args = ["study", str(scene), "--quick", "-i", "euler-matrix", "-i", "split2", "--out", str(out)]
+    args = ["study", str(scene), "--quick", "-i", "euler-matrix", "-i", "split2", "--no-mujoco", "--out", str(out)]
     result = CliRunner().invoke(app, args)
     assert result.exit_code == 0, result.output
     assert "euler-matrix" in result.output and "split2" in result.output
