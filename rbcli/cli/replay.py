@@ -61,6 +61,12 @@ def replay(
         raise messages.fail(f"recording not found: {file}", expected="a .mcap or .rrd file")
     if suffix not in (".mcap", ".rrd"):
         raise messages.fail(f"{file}: not a recording", expected="a .mcap or .rrd file")
+    from rbcli.record.read import RecordingTooNew, refuse_newer_recording
+
+    try:
+        refuse_newer_recording(file)
+    except RecordingTooNew as exc:
+        raise messages.fail(str(exc), expected="a newer rbsim (pip install -U rbsim)") from None
 
     if save is not None:
         _save(file, save)

@@ -45,11 +45,13 @@ def header_from_mcap_metadata(
 def mcap_to_rrd(source: str | Path, destination: str | Path, *, block_frames: int = 256) -> int:
     """Write `destination` (.rrd) from an rbsim MCAP file, streaming blocks; returns the frame count."""
     from rbcli.record.mcap_sink import METADATA_RUN, METADATA_SUMMARY, iter_mcap_blocks, read_mcap_contents
+    from rbcli.record.read import check_format_version
     from rbcli.record.rerun_sink import SinkRerun
 
     contents = read_mcap_contents(source)
     if METADATA_RUN not in contents.metadata:
         raise ValueError(f"{source}: no '{METADATA_RUN}' metadata record; not an rbsim recording")
+    check_format_version(source, contents.metadata[METADATA_RUN])
     header = header_from_mcap_metadata(contents.metadata[METADATA_RUN], contents.scene_text, contents.particle_offset)
     ending = contents.metadata.get(METADATA_SUMMARY, {})
     sink = SinkRerun(destination)

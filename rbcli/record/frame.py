@@ -13,6 +13,10 @@ from typing import Protocol
 
 import numpy as np
 
+# the layout of rbsim's recordings (.mcap channels and metadata, .rrd entities and properties), written as
+# `format_version` with `rbsim_version` in every file: bumped when an older reader would misread a newer file
+RECORDING_FORMAT_VERSION = 1
+
 
 @dataclass(frozen=True)
 class RunHeader:
@@ -45,6 +49,7 @@ class RunHeader:
         """Run parameters as strings for a file's metadata (floats as repr and lists as JSON, so they read
         back exactly); the sinks add what is specific to their format."""
         return {
+            "format_version": str(RECORDING_FORMAT_VERSION),
             "rbsim_version": self.rbsim_version,
             "scene_name": self.scene_name,
             "scene_path": self.scene_path or "",

@@ -44,7 +44,7 @@ from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 from mcap_protobuf.schema import build_file_descriptor_set
 
-from rbcli.record.frame import Checkpoint, FrameBlock, RunHeader, RunSummary
+from rbcli.record.frame import RECORDING_FORMAT_VERSION, Checkpoint, FrameBlock, RunHeader, RunSummary
 from rbcli.record.mcap_writer import COMPRESSIONS, MAX_ID, ZSTD_LEVEL, McapChunkWriter
 
 # A run's file is fsynced after a chunk when the last fsync is this old [s] (docs/robustness.md "Crashes").
@@ -60,7 +60,7 @@ WORLD_FRAME = "world"
 METADATA_RUN = "rbsim"
 METADATA_SUMMARY = "rbsim.summary"
 SCENE_ATTACHMENT = "scene.yaml"
-FORMAT_VERSION = "1"
+FORMAT_VERSION = str(RECORDING_FORMAT_VERSION)
 
 # (FrameBlock attribute, rbsim.State field name, field number, components per body)
 STATE_FIELDS = (
@@ -380,6 +380,10 @@ def _point_cloud(points: np.ndarray, frame_id: str, ns: int) -> PointCloud:
     """A foxglove.PointCloud of float64 x, y, z (exact) with an identity pose."""
     cloud = PointCloud(frame_id=frame_id, point_stride=24, data=np.ascontiguousarray(points, "<f8").tobytes())
     cloud.timestamp.FromNanoseconds(int(ns))
+    # the pose written out in full: protobuf omits an unset submessage, and an absent position is not (0, 0, 0)
+    # to every reader (Rerun's MCAP loader leaves its InstancePoses3D translation null, which `rerun rrd
+    # verify` rejects); SetInParent writes the empty Vector3, which Foxglove's schema reads as zeros
+    cloud.pose.position.SetInParent()
     cloud.pose.orientation.w = 1.0  # an all-zero quaternion would be invalid
     for i, axis in enumerate("xyz"):
         cloud.fields.add(name=axis, offset=8 * i, type=PackedElementField.FLOAT64)

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rbcli.record.frame import RunSummary
+from rbcli.record.frame import RECORDING_FORMAT_VERSION, RunSummary
 from rbcli.record.memory_sink import Trajectory, header_from_parameters
 
 # |f(0)| below this (SI units) makes a relative drift meaningless: the value is zero up to rounding,
@@ -68,6 +68,45 @@ def recording_format(path: str | Path) -> str:
     return suffix[1:]
 
 
+class RecordingTooNew(ValueError):
+    """A recording in a newer format than this rbsim reads (its `format_version` is above ours)."""
+
+
+def check_format_version(path: str | Path, meta: dict[str, str]) -> None:
+    """RecordingTooNew when the run parameters `meta` say the file is in a newer recording format; a file
+    without `format_version` (older than the key, or not rbsim's) is left to the other checks."""
+    text = meta.get("format_version")
+    if text is None:
+        return
+    try:
+        version = int(text)
+    except ValueError:
+        raise RecordingTooNew(f"{str(path)!r}: unknown recording format version {text!r}") from None
+    if version > RECORDING_FORMAT_VERSION:
+        writer = meta.get("rbsim_version", "?")
+        raise RecordingTooNew(
+            f"{str(path)!r} is in recording format version {version} (written by rbsim {writer}), newer than "
+            f"this rbsim understands (it reads up to version {RECORDING_FORMAT_VERSION}): upgrade rbsim"
+        )
+
+
+def refuse_newer_recording(path: str | Path) -> None:
+    """RecordingTooNew when a recording's run parameters say it is in a newer format (what `rbsim replay`
+    checks before handing the file to the viewer); a file whose parameters cannot be read passes here."""
+    try:
+        if recording_format(path) == "mcap":
+            from rbcli.record.mcap_sink import METADATA_RUN, read_mcap_contents
+
+            meta = read_mcap_contents(path).metadata.get(METADATA_RUN, {})
+        else:
+            from rbcli.record.rerun_sink import read_rrd_properties
+
+            meta = read_rrd_properties(path).get("rbsim", {})
+    except Exception:  # noqa: BLE001 - damaged or foreign: the viewer (or the converter) says what it finds
+        return
+    check_format_version(path, meta)
+
+
 def _json_list(value: str | None) -> list:
     return json.loads(value) if value else []
 
@@ -78,6 +117,7 @@ def read_mcap(path: str | Path) -> RecordedRun:
 
     contents = read_mcap_contents(path)
     meta = contents.metadata.get(METADATA_RUN, {})
+    check_format_version(path, meta)
     names = tuple(_json_list(meta.get("body_names")))
     blocks = list(iter_mcap_blocks(path))
 
@@ -118,6 +158,7 @@ def read_rrd(path: str | Path, *, bodies: bool = True) -> RecordedRun:
 
     contents = read_rrd_file(path, bodies=bodies)
     meta = contents.properties.get("rbsim", {})
+    check_format_version(path, meta)
     names = tuple(_json_list(meta.get("body_names")))
     entities = ["/" + body_entity(n) for n in names]
     recorded = [e for e in entities if e in contents.body_translation]
@@ -212,7 +253,7 @@ def read_trajectory(path: str | Path) -> Trajectory:
         raise FileNotFoundError(errno.ENOENT, reason, str(path))
     try:
         run = read_recording(path)
-    except (OSError, ImportError):
+    except (OSError, ImportError, RecordingTooNew):
         raise
     except Exception as exc:  # the readers raise several types for damaged or foreign files
         raise ValueError(f"{str(path)!r}: not a readable rbsim .{fmt} recording ({exc})") from exc
@@ -359,6 +400,7 @@ def summarize(path: str | Path) -> RunInfo:
         except ValueError as exc:  # no summary or index: read it front to back
             return _summarize_mcap_prefix(path, exc)
         meta, ending = contents.metadata.get(METADATA_RUN, {}), contents.metadata.get(METADATA_SUMMARY, {})
+        check_format_version(path, meta)
         t, _, invariants = read_mcap_invariants(path)
         frames = contents.message_counts.get("/rbsim/state", 0)
     else:
@@ -380,6 +422,7 @@ def _run_info(
     invariants: dict[str, np.ndarray],
     frames: int,
 ) -> RunInfo:
+    check_format_version(path, meta)
     dt = float(meta.get("dt", "nan"))
     t_end = float(ending.get("t_end", t[-1] if len(t) else "nan"))
     # without the run's summary record, the steps follow from the last recorded time (t = step dt)

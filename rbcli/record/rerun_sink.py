@@ -474,6 +474,21 @@ def _flat(column: Any, width: int) -> np.ndarray:
     return np.asarray(values, dtype=np.float64).reshape(-1, width)
 
 
+def read_rrd_properties(path: str | Path) -> dict[str, dict[str, str]]:
+    """The recording properties of an .rrd (`rbsim`: the run parameters; `rbsim.summary`), nothing else."""
+    from rerun.chunk import RrdReader
+
+    properties: dict[str, dict[str, str]] = {}
+    for chunk in RrdReader(path).stream().filter(content="/__properties/**"):
+        entity = chunk.entity_path
+        if entity.startswith("/__properties/"):
+            batch = chunk.to_record_batch()
+            prop = properties.setdefault(entity.removeprefix("/__properties/"), {})
+            for name in batch.schema.names[1:]:
+                prop[name] = batch.column(name).to_pylist()[-1][0]
+    return properties
+
+
 def read_rrd_file(path: str | Path, *, bodies: bool = True) -> RrdContents:
     """Read an .rrd written by SinkRerun, in either layout, with rerun's own chunk reader (rerun.chunk.RrdReader).
 

@@ -41,7 +41,7 @@ def plan_resume(log: str | Path, *, compression: str | None = None) -> ResumePla
     """Read `log` (an rbsim .mcap file, complete or cut short by a kill) and rebuild its run; ResumeError
     when it cannot be resumed (no checkpoint, completed or diverged, another format)."""
     from rbcli.record.mcap_sink import METADATA_RUN, METADATA_SUMMARY, read_mcap_resume_point
-    from rbcli.record.read import recording_format
+    from rbcli.record.read import RecordingTooNew, check_format_version, recording_format
     from rbcli.scene.compile import compile_scene
     from rbcli.scene.load import load_scene_text
 
@@ -57,6 +57,10 @@ def plan_resume(log: str | Path, *, compression: str | None = None) -> ResumePla
     run = point.metadata.get(METADATA_RUN)
     if run is None or not point.scene_text:
         raise ResumeError(f"{path}: not an rbsim log (no run parameters or scene attached)")
+    try:
+        check_format_version(path, run)  # a newer layout's checkpoint could be misread
+    except RecordingTooNew as exc:
+        raise ResumeError(str(exc)) from None
     status = point.metadata.get(METADATA_SUMMARY, {}).get("status", "truncated")
     if status == "completed":
         raise ResumeError(f"{path}: the run completed; nothing to resume")

@@ -280,8 +280,12 @@ class BodyResolver:
         if reason is None:
             return
         source = next(k for k in ("particles", *SAMPLED_SOURCES) if k in entry)
+        at_one_point = "one point" in reason
+        if at_one_point and len(cloud.mass) == 1:
+            reason = "a single particle is one point, so the body has no rotational inertia at all"
         if source in ("particles", "compound"):  # lattice particles carry a radius, so never degenerate
-            fix = "particles off that line, a particle radius (each particle then is a small solid sphere), or a shape"
+            where = "more particles, spread in three dimensions" if at_one_point else "particles off that line"
+            fix = f"{where}, a particle radius (each particle then is a small solid sphere), or a shape"
         else:
             fix = "a smaller spacing (or a larger count) so the lattice has particles in three dimensions"
         self.issues.error((*path, source), f"cannot be a rigid body: {reason}", fix, key=True)
@@ -409,7 +413,7 @@ class BodyResolver:
         if cache_key not in self._meshes:
             try:
                 vertices, faces = mesh_io.read_mesh(file)
-                mesh_io.check_closed(faces)
+                mesh_io.check_closed(faces, file.name)
                 vertices = vertices * scale
                 self._meshes[cache_key] = _Mesh(vertices, faces, mesh_io.mesh_volume(vertices, faces))
             except mesh_io.MeshError as exc:

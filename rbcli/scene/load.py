@@ -11,6 +11,7 @@ every other subtree still is. `schemas/scene.schema.json` is the single source o
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import replace
 from functools import cache
 from pathlib import Path
@@ -23,6 +24,7 @@ from rbcli.scene.issues import IssueCollector, did_you_mean, quoted_list
 from rbcli.scene.schema_errors import SchemaErrorFormatter
 from rbcli.scene.schema_path import scene_schema
 from rbcli.scene.spec import (
+    SCENE_FORMAT_VERSION,
     BodySpec,
     ForceSpec,
     RecordSpec,
@@ -70,9 +72,9 @@ def _adaptive_integrator_names() -> tuple[str, ...]:
 
 @cache
 def _validator() -> Any:
-    from jsonschema import Draft202012Validator
+    from rbcli.scene.schema_validator import scene_validator
 
-    return Draft202012Validator(scene_schema())
+    return scene_validator(scene_schema())
 
 
 def load_scene(path: str | Path) -> SceneSpec:
@@ -102,9 +104,15 @@ def analyse_scene(path: str | Path) -> tuple[SceneSpec | None, list[SceneIssue]]
     try:
         with open(path, "rb") as handle:
             raw = handle.read(MAX_SCENE_BYTES + 1)
+            size = os.fstat(handle.fileno()).st_size
     except OSError as exc:
         reason = exc.strerror or str(exc)
         return None, [SceneIssue(None, f"cannot read scene file '{file}': {reason}", "a readable YAML file")]
+    if len(raw) > MAX_SCENE_BYTES:  # only the first bytes were read: the error gives the file's real size
+        try:
+            decode_scene_bytes(raw, file, max(size, len(raw)))
+        except SceneError as exc:
+            return None, exc.issues
     return analyse_scene_text(raw, file, Path(path).resolve().parent)
 
 
@@ -128,8 +136,11 @@ def _analyse(
     if not isinstance(data, dict):
         issues.error((), "a scene must be a mapping", "keys such as name, simulation and bodies")
         return None, issues.sorted()
+    if _newer_format(data, issues):
+        return None, issues.sorted()
     data = _merge_defaults(doc, data)
-    bad_paths = _check_finite(data, (), issues)
+    # a walk over every number only when the reader saw a non-finite one (or one beyond int64)
+    bad_paths = _check_finite(data, (), issues) if doc.suspect_numbers else set()
     errors = sorted(_validator().iter_errors(data), key=lambda e: list(map(str, e.absolute_path)))
     bad_paths |= SchemaErrorFormatter(scene_schema(), issues).report(errors, skip_paths=bad_paths)
 
@@ -220,6 +231,21 @@ def _forces(data: dict[str, Any], clean: Any, issues: IssueCollector) -> tuple[F
     return tuple(forces)
 
 
+def _newer_format(data: dict[str, Any], issues: IssueCollector) -> bool:
+    """A scene written for a newer format: one located error, and nothing else checked (its other keys may
+    be ones this rbsim does not know, and a screen of "unknown key" errors would hide the reason)."""
+    version = data.get("version", SCENE_FORMAT_VERSION)
+    if isinstance(version, int) and not isinstance(version, bool) and version > SCENE_FORMAT_VERSION:
+        issues.error(
+            ("version",),
+            f"scene format version {version} is newer than this rbsim understands (it reads up to "
+            f"version {SCENE_FORMAT_VERSION})",
+            f"a newer rbsim (pip install -U rbsim), or a scene written for version {SCENE_FORMAT_VERSION}",
+        )
+        return True
+    return False
+
+
 # ---- defaults -----------------------------------------------------------------------------------------
 def _merge_defaults(doc: LocatedDocument, data: dict[str, Any]) -> dict[str, Any]:
     """`defaults` merged into each body and generator template (locations copied from `defaults`)."""
@@ -272,21 +298,39 @@ def _gives_source(entry: dict[str, Any]) -> bool:
 
 # ---- numbers ------------------------------------------------------------------------------------------
 def _check_finite(value: Any, path: YamlPath, issues: IssueCollector) -> set[YamlPath]:
-    """Report non-finite floats (.nan, .inf) and integers too large for a float64 or int64."""
+    """Report non-finite floats (.nan, .inf) and integers too large for a float64 or int64.
+
+    Lists of plain numbers (a large scene's particle data) are scanned without building a path per item:
+    a path is made only for a container or a bad number."""
     bad: set[YamlPath] = set()
+
+    def report(item: Any, where: YamlPath) -> None:
+        if isinstance(item, float):
+            issues.error(where, f"{item} is not a finite number", "a finite number")
+        else:
+            issues.error(where, "integer is too large", "an integer below 2^63 in magnitude")
+        bad.add(where)
+
     stack: list[tuple[Any, YamlPath]] = [(value, path)]
     while stack:
         item, where = stack.pop()
         if isinstance(item, dict):
             stack.extend((v, (*where, k)) for k, v in item.items())
         elif isinstance(item, list):
-            stack.extend((v, (*where, i)) for i, v in enumerate(item))
+            for i, v in enumerate(item):
+                kind = type(v)
+                if kind is float:
+                    if v - v != 0.0:  # inf - inf and nan - nan are nan: one test for both
+                        report(v, (*where, i))
+                elif kind is int:
+                    if not -(2**63) < v < 2**63:
+                        report(v, (*where, i))
+                elif kind is list or kind is dict:
+                    stack.append((v, (*where, i)))
         elif isinstance(item, float) and not math.isfinite(item):
-            issues.error(where, f"{item} is not a finite number", "a finite number")
-            bad.add(where)
+            report(item, where)
         elif isinstance(item, int) and not isinstance(item, bool) and abs(item) >= 2**63:
-            issues.error(where, "integer is too large", "an integer below 2^63 in magnitude")
-            bad.add(where)
+            report(item, where)
     return bad
 
 

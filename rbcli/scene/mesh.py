@@ -15,17 +15,17 @@ from types import ModuleType
 
 import numpy as np
 
+from rbcli.scene.mesh_files import MeshError, check_mesh_file
 from rbcli.scene.shapes import SamplingError, lattice
 
-
-class MeshError(ValueError):
-    """A mesh file that cannot be read or does not describe a closed solid."""
+__all__ = ["MeshError", "read_mesh", "check_closed", "mesh_volume", "voxelise"]
 
 
 def read_mesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
     """Vertices [mesh units], shape (v, 3), and triangles as vertex indices, shape (f, 3)."""
     if not path.is_file():
         raise MeshError(f"mesh file '{path}' does not exist")
+    check_mesh_file(path)  # a truncated or foreign file is told so, not a reader's internals
     trimesh = _trimesh()
     if trimesh is None:
         if path.suffix.lower() != ".obj":
@@ -78,14 +78,15 @@ def _read_obj(path: Path) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(vertices, dtype=float), f
 
 
-def check_closed(faces: np.ndarray) -> None:
-    """Every edge shared by exactly two triangles, else the mesh has no inside (MeshError)."""
+def check_closed(faces: np.ndarray, name: str = "") -> None:
+    """Every edge shared by exactly two triangles, else the mesh (file `name`) has no inside (MeshError)."""
     edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
     _, counts = np.unique(edges, axis=0, return_counts=True)
     open_edges = int(np.sum(counts != 2))
     if open_edges:
+        named = f" '{name}'" if name else ""
         raise MeshError(
-            f"mesh is not closed: {open_edges} edge(s) are not shared by exactly two triangles, "
+            f"mesh{named} is not closed: {open_edges} edge(s) are not shared by exactly two triangles, "
             "so it has no well-defined inside"
         )
 

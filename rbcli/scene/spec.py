@@ -11,6 +11,10 @@ from typing import Any
 
 import numpy as np
 
+# the scene file format this rbsim reads (a scene's optional `version:`; the schema's maximum): bumped when
+# a scene written for a newer rbsim could mean something this one would misread
+SCENE_FORMAT_VERSION = 1
+
 
 @dataclass(frozen=True)
 class SourceLocation:

@@ -34,7 +34,14 @@ from rbcli.scene.issues import IssueCollector
 from rbcli.scene.schema_errors import SchemaErrorFormatter
 from rbcli.scene.schema_path import scene_schema, scene_schema_path
 from rbcli.scene.spec import SceneError, SceneIssue
-from rbcli.scene.yaml_located import MAX_SCENE_BYTES, LocatedDocument, YamlPath, decode_scene_bytes, parse_located_yaml
+from rbcli.scene.yaml_located import (
+    MAX_SCENE_BYTES,
+    LocatedDocument,
+    YamlPath,
+    decode_scene_bytes,
+    parse_located_yaml,
+    top_level_keys,
+)
 from rbcli.sweeps.paths import PathError, ScenePath, check_in_data, known_in_schema, overlapping, parse_path, set_at
 from rbcli.sweeps.spec import MAX_VARIANTS, Axis, SweepSpec, grid_values, random_values
 
@@ -68,10 +75,11 @@ def is_sweep_file(path: str | Path) -> bool:
     try:
         with open(path, "rb") as handle:
             raw = handle.read(MAX_SCENE_BYTES + 1)
-        value = parse_located_yaml(decode_scene_bytes(raw, str(path)), str(path)).value
-    except (OSError, SceneError):
+        # the top-level keys only, up to `bodies`: a large scene is not read twice to learn it is a scene
+        keys = top_level_keys(decode_scene_bytes(raw, str(path)), frozenset({"bodies"}))
+    except (OSError, SceneError, yaml.YAMLError):
         return False
-    return isinstance(value, dict) and "axes" in value and "bodies" not in value
+    return "axes" in keys and "bodies" not in keys
 
 
 def load_sweep(path: str | Path) -> SweepSpec:

@@ -230,8 +230,16 @@ def test_collinear_particles_with_a_radius_are_a_rigid_body():
 
 def test_single_particle_is_rejected():
     body = "  - name: dot\n    particles: {positions: [[1, 2, 3]], masses: [2.0]}\n"
-    issue = the_issue(issues_of(SIM + "bodies:\n" + body), "one point")
+    issue = the_issue(issues_of(SIM + "bodies:\n" + body), "a single particle is one point")
     assert at(issue) == (4, 5)
+    assert "line" not in issue.message + issue.expected  # one particle lies on no line to move it off
+    assert "radius" in issue.expected and "more particles" in issue.expected
+
+
+def test_particles_all_at_one_point_are_told_to_spread():
+    body = "  - name: dots\n    particles: {positions: [[1, 2, 3], [1, 2, 3]], masses: 1.0}\n"
+    issue = the_issue(issues_of(SIM + "bodies:\n" + body), "all particles are at one point")
+    assert "line" not in issue.expected and "spread in three dimensions" in issue.expected
 
 
 def test_too_coarse_a_spacing_is_a_warning():
@@ -407,3 +415,21 @@ def test_template_position_is_explained():
     grid = "  - grid: {name: g, count: [2, 1, 1], spacing: 1, template: {position: [1, 2, 3], shape: {type: sphere, radius: 0.1}, spacing: 0.05, density: 1}}\n"  # noqa: E501
     issue = the_issue(issues_of(SIM + "bodies:\n" + grid), "set by the generator")
     assert at(issue) == (3, 62)
+
+
+# ---- format version -----------------------------------------------------------------------------------------
+def test_newer_scene_format_is_the_only_error():
+    # a newer file may use keys this rbsim does not know: one located error, not a screen of unknown keys
+    issues = issues_of("version: 2\n" + SIM + "bodies:\n" + HANDLE + "    warp: 9\n")
+    assert len(issues) == 1
+    issue = the_issue(issues, "scene format version 2 is newer than this rbsim understands")
+    assert at(issue) == (1, 10) and "up to version 1" in issue.message and "newer rbsim" in issue.expected
+
+
+def test_current_scene_format_version_is_accepted():
+    assert issues_of("version: 1\n" + SIM + "bodies:\n" + HANDLE) == []
+
+
+def test_scene_format_version_must_be_a_positive_integer():
+    assert at(the_issue(issues_of("version: 0\n" + SIM + "bodies:\n" + HANDLE), "out of range")) == (1, 10)
+    assert at(the_issue(issues_of("version: one\n" + SIM + "bodies:\n" + HANDLE), "wrong type")) == (1, 10)

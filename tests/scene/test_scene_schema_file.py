@@ -20,14 +20,15 @@ NUMERIC = {"number", "integer"}
 
 
 def walk(schema, path="#"):
-    """Every subschema with its JSON pointer-ish path."""
+    """Every subschema that defines fields, with its JSON pointer-ish path (not the conditions of
+    `if`/`then`/`else`, which restate fields defined elsewhere to constrain them)."""
     if isinstance(schema, dict):
         yield path, schema
         for key, value in schema.items():
             if key in ("properties", "$defs"):
                 for name, sub in value.items():
                     yield from walk(sub, f"{path}/{key}/{name}")
-            elif key in ("items", "not", "if", "then", "else"):
+            elif key in ("items", "not"):
                 yield from walk(value, f"{path}/{key}")
             elif key in ("oneOf", "anyOf", "allOf"):
                 for i, sub in enumerate(value):

@@ -152,7 +152,25 @@ def test_control_character_is_an_error():
 def test_size_limit():
     big = b"a: 1\n" + b"#" * MAX_SCENE_BYTES
     _, _, message = only_issue(big)
-    assert "limit" in message and "MB" in message
+    assert f"file is {len(big):,} bytes" in message and f"the {MAX_SCENE_BYTES:,}-byte (10.0 MiB) limit" in message
+
+
+@pytest.mark.parametrize("megabytes", [11, 50])
+def test_size_limit_gives_the_real_size_of_a_file(tmp_path, megabytes):
+    """The readers stop after the limit; the message still gives the file's own size, not what was read."""
+    from rbcli.scene.load import check_scene
+    from rbcli.scene.yaml_located import read_located_yaml
+
+    path = tmp_path / "big.yaml"
+    size = megabytes * 1_000_000
+    with open(path, "wb") as f:
+        f.write(b"a: 1\n")
+        f.truncate(size)  # a sparse file: no 50 MB written
+    (issue,) = check_scene(path)
+    with pytest.raises(SceneError) as caught:
+        read_located_yaml(path)
+    for message in (issue.message, caught.value.issues[0].message):
+        assert f"file is {size:,} bytes ({size / 2**20:.1f} MiB), over the 10,485,760-byte" in message
 
 
 def test_deep_nesting_is_refused_not_a_crash():
@@ -196,3 +214,13 @@ def test_missing_file(tmp_path):
         read_located_yaml(tmp_path / "nope.yaml")
     assert info.value.issues[0].location is None
     assert "nope.yaml" in info.value.issues[0].message
+
+
+def test_top_level_keys_without_building_values():
+    from rbcli.scene.yaml_located import top_level_keys
+
+    text = "a: 1\nb: [1, {c: 2}]\nd: {x: [1]}\n? [1]\n: 3\nf: &v 4\ng: *v\n"
+    assert top_level_keys(text) == {"a", "b", "d", "f", "g"}
+    assert top_level_keys("[1, 2]\n") == set() and top_level_keys("") == set()
+    # the scan stops at a stop key: what follows is never read (here: text that is not YAML at all)
+    assert top_level_keys("axes: []\nbodies: [1]\nrest: [unclosed\n", frozenset({"bodies"})) == {"axes", "bodies"}
