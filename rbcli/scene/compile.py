@@ -215,12 +215,9 @@ def run_settings(
             from rbcli.physics.contact.parameters import substeps_for
 
             substeps = substeps_for(settings.dt, contact.stable_step) if contact is not None else 1
-        settings = replace(settings, substeps=int(substeps))
         if settings.tolerance is not None:
-            raise ValueError(
-                "adaptive stepping (a tolerance) does not run contact yet: contact forces are not smooth, so "
-                "give a fixed dt (and contact.substeps: auto)"
-            )
+            substeps = 1  # adaptive steps are capped at the contacts' stable step instead (physics/adaptive.py)
+        settings = replace(settings, substeps=int(substeps))
     if settings.tolerance is not None:
         from rbcli.physics.integrators import get_integrator
 

@@ -149,7 +149,7 @@ def test_a_shaken_ball_leaves_the_plate_and_gains_energy_iff_peak_acceleration_e
         assert gain > 2.0 * riding  # pumped: each impact on the rising plate adds energy
 
 
-@pytest.mark.parametrize("run", ["split2"])
+@pytest.mark.parametrize("run", ["split2", "dopri5, tolerance: 1e-6"], ids=["split2", "adaptive"])
 def test_kinematic_hammer_sends_a_ball_off_at_one_plus_e_times_its_speed(run):
     """A kinematic sphere moving at V hits a free ball at rest head on (no gravity, no friction): the
     hammer's infinite mass gives the ball (1 + e) V, e the configured restitution, and the hammer's
