@@ -28,8 +28,6 @@ import math
 
 import numpy as np
 
-from rbcli.physics.contact.tables import PLANE_STIFFNESS_FACTOR
-
 PENETRATION_AT_REST = 0.0025  # fraction of the sphere radius a body sinks under its own weight
 REFERENCE_GRAVITY = 9.81  # [m/s^2] the default stiffness' scale in a scene without gravity
 DEFAULT_RESTITUTION = 0.5
@@ -146,8 +144,8 @@ def stable_step(
     zeta = float(np.max(damping_ratio)) if len(damping_ratio) else 0.0
     inv_m = np.where(movable, 1.0 / mass, 0.0)
     omega2 = np.zeros_like(mass)
-    if planes:  # a plane contact is PLANE_STIFFNESS_FACTOR k (rigid): the same 2 k / M as an identical pair
-        omega2 = np.maximum(omega2, PLANE_STIFFNESS_FACTOR * k * inv_m)
+    if planes:
+        omega2 = np.maximum(omega2, k * inv_m)
     lightest = int(np.argmax(inv_m))
     k_light = k[lightest]
     pair_k = 2.0 * k * k_light / (k + k_light)

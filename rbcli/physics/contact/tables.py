@@ -27,14 +27,6 @@ import numpy as np
 # A plane partner of a contact is stored in the history as -(plane + 1), a sphere partner as its index.
 PLANE_PARTNER_BASE = -1
 
-# A plane is rigid: a contact against it is the body's own surface spring alone, where a pair of bodies
-# is two surface springs in series. With k the stiffness of a pair of equal bodies (each body's surface
-# spring 2k, in series: k), a plane contact is 2k. (It was k, as if the plane were as soft as the body:
-# the bottom balls of a pile, carrying the weight above, sank deepest; the 13-sphere-cloud pile's
-# deepest overlap, 5.3 % of the ball's radius, was a ground contact.) Stability is unchanged: a plane
-# contact's 2k / M is the same frequency as a pair's k / (M / 2), which the stable step already covers.
-PLANE_STIFFNESS_FACTOR = 2.0
-
 # History slots per contact sphere: the contacts it owns (it is the lower index of the pair, or a plane
 # contact). 12 is the kissing number of equal spheres; a sphere owning more contacts keeps the first 12
 # histories and counts the others in `ContactWork.counters[COUNT_OVERFLOW]` (their friction then starts
