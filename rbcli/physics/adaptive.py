@@ -22,6 +22,28 @@ Step-size control (HNW II.4): accept when err <= 1; the next step is
 h * clip(SAFETY err^(-1/4), FAC_MIN, FAC_MAX) (err ~ h^4 per unit step for the 4th-order estimate),
 with no growth right after a rejection. A step below STEP_MIN_RELATIVE * max(1, |t|) stops the run
 (status STATUS_STEP_TOO_SMALL): the problem is stiff or singular there and would never finish.
+
+Contact runs through the same stages as the fixed-step pipeline (physics/pipeline.py), per attempt:
+contact_begin (the springs' clock: this attempt's [t, t + h)) before the stages, and only for an
+accepted attempt kinematic_end and contact_commit (the last evaluation, f(y_new) at t + h, becomes the
+history). A rejected attempt's evaluations wrote only trial arrays, so `restore` plus the untouched
+history is exactly the state before it: the step is retried as if never tried (tested), and k_1 (FSAL)
+stays valid. Kinematic bodies (contact/kinematic.py) are put at their mean motion over each attempt,
+which changes the state, so k_1 is evaluated again for them (one evaluation more per attempt, only in
+scenes that have kinematic bodies). Stiffness: contact forces switch on and off (the dashpot at first
+touch, the Coulomb cap), so the error estimate rejects steps across a switch until they are short,
+and no accuracy argument bounds the step inside a long resting contact, where an explicit method must
+still resolve the contact's period; so steps never exceed the contacts' stable step (ContactTable.
+stable_step, the leapfrog bound 2 (sqrt(1 + zeta^2) - zeta) / w, which is about half of dopri5's own
+stability bound on the damped oscillator: there the error estimate, not instability, decides).
+At a touch-down the dashpot force jumps by c v_n, and the estimated error of P in a step across the
+jump is ~ h c v_n / 20: proportional to h, so its error per unit step never falls and the controller
+would shrink the step to nothing (it did: "step below 1e-12 t" at the first bounce). So with contact a
+step shorter than CONTACT_STEP_FLOOR times the stable step is allowed the error of a step that long
+(error per step below it, HNW's other criterion): the step across a jump shrinks to ~tol / (c v_n)
+relative and is accepted, and the few short steps around each touch-down add a few per cent of the
+tolerance each to the global error (measured: see docs/integrators.md). Tolerances much below 1e-9
+then still fail at touch-down, the jump step falling under 1e-12 t.
 """
 
 from __future__ import annotations
@@ -29,6 +51,14 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from rbcli.physics.forces.stages import (
+    contact_begin_stage,
+    contact_commit_stage,
+    contact_record_stage,
+    contact_step_limit,
+    kinematic_begin_stage,
+    kinematic_end_stage,
+)
 from rbcli.physics.integrators import dopri5
 from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, chunk_status, record_if_due
 
@@ -39,6 +69,9 @@ SAFETY = 0.9  # HNW's safety factor: aim at err = 0.9^4 ~ 0.65 so most steps are
 FAC_MIN = 0.2  # the step shrinks at most 5x per attempt ...
 FAC_MAX = 5.0  # ... and grows at most 5x per step (HNW use 5 to 10)
 STEP_MIN_RELATIVE = 1e-12  # far above round-off of t (1e-16 |t|), far below any useful step
+# with contact, a step shorter than this fraction of the contacts' stable step is allowed the error of
+# one that long (module docstring: the step across a touch-down)
+CONTACT_STEP_FLOOR = 0.1
 
 # control: float64 (2,)
 CONTROL_STEP = 0  # the step size [s] proposed for the next attempt; <= 0: choose one from the rates
@@ -90,10 +123,14 @@ def run_adaptive_chunk(
     index = step0
     end = step0 + n_steps
     t = step0 * dt
+    h_max = contact_step_limit(forces)  # inf without contact
+    h_floor = CONTACT_STEP_FLOOR * h_max if h_max < np.inf else 0.0
+    contact_begin_stage(forces.contact, force_data.contact, t, 0.0)  # k_1's evaluation: offset 0 into a step
     dopri5.begin(model, forces, force_data, t, x, q, P, L, F, tau, work)  # y0 and k_1 (one evaluation per chunk)
     h = control[CONTROL_STEP]
     if h <= 0.0:
         h = _initial_step(x, q, P, L, work, tolerance, record_every * dt)
+    h = min(h, h_max)
     rejected_last = control[CONTROL_REJECTED_LAST] > 0.0
     per_time = tolerance / max(duration, dt)  # error budget per second of simulated time
     status = STATUS_OK
@@ -102,23 +139,32 @@ def run_adaptive_chunk(
         remaining = target * dt - t
         landing = h >= remaining * (1.0 - 1e-12)  # a sliver short of the target counts as landing
         h_try = remaining if landing else h
+        if kinematic_begin_stage(model, forces, t, h_try, x, q, P, L):  # the state changed: k_1 again
+            contact_begin_stage(forces.contact, force_data.contact, t, h_try)
+            dopri5.begin(model, forces, force_data, t, x, q, P, L, F, tau, work)
+        contact_begin_stage(forces.contact, force_data.contact, t, h_try)
         dopri5.advance(model, forces, force_data, t, h_try, x, q, P, L, F, tau, work)
-        err = dopri5.error_norm(model, forces, force_data, t, h_try, per_time * h_try, x, q, P, L, F, tau, work)
+        allowed = per_time * max(h_try, h_floor)
+        err = dopri5.error_norm(model, forces, force_data, t, h_try, allowed, x, q, P, L, F, tau, work)
         if err <= 1.0:
             counters[COUNT_ACCEPTED] += 1
             dopri5.accept(x, q, P, L, work)
+            t_end = target * dt if landing else t + h_try
+            kinematic_end_stage(model, forces, t_end, x, q, P, L)
+            contact_commit_stage(model, forces.contact, force_data.contact, x, q, P, L)
             factor = FAC_MAX if err == 0.0 else min(FAC_MAX, max(FAC_MIN, SAFETY * err**-0.25))
             if rejected_last:
                 factor = min(factor, 1.0)
             rejected_last = False
             if landing:
                 # a landing step is usually shorter than the controller asked for: keep its proposal
-                h = max(h, h_try * factor)
+                h = min(h_max, max(h, h_try * factor))
                 t = target * dt
                 index = target
+                contact_record_stage(force_data.contact, frames, filled, index % record_every == 0)
                 filled, status = record_if_due(index, record_every, x, q, P, L, frames, filled)
             else:
-                h = h_try * factor
+                h = min(h_max, h_try * factor)
                 t += h_try
         else:
             counters[COUNT_REJECTED] += 1

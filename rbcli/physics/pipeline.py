@@ -5,10 +5,12 @@ A step from grid index n (t = n dt) to n + 1 runs, in this order (STEP_STAGES):
     impulses        exact jumps P += J, L += r x J of the impulses due in [t, t + dt)  (forces/impulse.py)
     then data.substeps times (1 unless contact sub-stepping is on), over [ts, ts + h), h = dt / substeps:
       contact_begin   the contact springs' clock: the (sub-)step being taken            (contact/force.py)
+      kinematic_begin kinematic bodies at their exact pose, at their mean velocity   (contact/kinematic.py)
       update          the integrator's maths (integrators/<name>.py `step`); every force evaluation it
                       needs is the force pass `forces/wrench.accumulate_wrench`, itself a list of force
                       stages (gravity, fields, point forces, torques, springs, drag, contact), each
                       present only when the scene has rows for it
+      kinematic_end   kinematic bodies at their exact state at the end of the (sub-)step
       contact_commit  the last evaluation's contacts and tangential springs become the history
     record          on recording steps: the divergence check, then the state copied into the next frame
 
@@ -80,10 +82,24 @@ STEP_STAGES: tuple[Stage, ...] = (
         substep=True,
     ),
     Stage(
+        "kinematic_begin",
+        "kinematic_begin: kinematic bodies at their exact pose, moving at their mean velocity over the (sub-)step",
+        ("from rbcli.physics.forces.stages import kinematic_begin_stage",),
+        "kinematic_begin_stage(model, forces, ts, h, x, q, P, L)",
+        substep=True,
+    ),
+    Stage(
         "update",
         "update: the integrator's maths, its force evaluations through forces.wrench.accumulate_wrench",
         (),
         "integrator_step(model, forces, data.force, ts, h, x, q, P, L, data.F, data.tau, data.scratch)",
+        substep=True,
+    ),
+    Stage(
+        "kinematic_end",
+        "kinematic_end: kinematic bodies at their exact state at the end of the (sub-)step (closed form)",
+        ("from rbcli.physics.forces.stages import kinematic_end_stage",),
+        "kinematic_end_stage(model, forces, ts + h, x, q, P, L)",
         substep=True,
     ),
     Stage(
@@ -152,7 +168,11 @@ def _import_lines(module: str, stages: tuple[Stage, ...]) -> str:
     integrator = f"rbcli.physics.integrators.{module}"
     lines = [(integrator, f"from {integrator} import SCRATCH_WIDTH"),
              (integrator, f"from {integrator} import step as integrator_step")]  # fmt: skip
-    lines += [(source, f"from {source} import {', '.join(sorted(found))}") for source, found in names.items()]
+    for source, found in names.items():
+        line = f"from {source} import {', '.join(sorted(found))}"
+        if len(line) > 120:  # ruff's line length: one name per line in parentheses, as ruff's isort writes it
+            line = f"from {source} import (\n" + "".join(f"    {name},\n" for name in sorted(found)) + ")"
+        lines.append((source, line))
     return "\n".join(line for _, line in sorted(lines))
 
 

@@ -87,7 +87,7 @@ def likely_cause(compiled: CompiledScene, body: int) -> str:
     settings = compiled.settings
     step = settings.dt / max(1, settings.substeps)
     contact = compiled.contact
-    if contact is not None and step >= contact.stable_step:
+    if contact is not None and settings.tolerance is None and step >= contact.stable_step:
         return (f"the step {step:.3g} s is above the contacts' stable step {contact.stable_step:.3g} s: set "
                 "contact.substeps: auto or a smaller dt")  # fmt: skip
     springs = [w for w in compiled.warnings if "stability limit" in w.message]

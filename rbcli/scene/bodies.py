@@ -235,7 +235,7 @@ class BodyResolver:
     def _contact_keys(self, entry: dict[str, Any], path: YamlPath, cloud: ParticleCloud) -> dict[str, Any]:
         """The BodySpec's contact fields: material, static, collide and where its contact spheres come
         from (used only when the scene has a `contact:` section)."""
-        from rbcli.scene.contact_spec import material_from_mapping
+        from rbcli.scene.contact_spec import kinematic_from_mapping, material_from_mapping
 
         if "shape" in entry and entry["shape"].get("type") == "sphere":
             geometry, size = "sphere", float(entry["shape"]["radius"])
@@ -243,10 +243,14 @@ class BodyResolver:
             geometry, size = "lattice", 2.0 * float(cloud.radius[0])
         else:
             geometry, size = "particles", 0.0
+        kinematic = entry.get("kinematic", False)
         return dict(
             material=material_from_mapping(entry.get("material"), (*path, "material"), self.issues),
             static=bool(entry.get("static", False)),
-            kinematic=bool(entry.get("kinematic", False)),
+            kinematic=bool(kinematic),
+            kinematic_motion=kinematic_from_mapping(kinematic, (*path, "kinematic"), self.issues)
+            if isinstance(kinematic, dict)
+            else None,
             collide=bool(entry.get("collide", True)),
             contact_geometry=geometry,
             contact_size=size,

@@ -41,7 +41,8 @@ def contact_warnings(compiled: CompiledScene) -> list[SceneIssue]:
         return []
     issues = []
     step = compiled.settings.dt / compiled.settings.substeps
-    if step >= contact.stable_step:
+    # with a tolerance dt is only the output spacing: the adaptive steps stay under the stable step
+    if compiled.settings.tolerance is None and step >= contact.stable_step:
         substeps = f" ({compiled.settings.substeps} sub-steps)" if compiled.settings.substeps > 1 else ""
         issues.append(
             SceneIssue(

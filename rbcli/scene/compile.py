@@ -13,7 +13,7 @@ from rbcli.physics.frames import internal_orientation
 from rbcli.physics.model import Model, build_model
 from rbcli.physics.rotation import quat_rotate, quat_rotate_inverse
 from rbcli.physics.state import State
-from rbcli.scene.compile_contact import ContactSummary, compile_contact
+from rbcli.scene.compile_contact import ContactSummary, compile_contact, kinematic_initial_state, kinematic_rows
 from rbcli.scene.compile_forces import compile_force_tables
 from rbcli.scene.spec import SceneError, SceneIssue, SceneSpec
 
@@ -123,7 +123,9 @@ def compile_model(spec: SceneSpec) -> CompiledModel:
     state = initial_state(spec, model)
     body_index = {name: i for i, name in enumerate(model.body_names)}
     contact, summary = compile_contact(spec, model, centres) if spec.contact is not None else (None, None)
-    forces = compile_force_tables(spec.gravity, spec.forces, model, body_index, centres, contact)
+    motions = kinematic_rows(spec, model, state) if spec.contact is not None else []
+    forces = compile_force_tables(spec.gravity, spec.forces, model, body_index, centres, contact, motions)
+    kinematic_initial_state(forces, model, state)
     return CompiledModel(model, forces, state, summary)
 
 
@@ -213,12 +215,9 @@ def run_settings(
             from rbcli.physics.contact.parameters import substeps_for
 
             substeps = substeps_for(settings.dt, contact.stable_step) if contact is not None else 1
-        settings = replace(settings, substeps=int(substeps))
         if settings.tolerance is not None:
-            raise ValueError(
-                "adaptive stepping (a tolerance) does not run contact yet: contact forces are not smooth, so "
-                "give a fixed dt (and contact.substeps: auto)"
-            )
+            substeps = 1  # adaptive steps are capped at the contacts' stable step instead (physics/adaptive.py)
+        settings = replace(settings, substeps=int(substeps))
     if settings.tolerance is not None:
         from rbcli.physics.integrators import get_integrator
 

@@ -25,9 +25,14 @@ from rbcli.physics.contact.parameters import (
     stable_step,
     support_count,
 )
+from rbcli.physics.contact.reference import kinematic_state_numpy
 from rbcli.physics.contact.tables import ContactTable, contact_table
+from rbcli.physics.forces import ForceTables
+from rbcli.physics.forces.tables import schedule_values_numpy
 from rbcli.physics.model import Model
 from rbcli.physics.rotation import quat_to_matrix
+from rbcli.physics.state import State
+from rbcli.scene.compile_forces import KinematicRow
 from rbcli.scene.spec import BodySpec, MaterialSpec, SceneSpec
 
 
@@ -140,6 +145,9 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
     planes = contact.planes
     plane_zeta = [damping_ratio(e)
                   for e in (p.material.over(base).restitution or DEFAULT_RESTITUTION for p in planes)]  # fmt: skip
+    movable = colliding & ~static
+    dt_crit, worst = stable_step(model.body_mass, stiffness * support, np.where(colliding, zeta, 0.0), movable,
+                                 planes=bool(planes))  # fmt: skip
     table = contact_table(
         sphere_body=np.concatenate(sphere_body) if sphere_body else [],
         sphere_offset=np.concatenate(offsets) if offsets else np.zeros((0, 3)),
@@ -153,10 +161,8 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
         plane_normal=[p.normal for p in planes] or np.zeros((0, 3)),
         plane_damping_ratio=plane_zeta,
         plane_friction=[p.material.over(base).friction for p in planes],
+        stable_step=dt_crit,
     )
-    movable = colliding & ~static
-    dt_crit, worst = stable_step(model.body_mass, stiffness * support, np.where(colliding, zeta, 0.0), movable,
-                                 planes=bool(planes))  # fmt: skip
     summary = ContactSummary(
         sphere_count=int(table.sphere_radius.shape[0]),
         plane_count=len(planes),
@@ -167,3 +173,37 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
         stiffness=float(stiffness[worst]) if worst >= 0 else math.nan,
     )
     return table, summary
+
+
+def kinematic_rows(spec: SceneSpec, model: Model, state: State) -> list[KinematicRow]:
+    """The prescribed motion of each kinematic body (physics/contact/kinematic.py) from its spec and
+    initial state: `kinematic: true` keeps its initial velocity and angular velocity (v0 = P / M,
+    w0 = L / I: isotropic) about its centre of mass; `kinematic: {...}` gives v0, w0, a pivot and a schedule."""
+    rows = []
+    for b, body in enumerate(spec.bodies):
+        if not body.kinematic:
+            continue
+        x0 = state.x[b].copy()
+        motion = body.kinematic_motion
+        if motion is None:
+            v0, w0 = state.P[b] / model.body_mass[b], state.L[b] / model.body_inertia[b, 0]
+            pivot, schedule = x0, None
+        else:
+            v0, w0, schedule = motion.velocity, motion.angular_velocity, motion.schedule
+            pivot = x0 if motion.pivot is None else motion.pivot
+        rows.append(KinematicRow(b, np.array(v0, dtype=float), np.array(w0, dtype=float), np.array(pivot, dtype=float),
+                                 x0, state.q[b].copy(), schedule, body.location))  # fmt: skip
+    return rows
+
+
+def kinematic_initial_state(forces: ForceTables, model: Model, state: State) -> None:
+    """Set the kinematic bodies' P and L to their prescribed motion at t = 0 (s(0) scales it)."""
+    table = forces.kinematic
+    if not table.body.shape[0]:
+        return
+    rate = schedule_values_numpy(forces.schedule, table.schedule, 0.0)
+    body = table.body
+    _, _, P, L = kinematic_state_numpy(table, np.zeros(len(body)), rate, model.body_mass[body],
+                                       model.body_inertia[body, 0])  # fmt: skip
+    state.P[body] = P
+    state.L[body] = L

@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from rbcli.physics.contact.tables import ContactTable
+from rbcli.physics.contact.tables import ContactTable, kinematic_table
 from rbcli.physics.forces import NO_SCHEDULE, WORLD, ForceTables, build_force_tables
 from rbcli.physics.forces.tables import (
     SCHEDULE_KINDS,
@@ -40,7 +41,7 @@ from rbcli.scene.force_specs import (
     ForceTorque,
     Schedule,
 )
-from rbcli.scene.spec import ForceSpec, SceneError, SceneIssue
+from rbcli.scene.spec import ForceSpec, SceneError, SceneIssue, SourceLocation
 
 
 class _Invalid(Exception):
@@ -58,9 +59,11 @@ def compile_force_tables(
     body_index: Mapping[str, int],
     body_centres_user: np.ndarray,
     contact: ContactTable | None = None,
+    kinematic: Sequence[KinematicRow] = (),
 ) -> ForceTables:
     """ForceTables of a scene: uniform gravity [m/s^2] (3,) or None, its force specs, the compiled
-    model, body name -> index, and each body's centre of mass in its user frame [m] (body_count, 3).
+    model, body name -> index, and each body's centre of mass in its user frame [m] (body_count, 3);
+    with contact, its table and the kinematic bodies' motions (their schedules join the force terms').
 
     Raises SceneError listing every invalid spec with its location.
     """
@@ -71,9 +74,29 @@ def compile_force_tables(
             builder.add(spec)
         except _Invalid as exc:
             issues.append(SceneIssue(spec.location, f"force {spec.kind!r}: {exc}", exc.expected))
+    for row in kinematic:
+        try:
+            builder.add_kinematic(row)
+        except _Invalid as exc:
+            issues.append(SceneIssue(row.location, f"kinematic body: {exc}", exc.expected))
     if issues:
         raise SceneError(issues)
     return builder.tables(gravity, contact)
+
+
+@dataclass(frozen=True)
+class KinematicRow:
+    """One kinematic body's motion as compile_contact resolves it: v0, w0 [world], the pivot and the
+    centre of mass at t = 0 [m, world], q0 (world-from-principal) and the schedule (None: s = 1)."""
+
+    body: int
+    velocity: np.ndarray
+    angular_velocity: np.ndarray
+    pivot: np.ndarray
+    position: np.ndarray
+    orientation: np.ndarray
+    schedule: Schedule | None
+    location: SourceLocation | None = None
 
 
 def _vector(value: object, name: str, shape: tuple[int, ...] = (3,)) -> np.ndarray:
@@ -120,6 +143,8 @@ class _TableBuilder:
         self.drag: dict[str, list] = {k: [] for k in ("body", "linear", "quadratic", "angular_linear",
                                                        "angular_quadratic")}  # fmt: skip
         self.impulse: dict[str, list] = {k: [] for k in ("body", "time", "vector", "point", "body_frame")}
+        self.kinematic: dict[str, list] = {k: [] for k in ("body", "schedule", "velocity", "angular_velocity",
+                                                           "pivot", "position", "orientation")}  # fmt: skip
 
     # ---- resolution of names, points, vectors, schedules ------------------------------------------
 
@@ -192,6 +217,13 @@ class _TableBuilder:
         s["offset"].append(_scalar(schedule.value if constant else schedule.offset, "schedule value", minimum=None))
         s["knots"].append((times, values))
         return len(s["kind"]) - 1
+
+    def add_kinematic(self, row: KinematicRow) -> None:
+        k = self.kinematic
+        k["schedule"].append(self.add_schedule(row.schedule))
+        k["body"].append(row.body)
+        for name in ("velocity", "angular_velocity", "pivot", "position", "orientation"):
+            k[name].append(np.asarray(getattr(row, name), dtype=np.float64))
 
     # ---- one method per spec type --------------------------------------------------------------------
 
@@ -299,4 +331,5 @@ class _TableBuilder:
             drag=drag_table(**self.drag),
             impulse=impulse_table(**self.impulse),
             contact=contact,
+            kinematic=kinematic_table(**self.kinematic),
         )

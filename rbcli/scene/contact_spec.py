@@ -13,7 +13,7 @@ import numpy as np
 
 from rbcli.physics.contact.parameters import LOWEST_RESTITUTION
 from rbcli.scene.issues import IssueCollector
-from rbcli.scene.spec import BodySpec, ContactSpec, MaterialSpec, PlaneSpec
+from rbcli.scene.spec import BodySpec, ContactSpec, KinematicSpec, MaterialSpec, PlaneSpec
 from rbcli.scene.yaml_located import YamlPath
 
 
@@ -35,6 +35,26 @@ def material_from_mapping(value: dict[str, Any] | None, path: YamlPath, issues: 
         stiffness=None if stiffness in (None, "auto") else float(stiffness),
         restitution=None if restitution is None else float(restitution),
         friction=None if value.get("friction") is None else float(value["friction"]),
+    )
+
+
+def kinematic_from_mapping(value: dict[str, Any], path: YamlPath, issues: IssueCollector) -> KinematicSpec | None:
+    """The KinematicSpec of a `kinematic: {velocity, angular_velocity, pivot, schedule}` mapping (the schema
+    has checked the keys and types); None, with a located error, for a schedule that cannot be."""
+    from rbcli.scene.force_specs import schedule_from_mapping
+
+    schedule = None
+    if value.get("schedule") is not None:
+        try:
+            schedule = schedule_from_mapping(value["schedule"])
+        except (TypeError, ValueError) as exc:
+            issues.error((*path, "schedule"), str(exc), "a schedule as in a force's (docs/forces.md)")
+            return None
+    return KinematicSpec(
+        velocity=_vector(value.get("velocity", [0.0, 0.0, 0.0])),
+        angular_velocity=_vector(value.get("angular_velocity", [0.0, 0.0, 0.0])),
+        pivot=_vector(value["pivot"]) if value.get("pivot") is not None else None,
+        schedule=schedule,
     )
 
 
@@ -110,6 +130,12 @@ def check_contact_bodies(bodies: list[BodySpec], entries: list[Any], issues: Iss
         if body.static and body.kinematic:
             message = "a body is static (never moves) or kinematic (moves as given), not both"
             issues.issues.append(_located(body, message, "static: true or kinematic: true"))
+        if body.kinematic_motion is not None and (body.velocity is not None or body.momentum is not None
+                                                  or body.angular_velocity is not None
+                                                  or body.angular_momentum is not None):  # fmt: skip
+            issues.issues.append(_located(body, "a kinematic body with a prescribed motion takes its velocities "
+                                          "from `kinematic:` only", "velocity and angular_velocity inside "
+                                          "kinematic: {...}, none beside it"))  # fmt: skip
         if body.kinematic and body.angular_momentum is not None:
             issues.issues.append(_located(body, "a kinematic body spins at a given angular velocity",
                                           "angular_velocity instead of angular_momentum"))  # fmt: skip

@@ -109,6 +109,19 @@ class PlaneSpec:
 
 
 @dataclass(frozen=True)
+class KinematicSpec:
+    """A kinematic body's prescribed motion (`kinematic: {velocity, angular_velocity, pivot, schedule}`,
+    physics/contact/kinematic.py): it moves at s(t) velocity [m/s] and turns at s(t) angular_velocity
+    [rad/s] (both world frame) about `pivot` [m] (a world point at t = 0 that moves with the body's
+    translation; None: its centre of mass), s(t) the schedule (force_specs.Schedule; None: s = 1)."""
+
+    velocity: np.ndarray
+    angular_velocity: np.ndarray
+    pivot: np.ndarray | None = None
+    schedule: Any = None
+
+
+@dataclass(frozen=True)
 class ContactSpec:
     """The scene's `contact:` section: world planes (ground, walls, container), the default material,
     and contact sub-stepping (None: `auto`, chosen from the stable step at the dt that runs)."""
@@ -149,6 +162,9 @@ class BodySpec:
     # moves at its initial velocity and spins at its initial angular velocity whatever hits it (a conveyor,
     # a turning paddle): infinite mass for contact, no force acts on it
     kinematic: bool = False
+    # kinematic with a prescribed motion (`kinematic: {...}`); None with `kinematic: true` (its initial velocity
+    # and angular velocity, constant)
+    kinematic_motion: KinematicSpec | None = None
     collide: bool = True  # False: the body passes through everything
     # where its contact spheres come from: "particles" (every particle, with its radius), "sphere" (one
     # sphere of radius contact_size at the body origin: a sphere shape's exact surface), "lattice" (the

@@ -38,9 +38,10 @@ def test_committed_chunk_loops_are_generated_from_the_stage_list(name):
 
 
 def test_stage_list_is_impulses_contact_update_record():
-    names = ["impulses", "contact_begin", "update", "contact_commit", "contact_record", "record"]
+    names = ["impulses", "contact_begin", "kinematic_begin", "update", "kinematic_end", "contact_commit",
+             "contact_record", "record"]  # fmt: skip
     assert [stage.name for stage in STEP_STAGES] == names
-    assert [stage.name for stage in STEP_STAGES if stage.substep] == ["contact_begin", "update", "contact_commit"]
+    assert [stage.name for stage in STEP_STAGES if stage.substep] == names[1:6]
 
 
 # A trivial stage, as a user of the pipeline would add one: a constant push on every body, applied as an

@@ -5,7 +5,14 @@ Regenerate with `python tests/physics/test_pipeline.py --regenerate` after chang
 
 import numba
 
-from rbcli.physics.forces.stages import contact_begin_stage, contact_commit_stage, contact_record_stage, impulse_stage
+from rbcli.physics.forces.stages import (
+    contact_begin_stage,
+    contact_commit_stage,
+    contact_record_stage,
+    impulse_stage,
+    kinematic_begin_stage,
+    kinematic_end_stage,
+)
 from rbcli.physics.integrators.euler_quat import SCRATCH_WIDTH
 from rbcli.physics.integrators.euler_quat import step as integrator_step
 from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, chunk_status, record_if_due
@@ -32,8 +39,12 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
             ts = t + sub * h
             # contact_begin: the contact springs measure time from the start of this (sub-)step
             contact_begin_stage(forces.contact, data.force.contact, ts, h)
+            # kinematic_begin: kinematic bodies at their exact pose, moving at their mean velocity over the (sub-)step
+            kinematic_begin_stage(model, forces, ts, h, x, q, P, L)
             # update: the integrator's maths, its force evaluations through forces.wrench.accumulate_wrench
             integrator_step(model, forces, data.force, ts, h, x, q, P, L, data.F, data.tau, data.scratch)
+            # kinematic_end: kinematic bodies at their exact state at the end of the (sub-)step (closed form)
+            kinematic_end_stage(model, forces, ts + h, x, q, P, L)
             # contact_commit: the (sub-)step is complete: its last evaluation's contacts become the history
             contact_commit_stage(model, forces.contact, data.force.contact, x, q, P, L)
         # contact_record: on recording steps, the step's contact count, deepest overlap and energy

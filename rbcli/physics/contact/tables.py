@@ -19,6 +19,7 @@ numpy only.
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -66,6 +67,9 @@ class ContactTable(NamedTuple):
     cell_size: float  # [m] broad-phase grid cell: the largest sphere diameter
     tangential_ratio: float  # k_t / k_n of every contact
     bucket_count: int  # size of the broad phase's bucket table (see broad_phase.py)
+    # [s] the smallest stable step of the contacts the scene can form (parameters.stable_step; inf: none
+    # can collide): adaptive stepping never steps longer (physics/adaptive.py)
+    stable_step: float = math.inf
 
 
 class ContactWork(NamedTuple):
@@ -126,6 +130,7 @@ def contact_table(
     plane_damping_ratio=(),  # noqa: ANN001
     plane_friction=(),  # noqa: ANN001
     tangential_ratio: float = 2.0 / 7.0,
+    stable_step: float = math.inf,
 ) -> ContactTable:
     """A ContactTable with consistent dtypes (all empty: a scene without contact)."""
     radius = _ro(sphere_radius, np.float64)
@@ -150,6 +155,7 @@ def contact_table(
         cell_size=float(2.0 * radius.max()) if spheres else 1.0,
         tangential_ratio=float(tangential_ratio),
         bucket_count=int(buckets),
+        stable_step=float(stable_step),
     )
 
 
@@ -185,3 +191,38 @@ def make_contact_work(contact: ContactTable, body_count: int) -> ContactWork:
 
 def has_contact(contact: ContactTable) -> bool:
     return bool(contact.sphere_radius.shape[0])
+
+
+class KinematicTable(NamedTuple):
+    """The prescribed motions of a scene's kinematic bodies, one row each (read-only; the closed form
+    and the stages that set it: contact/kinematic.py)."""
+
+    body: np.ndarray  # int64 (row_count,)
+    schedule: np.ndarray  # int64 (row_count,): NO_SCHEDULE (s = 1) or a ScheduleTable row of ForceTables
+    velocity: np.ndarray  # v0 [m/s] (row_count, 3), world
+    angular_velocity: np.ndarray  # w0 [rad/s] (row_count, 3), world
+    pivot: np.ndarray  # p0 [m] (row_count, 3), world, at t = 0
+    position: np.ndarray  # x0 [m] (row_count, 3), world, centre of mass at t = 0
+    orientation: np.ndarray  # q0 (row_count, 4) wxyz, world-from-principal at t = 0
+
+
+def kinematic_table(
+    body=(),  # noqa: ANN001
+    schedule=(),  # noqa: ANN001
+    velocity=(),  # noqa: ANN001
+    angular_velocity=(),  # noqa: ANN001
+    pivot=(),  # noqa: ANN001
+    position=(),  # noqa: ANN001
+    orientation=(),  # noqa: ANN001
+) -> KinematicTable:
+    """A KinematicTable with consistent dtypes (empty: a scene without kinematic bodies)."""
+
+    return KinematicTable(
+        _ro(body, np.int64),
+        _ro(schedule, np.int64),
+        _ro(velocity, np.float64, 3),
+        _ro(angular_velocity, np.float64, 3),
+        _ro(pivot, np.float64, 3),
+        _ro(position, np.float64, 3),
+        _ro(orientation, np.float64, 4),
+    )

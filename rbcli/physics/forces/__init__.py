@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from rbcli.physics.contact.tables import ContactTable, contact_table
+from rbcli.physics.contact.tables import ContactTable, KinematicTable, contact_table, kinematic_table
 from rbcli.physics.forces.tables import (
     NO_SCHEDULE,
     TERM_NAMES,
@@ -78,6 +78,7 @@ def build_force_tables(
     drag: DragTable | None = None,
     impulse: ImpulseTable | None = None,
     contact: ContactTable | None = None,
+    kinematic: KinematicTable | None = None,
 ) -> ForceTables:
     """Tables for a scene of body_count bodies from plain tables (a missing table = 0 rows).
 
@@ -106,6 +107,7 @@ def build_force_tables(
         has_torque=bool(torque_body.any()),
         torque_body=torque_body,
         contact=contact,
+        kinematic=kinematic if kinematic is not None else kinematic_table(),
         **tables,
     )
 

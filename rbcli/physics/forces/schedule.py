@@ -2,7 +2,8 @@
 
 s(t) = 0 outside start <= t < stop; inside: constant `offset`; piecewise-linear through knots (held
 at the end values outside them; right-continuous, so a repeated knot time is a step whose later value
-holds from that time on); or offset + amplitude sin(2 pi frequency t + phase).
+holds from that time on); or offset + amplitude sin(2 pi frequency t + phase). Its integral from 0,
+`schedule_integral`, moves kinematic bodies on a schedule (contact/kinematic.py) in closed form.
 """
 
 from __future__ import annotations
@@ -13,10 +14,11 @@ import numpy as np
 from rbcli.physics.forces.tables import (
     NO_SCHEDULE,
     SCHEDULE_CONSTANT,
-    SCHEDULE_PIECEWISE_LINEAR,
     SCHEDULE_SINE,
-    ScheduleTable,
+    schedule_values_numpy,
 )
+
+__all__ = ["schedule_integral", "schedule_value", "schedule_values_numpy"]
 
 
 @numba.njit(cache=True)
@@ -48,27 +50,45 @@ def schedule_value(schedule, index: int, t: float) -> float:  # noqa: ANN001 - n
     return values[k] + (values[k + 1] - values[k]) * ((t - times[k]) / span)
 
 
-def schedule_values_numpy(schedule: ScheduleTable, index: np.ndarray, t: float) -> np.ndarray:
-    """Plain numpy reference of `schedule_value` for an array of row indices (NO_SCHEDULE -> 1)."""
-    index = np.asarray(index, dtype=np.int64)
-    out = np.ones(index.shape)
-    for n, j in enumerate(index.tolist()):  # tests only: one schedule at a time is clearest
-        if j == NO_SCHEDULE:
-            continue
-        if not (schedule.start[j] <= t < schedule.stop[j]):
-            out[n] = 0.0
-        elif schedule.kind[j] == SCHEDULE_CONSTANT:
-            out[n] = schedule.offset[j]
-        elif schedule.kind[j] == SCHEDULE_SINE:
-            out[n] = schedule.offset[j] + schedule.amplitude[j] * np.sin(
-                2 * np.pi * schedule.frequency[j] * t + schedule.phase[j]
-            )
-        elif schedule.kind[j] == SCHEDULE_PIECEWISE_LINEAR:
-            knots = slice(schedule.knot_start[j], schedule.knot_start[j] + schedule.knot_count[j])
-            times, values = schedule.knot_time[knots], schedule.knot_value[knots]
-            k = int(np.searchsorted(times, t, side="right")) - 1  # times[k] <= t < times[k + 1]
-            if k < 0 or k == len(times) - 1:
-                out[n] = values[max(k, 0)]
-            else:
-                out[n] = values[k] + (values[k + 1] - values[k]) * (t - times[k]) / (times[k + 1] - times[k])
-    return out
+@numba.njit(cache=True)
+def _profile_antiderivative(schedule, index: int, t: float) -> float:  # noqa: ANN001
+    """G(t), an antiderivative of the in-window profile of row `index` (the window is not applied):
+    constant: offset t; sine: offset t - amplitude cos(2 pi f t + phase) / (2 pi f) (f = 0: the
+    constant offset + amplitude sin(phase)); piecewise linear: the area from the first knot (held
+    values outside the knots, trapezoids between them; a repeated knot time adds nothing)."""
+    kind = schedule.kind[index]
+    if kind == SCHEDULE_CONSTANT:
+        return schedule.offset[index] * t
+    if kind == SCHEDULE_SINE:
+        f = schedule.frequency[index]
+        if f == 0.0:
+            return (schedule.offset[index] + schedule.amplitude[index] * np.sin(schedule.phase[index])) * t
+        w = 2.0 * np.pi * f
+        return schedule.offset[index] * t - schedule.amplitude[index] * np.cos(w * t + schedule.phase[index]) / w
+    k0 = schedule.knot_start[index]
+    k1 = k0 + schedule.knot_count[index] - 1
+    times, values = schedule.knot_time, schedule.knot_value
+    if t <= times[k0]:
+        return values[k0] * (t - times[k0])
+    area = 0.0
+    k = k0
+    while k < k1 and times[k + 1] <= t:
+        area += 0.5 * (values[k] + values[k + 1]) * (times[k + 1] - times[k])
+        k += 1
+    if k == k1:
+        return area + values[k1] * (t - times[k1])
+    value_t = values[k] + (values[k + 1] - values[k]) * ((t - times[k]) / (times[k + 1] - times[k]))
+    return area + 0.5 * (values[k] + value_t) * (t - times[k])
+
+
+@numba.njit(cache=True)
+def schedule_integral(schedule, index: int, t: float) -> float:  # noqa: ANN001 - numba types
+    """S(t) = integral of s over [0, t] for schedule row `index` (t for NO_SCHEDULE), in closed form:
+    the profile's antiderivative between the window's ends clipped to [0, t] (s = 0 outside it)."""
+    if index == NO_SCHEDULE:
+        return t
+    lo = max(schedule.start[index], 0.0)
+    hi = min(schedule.stop[index], t)
+    if hi <= lo:
+        return 0.0
+    return _profile_antiderivative(schedule, index, hi) - _profile_antiderivative(schedule, index, lo)

@@ -20,7 +20,8 @@ cached caller; they take STEP_KERNEL's options: cached, no reference counting).
 Force stages (called by forces/wrench.accumulate_wrench, each adding its rows to `counts`, the
 ForceData.term_evaluations counter): field, point force, torque, spring, drag, contact (with the
 static bodies held). Pipeline stages (called by the generated chunk loops, physics/pipeline.py):
-impulses, contact_begin, contact_commit, contact_record. Gravity has no table (a flag and a vector) and is not here.
+impulses, contact_begin, kinematic_begin, kinematic_end, contact_commit, contact_record; and for adaptive
+stepping the contacts' step limit. Gravity has no table (a flag and a vector) and is not here.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from numba.core import types
 from numba.extending import overload
 
 from rbcli.physics.contact.force import accumulate_contact, begin_contact_step, commit_contacts, hold_static_bodies
+from rbcli.physics.contact.kinematic import kinematic_begin, kinematic_end
 from rbcli.physics.forces.drag import accumulate_drag
 from rbcli.physics.forces.field import accumulate_field
 from rbcli.physics.forces.impulse import apply_impulses
@@ -245,5 +247,60 @@ def _contact_record_stage(work, frames, filled, due):  # noqa: ANN001, ANN202
         if due and filled < frames.contact.shape[0]:
             for k in range(frames.contact.shape[1]):
                 frames.contact[filled, k] = work.stats[k]
+
+    return run
+
+
+def kinematic_begin_stage(model, forces, t, h, x, q, P, L) -> bool:  # noqa: ANN001
+    """Kinematic bodies at their exact pose at t, moving at their mean velocity over [t, t + h)
+    (contact/kinematic.py), when the scene has any; True when it moved something."""
+    _kernel_only()
+    return False
+
+
+@overload(kinematic_begin_stage, jit_options=_OPTIONS)
+def _kinematic_begin_stage(model, forces, t, h, x, q, P, L):  # noqa: ANN001, ANN202
+    if _absent(_member(forces, "kinematic")):
+        return lambda model, forces, t, h, x, q, P, L: False
+
+    def run(model, forces, t, h, x, q, P, L):  # noqa: ANN001, ANN202
+        if forces.kinematic.body.shape[0]:
+            kinematic_begin(model, forces.kinematic, forces.schedule, t, h, x, q, P, L)
+            return True
+        return False
+
+    return run
+
+
+def kinematic_end_stage(model, forces, t, x, q, P, L) -> None:  # noqa: ANN001
+    """Kinematic bodies at their exact x, q, P, L at t (contact/kinematic.py) when the scene has any."""
+    _kernel_only()
+
+
+@overload(kinematic_end_stage, jit_options=_OPTIONS)
+def _kinematic_end_stage(model, forces, t, x, q, P, L):  # noqa: ANN001, ANN202
+    if _absent(_member(forces, "kinematic")):
+        return lambda model, forces, t, x, q, P, L: None
+
+    def run(model, forces, t, x, q, P, L):  # noqa: ANN001, ANN202
+        if forces.kinematic.body.shape[0]:
+            kinematic_end(model, forces.kinematic, forces.schedule, t, x, q, P, L)
+
+    return run
+
+
+def contact_step_limit(forces) -> float:  # noqa: ANN001
+    """The longest step [s] adaptive stepping may take: the contacts' stable step, inf without contact."""
+    _kernel_only()
+    return 0.0
+
+
+@overload(contact_step_limit, jit_options=_OPTIONS)
+def _contact_step_limit(forces):  # noqa: ANN001, ANN202
+    if _absent(_member(forces, "contact")):
+        return lambda forces: np.inf
+
+    def run(forces):  # noqa: ANN001, ANN202
+        return forces.contact.stable_step
 
     return run

@@ -21,7 +21,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from rbcli.physics.contact.tables import ContactTable, ContactWork, make_contact_work
+from rbcli.physics.contact.tables import ContactTable, ContactWork, KinematicTable, kinematic_table, make_contact_work
 
 # Row column `schedule` value meaning "no schedule": the force acts at full strength at all times.
 NO_SCHEDULE = -1
@@ -141,6 +141,8 @@ class ForceTables(NamedTuple):
       the wrench leaves tau untouched (all zeros). Equal to torque_body.any().
     contact: contact spheres, materials, planes and static bodies (contact/tables.py; 0 spheres: no
       contact stage).
+    kinematic: the prescribed motions of kinematic bodies (contact/tables.py, contact/kinematic.py;
+      0 rows: no kinematic stages).
     torque_body: bool (body_count,): True for a body that some term can give a torque (a field row,
       a point force or spring end off its centre of mass, a pure torque, angular drag). Integrators
       run their torque path (L += h tau, the body-frame torque in Euler's equations) only for these
@@ -160,6 +162,7 @@ class ForceTables(NamedTuple):
     drag: DragTable
     impulse: ImpulseTable
     contact: ContactTable
+    kinematic: KinematicTable = kinematic_table()
 
     def kernel(self) -> KernelForceTables:
         """The tables as compiled kernels take them: None for each table without rows (see
@@ -171,7 +174,7 @@ class ForceTables(NamedTuple):
         return KernelForceTables(
             self.gravity, self.has_gravity, self.has_torque, self.torque_body, self.schedule,
             rows(self.field), rows(self.point_force), rows(self.torque), rows(self.spring), rows(self.drag),
-            rows(self.impulse), self.contact if contact_present(self.contact) else None,
+            rows(self.impulse), self.contact if contact_present(self.contact) else None, rows(self.kinematic),
         )  # fmt: skip
 
 
@@ -194,6 +197,7 @@ class KernelForceTables(NamedTuple):
     drag: DragTable | None
     impulse: ImpulseTable | None
     contact: ContactTable | None
+    kinematic: KinematicTable | None = None
 
 
 def contact_present(contact: ContactTable | None) -> bool:
@@ -300,3 +304,30 @@ def impulse_table(body=(), time=(), vector=(), point=(), body_frame=()) -> Impul
 def table_rows(table: NamedTuple) -> int:
     """Number of rows of a force table (the length of its first column)."""
     return int(table[0].shape[0])
+
+
+def schedule_values_numpy(schedule: ScheduleTable, index: np.ndarray, t: float) -> np.ndarray:
+    """Plain numpy reference of `forces/schedule.py: schedule_value` (numpy only, so compiling a scene can
+    evaluate a schedule) for an array of row indices (NO_SCHEDULE -> 1)."""
+    index = np.asarray(index, dtype=np.int64)
+    out = np.ones(index.shape)
+    for n, j in enumerate(index.tolist()):  # tests only: one schedule at a time is clearest
+        if j == NO_SCHEDULE:
+            continue
+        if not (schedule.start[j] <= t < schedule.stop[j]):
+            out[n] = 0.0
+        elif schedule.kind[j] == SCHEDULE_CONSTANT:
+            out[n] = schedule.offset[j]
+        elif schedule.kind[j] == SCHEDULE_SINE:
+            out[n] = schedule.offset[j] + schedule.amplitude[j] * np.sin(
+                2 * np.pi * schedule.frequency[j] * t + schedule.phase[j]
+            )
+        elif schedule.kind[j] == SCHEDULE_PIECEWISE_LINEAR:
+            knots = slice(schedule.knot_start[j], schedule.knot_start[j] + schedule.knot_count[j])
+            times, values = schedule.knot_time[knots], schedule.knot_value[knots]
+            k = int(np.searchsorted(times, t, side="right")) - 1  # times[k] <= t < times[k + 1]
+            if k < 0 or k == len(times) - 1:
+                out[n] = values[max(k, 0)]
+            else:
+                out[n] = values[k] + (values[k + 1] - values[k]) * (t - times[k]) / (times[k + 1] - times[k])
+    return out
