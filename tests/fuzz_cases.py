@@ -562,7 +562,7 @@ def check_command(result, *, codes=EXIT_CODES, message_on: str = "stderr") -> No
         assert said.strip(), f"exit {result.exit_code} with nothing said"
 
 
-def write_mesh_files(folder: Path) -> dict[str, bytes]:
+def write_mesh_files() -> dict[str, bytes]:
     """Closed meshes in several formats (the bytes the fuzzer damages): OBJ text, binary and ASCII STL, PLY."""
     import trimesh
 
