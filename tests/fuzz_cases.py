@@ -41,7 +41,20 @@ INTEGRATORS = (
     "dopri5",
 )
 EXIT_CODES = {0, 1, 2, 3}  # ok, invalid input, usage error (Typer), diverged: docs/robustness.md
-DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
+
+
+class Dumper(getattr(yaml, "CSafeDumper", yaml.SafeDumper)):  # type: ignore[misc]
+    """PyYAML writes YAML 1.1, whose floats need a dot: it leaves the string '1e100' unquoted, which
+    rbsim reads (YAML 1.2) as a number. Quote such strings."""
+
+
+def _string(dumper, value: str):  # noqa: ANN001, ANN202
+    looks_numeric = re.fullmatch(r"[-+]?(\.[0-9]+|[0-9]+(\.[0-9]*)?)([eE][-+]?[0-9]+)?", value.strip())
+    return dumper.represent_scalar("tag:yaml.org,2002:str", value, style='"' if looks_numeric else None)
+
+
+Dumper.add_representer(str, _string)
+DUMPER = Dumper
 
 
 def ci_settings(examples: int) -> settings:

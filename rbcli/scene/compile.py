@@ -12,7 +12,7 @@ from rbcli.physics.forces import ForceTables
 from rbcli.physics.frames import internal_orientation
 from rbcli.physics.model import Model, build_model
 from rbcli.physics.rotation import quat_rotate, quat_rotate_inverse
-from rbcli.physics.state import State
+from rbcli.physics.state import STATE_LIMIT, State
 from rbcli.scene.compile_contact import ContactSummary, compile_contact
 from rbcli.scene.compile_forces import compile_force_tables
 from rbcli.scene.spec import SceneError, SceneIssue, SceneSpec
@@ -121,10 +121,37 @@ def compile_model(spec: SceneSpec) -> CompiledModel:
         inertia.setflags(write=False)
         model = replace(model, body_inertia=inertia)
     state = initial_state(spec, model)
+    _check_initial_state(spec, state)
     body_index = {name: i for i, name in enumerate(model.body_names)}
     contact, summary = compile_contact(spec, model, centres) if spec.contact is not None else (None, None)
     forces = compile_force_tables(spec.gravity, spec.forces, model, body_index, centres, contact)
     return CompiledModel(model, forces, state, summary)
+
+
+def _check_initial_state(spec: SceneSpec, state: State) -> None:
+    """SceneError, located at each body, when its initial position, momentum or angular momentum is
+    non-finite or beyond STATE_LIMIT (1e100): the run would stop at step 0 as diverged. Found by fuzzing:
+    a velocity of 1e300 loaded, and `rbsim run` then failed with a SimulationDiverged traceback."""
+    issues = []
+    quantities = (
+        ("position", "m", state.x),
+        ("momentum", "kg m/s", state.P),
+        ("angular momentum", "kg m^2/s", state.L),
+    )
+    for b, body in enumerate(spec.bodies):  # once per body at set-up
+        for name, unit, values in quantities:
+            value = values[b]
+            if not np.all(np.abs(value) <= STATE_LIMIT):  # also catches nan
+                issues.append(
+                    SceneIssue(
+                        body.location,
+                        f"body '{body.name}': initial {name} [{', '.join(f'{v:.4g}' for v in value)}] {unit} is beyond "
+                        f"{STATE_LIMIT:g}, where a run counts the state as diverged",
+                        "positions, velocities and angular velocities in SI units, well below 1e100",
+                    )
+                )
+    if issues:
+        raise SceneError(issues)
 
 
 def run_settings(

@@ -66,19 +66,3 @@ def test_validate_command_says_ok_or_located_errors(text):
         for line in errors:
             match = LOCATED.match(line)
             assert match and match["file"] == str(path), line
-
-
-def test_a_tolerance_with_contact_is_a_located_error():
-    """Found by the fuzzer: run_settings refused adaptive stepping with contact by a ValueError that escaped
-    `rbcli.load_scene` and `rbsim validate` as a traceback; now an error at simulation.tolerance."""
-    text = (
-        "simulation: {dt: 0.001, steps: 5, integrator: dopri5, tolerance: 1.0e-6}\n"
-        "contact: {ground: 0.0}\n"
-        "bodies:\n"
-        "  - {name: b, shape: {type: sphere, radius: 0.1}, spacing: 0.05, density: 100, position: [0, 0, 1]}\n"
-    )
-    spec, issues = analyse_scene_text(text, "s.yaml")
-    assert spec is None
-    [error] = [i for i in issues if i.severity == "error"]
-    assert (error.location.line, error.location.column) == (1, text.index("tolerance") + 1)  # the key
-    assert error.message.startswith("simulation.tolerance: adaptive stepping (a tolerance) does not run contact")
