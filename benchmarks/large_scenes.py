@@ -56,8 +56,9 @@ def explicit_scene(path: Path, size_bytes: int, seed: int = 0) -> int:
     return count
 
 
-def measure(args: list[str]) -> tuple[int, float, float, str]:
-    """(exit status, wall time [s], peak RSS [MiB], last line of stderr or stdout) of one child process."""
+def measure(args: list[str]) -> tuple[int, float, float, float, str]:
+    """(exit status, wall time [s], CPU time [s], peak RSS [MiB], last line of its output) of one child
+    process (CPU time: user + system, what a loaded machine does not inflate)."""
     with tempfile.TemporaryFile() as out:
         started = time.perf_counter()
         process = subprocess.Popen(args, stdout=out, stderr=subprocess.STDOUT)
@@ -65,7 +66,8 @@ def measure(args: list[str]) -> tuple[int, float, float, str]:
         wall = time.perf_counter() - started
         out.seek(0)
         lines = out.read().decode(errors="replace").strip().splitlines()
-    return os.waitstatus_to_exitcode(status), wall, usage.ru_maxrss / 1024, (lines or [""])[-1]
+    cpu = usage.ru_utime + usage.ru_stime
+    return os.waitstatus_to_exitcode(status), wall, cpu, usage.ru_maxrss / 1024, (lines or [""])[-1]
 
 
 def main() -> None:
@@ -94,10 +96,10 @@ def main() -> None:
             count = explicit_scene(folder / "big9.yaml", int(9.9 * 2**20))
             label = f"9.9 MB file ({count:,} explicit particles): validate"
             cases.append((label, [*rbsim, "validate", f"{name}/big9.yaml"]))
-        print(f"{'case':58s} {'exit':>4s} {'wall [s]':>9s} {'peak RSS [MiB]':>15s}  last line")
+        print(f"{'case':58s} {'exit':>4s} {'wall [s]':>9s} {'CPU [s]':>8s} {'peak RSS [MiB]':>15s}  last line")
         for label, command in cases:
-            code, wall, rss, last = measure(command)
-            print(f"{label:58s} {code:4d} {wall:9.2f} {rss:15.0f}  {last[:150]}", flush=True)
+            code, wall, cpu, rss, last = measure(command)
+            print(f"{label:58s} {code:4d} {wall:9.2f} {cpu:8.2f} {rss:15.0f}  {last[:150]}", flush=True)
 
 
 if __name__ == "__main__":

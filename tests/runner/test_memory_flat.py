@@ -4,9 +4,9 @@ A real `rbsim run` subprocess of 10 tumbling bodies recording every step, at 4,0
 .mcap and to .rrd; its peak resident set size comes from the kernel (`os.wait4`'s rusage of that child,
 so no other process of the test session counts). The long run's states alone are 40,000 x 10 x 13 x 8 B
 = 42 MB (the .mcap is ~50 MB): a run that kept its frames would grow by at least that much, so the bound
-on the growth, 20 MB, is generous (measured: +2.6 MB for .mcap, +3.2 MB for .rrd) and still fails such a
-run. The control shows that the measurement sees such growth: `rbcli.simulate`, which keeps every frame
-in memory by design, grows by more than the bound over the same two lengths. ~12 s.
+on the growth, 20 MiB, is generous (measured: +2.5 MiB for .mcap, +3.1 MiB for .rrd) and still fails
+such a run. The control shows that the measurement sees such growth: `rbcli.simulate`, which keeps every
+frame in memory by design, grows by more than the bound over the same two lengths (+112 MiB). ~12 s.
 """
 
 from __future__ import annotations
