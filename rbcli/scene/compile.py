@@ -128,6 +128,10 @@ def compile_model(spec: SceneSpec) -> CompiledModel:
     return CompiledModel(model, forces, state, summary)
 
 
+# Recordings store times as whole nanoseconds: int64 in .rrd, uint64 in .mcap; the smaller bound [s]
+MAX_RECORDED_TIME = (2**63 - 1) * 1e-9
+
+
 def _check_initial_state(spec: SceneSpec, state: State) -> None:
     """SceneError, located at each body, when its initial position, momentum or angular momentum is
     non-finite or beyond STATE_LIMIT (1e100): the run would stop at step 0 as diverged. Found by fuzzing:
@@ -204,6 +208,14 @@ def run_settings(
             blame,
             dt_value if blame == "dt" else duration_value,
             f"dt = {dt_value:g} s is longer than duration = {duration_value:g} s (at least one step is needed)",
+        )
+    if duration_value > MAX_RECORDED_TIME:
+        # found by fuzzing: --dt 4.6e16 --duration 4.6e16 ended in a struct.error traceback in the MCAP writer
+        raise refuse(
+            "duration",
+            duration_value,
+            f"longer than {MAX_RECORDED_TIME:.4g} s (292 years), the latest time a recording holds "
+            "(whole nanoseconds in a signed 64-bit integer, as .mcap and .rrd store them)",
         )
     every = record_every if record_every is not None else sim.record.every
     try:

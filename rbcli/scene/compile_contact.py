@@ -28,7 +28,7 @@ from rbcli.physics.contact.parameters import (
 from rbcli.physics.contact.tables import ContactTable, contact_table
 from rbcli.physics.model import Model
 from rbcli.physics.rotation import quat_to_matrix
-from rbcli.scene.spec import BodySpec, MaterialSpec, SceneSpec
+from rbcli.scene.spec import BodySpec, MaterialSpec, SceneError, SceneIssue, SceneSpec
 
 
 @dataclass(frozen=True)
@@ -99,7 +99,8 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
     assert contact is not None
     n = model.body_count
     base = contact.material.over(MaterialSpec(None, DEFAULT_RESTITUTION, DEFAULT_FRICTION))
-    g = float(np.linalg.norm(spec.gravity)) if spec.gravity is not None else 0.0
+    with np.errstate(over="ignore"):  # an absurd gravity (1e300) overflows to inf: refused below, no warning
+        g = float(np.linalg.norm(spec.gravity)) if spec.gravity is not None else 0.0
     sphere_body, offsets, radii = [], [], []
     stiffness = np.zeros(n)
     zeta = np.zeros(n)
@@ -130,8 +131,18 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
         if material.stiffness is not None:
             stiffness[b] = material.stiffness
         else:
-            stiffness[b] = float(default_body_stiffness(model.body_mass[b : b + 1], min_radius[b : b + 1], g)[0])
+            with np.errstate(all="ignore"):
+                stiffness[b] = float(default_body_stiffness(model.body_mass[b : b + 1], min_radius[b : b + 1], g)[0])
             stiffness[b] /= support[b]
+            if not 0.0 < stiffness[b] < math.inf:
+                # found by fuzzing: gravity 9.8e300 gave k = inf, numpy warnings on the terminal and NaN forces
+                message = (
+                    f"body '{body.name}': its contact stiffness, from its mass {model.body_mass[b]:.4g} kg, sphere "
+                    f"radius {min_radius[b]:.4g} m and gravity {g:.4g} m/s^2, is {stiffness[b]:.4g} N/m, not a "
+                    "positive finite number"
+                )
+                expected = "masses, sizes and gravity in SI units, or a material stiffness"
+                raise SceneError([SceneIssue(body.location, message, expected)])
     colliding = np.isfinite(min_radius)
     stiffness[~colliding] = 1.0  # never used: such a body has no spheres; keeps the pair formula finite
     # static and kinematic bodies: infinite mass for contact, their wrench held at zero (they keep P and L)
@@ -155,8 +166,9 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
         plane_friction=[p.material.over(base).friction for p in planes],
     )
     movable = colliding & ~static
-    dt_crit, worst = stable_step(model.body_mass, stiffness * support, np.where(colliding, zeta, 0.0), movable,
-                                 planes=bool(planes))  # fmt: skip
+    with np.errstate(all="ignore"):  # a huge stiffness over a tiny mass: dt_crit 0 (a warning of its own)
+        dt_crit, worst = stable_step(model.body_mass, stiffness * support, np.where(colliding, zeta, 0.0), movable,
+                                     planes=bool(planes))  # fmt: skip
     summary = ContactSummary(
         sphere_count=int(table.sphere_radius.shape[0]),
         plane_count=len(planes),

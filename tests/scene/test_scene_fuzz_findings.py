@@ -86,3 +86,34 @@ def test_warm_up_leaves_an_out_of_bounds_state_to_the_run(tmp_path):
     summary = run(compiled, [memory])
     assert summary.status == "diverged" and "angular" in summary.message
     assert np.array_equal(memory.trajectory().step, [0])
+
+
+def test_a_contact_stiffness_that_overflows_is_a_located_error():
+    """gravity 9.81e300 m/s^2 with contact: the stiffness derived from it (k ~ M g / overlap) was inf, numpy
+    overflow and invalid-value warnings reached the terminal and the run diverged on NaN forces."""
+    text = (
+        "simulation: {dt: 0.001, steps: 5, integrator: split2}\ngravity: [0, 0, -9.81e+300]\ncontact: {ground: 0}\n"
+        "bodies:\n  - {name: ball, shape: {type: sphere, radius: 0.1}, spacing: 0.05, density: 100}\n"
+    )
+    [error] = errors(text)
+    assert (error.location.line, error.location.column) == (5, 5)
+    assert error.message.startswith("body 'ball': its contact stiffness, from its mass")
+    assert "gravity inf m/s^2, is inf N/m, not a positive finite number" in error.message
+
+
+def test_a_duration_beyond_what_a_recording_holds_is_refused(tmp_path):
+    """`rbsim run --dt 4.6e16 --duration 4.6e16` ended in a struct.error traceback in the MCAP writer: the
+    step's time in nanoseconds did not fit 64 bits. The bound is 2^63 - 1 ns (.rrd's signed int64)."""
+    scene = tmp_path / "s.yaml"
+    scene.write_text("simulation: {dt: 0.001, steps: 5}\nbodies:\n" + BODY.format(s=1, m=1))
+    result = CliRunner().invoke(app, ["run", str(scene), "--dt", "4.6e16", "--duration", "4.6e16", "-o", "x.mcap"])
+    assert result.exit_code == 1 and result.exception.__class__ is SystemExit
+    assert result.stderr.startswith("error: --duration 4.6e+16: longer than 9.223e+09 s (292 years)")
+    assert not (tmp_path / "x.mcap").exists()
+    with pytest.raises(ValueError, match=r"^duration=10000000000.0: longer than"):
+        rbcli.prepare(scene, dt=1e9, duration=1e10)
+    rbcli.prepare(scene, dt=1e9, duration=9e9)  # 9e9 s fits
+    text = "simulation: {dt: 1.0e+16, duration: 1.0e+17}\nbodies:\n" + BODY.format(s=1, m=1)
+    [error] = errors(text)
+    assert (error.location.line, error.location.column) == (1, 1)
+    assert error.message.startswith("simulation: simulation.duration=1e+17: longer than 9.223e+09 s")
