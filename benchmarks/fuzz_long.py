@@ -58,6 +58,7 @@ from fuzz_cases import (  # noqa: E402
 from hypothesis import HealthCheck, Phase, assume, given, settings  # noqa: E402
 from hypothesis import seed as seed_examples  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
+from hypothesis.errors import UnsatisfiedAssumption  # noqa: E402
 
 WEIGHTS = {
     "load-valid": 0.12,
@@ -138,6 +139,9 @@ def property_for(target: str, findings: Findings, stop_at: float):  # noqa: C901
                     body(value)
             except AssertionError as exc:
                 findings.fail(target, exc, data)
+            except UnsatisfiedAssumption:
+                findings.examples[target] -= 1  # hypothesis draws another example instead
+                raise
             except Exception as exc:  # an exception that escaped rbsim: the finding
                 findings.fail(target, exc, data)
 

@@ -110,6 +110,13 @@ def test_rerun_reader_crash_on_a_damaged_rrd():
     assert "panicked" not in result.stderr and "Traceback" not in result.stderr
 
 
+def test_a_damaged_mcap_whose_invariants_decode_wrong_raises_value_error():
+    """Found by benchmarks/fuzz_long.py: a .mcap with a few damaged bytes decoded into invariants that were
+    protobuf classes, and rbcli.read_recording raised TypeError (the API promises ValueError)."""
+    with pytest.raises(ValueError, match=r"not a readable rbsim \.mcap recording \(TypeError: float\(\) argument"):
+        rbcli.read_recording(DATA / "damaged_invariants.mcap")
+
+
 MESHES = write_mesh_files()
 
 
