@@ -2,19 +2,18 @@
 
 A real `rbsim run` subprocess of 10 tumbling bodies recording every step, at 4,000 and 40,000 steps, to
 .mcap and to .rrd; its peak resident set size comes from the kernel (`os.wait4`'s rusage of that child,
-so no other process of the test session counts). The long run's states alone are 40,000 x 10 x 13 x 8 B
-= 42 MB (the .mcap is ~50 MB): a run that kept its frames would grow by at least that much, so the bound
-on the growth, 20 MiB, is generous (measured: +2.5 MiB for .mcap, +3.1 MiB for .rrd) and still fails
-such a run. The control shows that the measurement sees such growth: `rbcli.simulate`, which keeps every
-frame in memory by design, grows by more than the bound over the same two lengths (+112 MiB). ~12 s.
+started by a small launcher, so the test process's own size does not count). The long run's states
+alone are 40,000 x 10 x 13 x 8 B = 42 MB (the .mcap is ~50 MB): a run that kept its frames would grow by
+at least that much, so the bound on the growth, 20 MiB, is generous (measured: +2.5 MiB for .mcap,
++3.1 MiB for .rrd) and still fails such a run. The control shows that the measurement sees such growth:
+`rbcli.simulate`, which keeps every frame in memory by design, grows by more than the bound over the
+same two lengths (+112 MiB). ~12 s.
 """
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 import pytest
@@ -39,15 +38,25 @@ bodies:
 """
 
 
+# Linux counts the resident set a process had before exec in its peak (ru_maxrss), and a forked child
+# starts with its parent's: children of the test process (hundreds of MB after a few tests) would all peak
+# at its size. So a small Python process starts the command and reports that grandchild's own peak.
+LAUNCHER = """
+import os, subprocess, sys
+with open(os.devnull, "w") as out:
+    process = subprocess.Popen(sys.argv[1:], stdout=out, stderr=sys.stderr)
+    _, status, usage = os.wait4(process.pid, 0)
+print(os.waitstatus_to_exitcode(status), usage.ru_maxrss)
+"""
+
+
 def peak_rss_bytes(args: list[str]) -> int:
-    """Peak resident set size of one child process [bytes] (Linux reports ru_maxrss in KiB)."""
-    with tempfile.TemporaryFile() as err:  # a file, not a pipe: wait4 must not wait on a full pipe
-        process = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=err)
-        _, status, usage = os.wait4(process.pid, 0)
-        process.returncode = os.waitstatus_to_exitcode(status)
-        err.seek(0)
-        assert process.returncode == 0, err.read().decode()
-    return usage.ru_maxrss * 1024
+    """Peak resident set size of a command's own process [bytes] (Linux reports ru_maxrss in KiB)."""
+    result = subprocess.run([sys.executable, "-c", LAUNCHER, *args], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    code, kib = map(int, result.stdout.split())
+    assert code == 0, result.stderr
+    return kib * 1024
 
 
 @pytest.fixture(scope="module")
