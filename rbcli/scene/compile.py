@@ -219,11 +219,12 @@ def run_settings(
         )
     every = record_every if record_every is not None else sim.record.every
     try:
-        whole = not isinstance(every, bool | str) and int(every) == every >= 1
+        # the compiled loops take it as an int64: 2^70 was an OverflowError traceback (found by fuzzing)
+        whole = not isinstance(every, bool | str) and int(every) == every >= 1 and int(every) < 2**63
     except (TypeError, ValueError, OverflowError):
         whole = False
     if not whole:
-        raise refuse("record_every", every, "must be a whole number of steps, at least 1")
+        raise refuse("record_every", every, "must be a whole number of steps, at least 1 (and below 2^63)")
     name = integrator if integrator is not None else sim.integrator
     from rbcli.physics.integrators import integrator_names
 

@@ -117,3 +117,17 @@ def test_a_duration_beyond_what_a_recording_holds_is_refused(tmp_path):
     [error] = errors(text)
     assert (error.location.line, error.location.column) == (1, 1)
     assert error.message.startswith("simulation: simulation.duration=1e+17: longer than 9.223e+09 s")
+
+
+def test_a_record_every_beyond_int64_is_refused_naming_the_option(tmp_path):
+    """`--record-every 1180591620717411303424` (2^70) passed the checks and the run loop raised an
+    OverflowError traceback handing it to the compiled kernel (an int64)."""
+    scene = tmp_path / "s.yaml"
+    scene.write_text("simulation: {dt: 0.001, steps: 5}\nbodies:\n" + BODY.format(s=1, m=1))
+    out = str(tmp_path / "x.mcap")
+    result = CliRunner().invoke(app, ["run", str(scene), "--record-every", str(2**70), "-o", out])
+    assert result.exit_code == 1 and result.exception.__class__ is SystemExit
+    assert result.stderr.startswith(f"error: --record-every {2**70}: must be a whole number of steps, at least 1")
+    result = CliRunner().invoke(app, ["run", str(scene), "--record-every", str(2**63 - 1), "-o", out, "-q"])
+    assert result.exit_code == 0, result.stderr  # the largest int64 runs: it records the first and last step
+    assert list(rbcli.read_recording(out).step) == [0, 5]
