@@ -126,7 +126,8 @@ def build_model(
     """Precompute every body's mass properties; returns the model and each body's centre of mass in
     its user frame, shape (body_count, 3) (needed to place bodies and to report particles).
 
-    Raises ValueError naming the body when its inertia is singular (collinear or single-point cloud).
+    Raises ValueError naming the body when its inertia is singular (collinear or single-point cloud) or
+    too small to invert in float64.
     """
     count = len(names)
     body_mass = np.empty(count)
@@ -148,6 +149,11 @@ def build_model(
             raise ValueError(
                 f"body {names[b]!r}: its inertia I0 is singular (principal moments {body_inertia[b].tolist()}); "
                 "its particles are collinear or a single point, so it has no inertia about some axis"
+            )
+        if body_inertia[b].min() < 1.0 / np.finfo(float).max:  # omega = L / I: 1 / I must be a finite float
+            raise ValueError(
+                f"body {names[b]!r}: its principal moments {body_inertia[b].tolist()} kg m^2 are so small that "
+                "1 / I overflows float64 (masses or sizes far too small: masses in kg, positions in m)"
             )
     body_frame_q = matrix_to_quat(axes) if count else np.zeros((0, 4))
     # particle offsets along the principal axes: E^T r0 for each particle's body

@@ -12,6 +12,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+# The largest magnitude of any state component a run accepts (physics/step.py BLOWUP_LIMIT: a state beyond
+# it counts as diverged); here, without numba, so that `validate` can refuse an initial state beyond it.
+STATE_LIMIT = 1e100
+
 
 @dataclass
 class State:

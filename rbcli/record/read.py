@@ -257,7 +257,12 @@ def read_trajectory(path: str | Path) -> Trajectory:
         raise
     except Exception as exc:  # the readers raise several types for damaged or foreign files
         raise ValueError(f"{str(path)!r}: not a readable rbsim .{fmt} recording ({exc})") from exc
-    return trajectory_from_run(run)
+    try:
+        return trajectory_from_run(run)
+    except ValueError:
+        raise
+    except Exception as exc:  # found by fuzzing: a damaged .mcap decoded into invariants of the wrong type
+        raise ValueError(f"{str(path)!r}: not a readable rbsim .{fmt} recording ({type(exc).__name__}: {exc})") from exc
 
 
 def trajectory_from_run(run: RecordedRun) -> Trajectory:

@@ -12,7 +12,7 @@ from rbcli.physics.forces import ForceTables
 from rbcli.physics.frames import internal_orientation
 from rbcli.physics.model import Model, build_model
 from rbcli.physics.rotation import quat_rotate, quat_rotate_inverse
-from rbcli.physics.state import State
+from rbcli.physics.state import STATE_LIMIT, State
 from rbcli.scene.compile_contact import ContactSummary, compile_contact, kinematic_initial_state, kinematic_rows
 from rbcli.scene.compile_forces import compile_force_tables
 from rbcli.scene.spec import SceneError, SceneIssue, SceneSpec
@@ -121,12 +121,43 @@ def compile_model(spec: SceneSpec) -> CompiledModel:
         inertia.setflags(write=False)
         model = replace(model, body_inertia=inertia)
     state = initial_state(spec, model)
+    _check_initial_state(spec, state)
     body_index = {name: i for i, name in enumerate(model.body_names)}
     contact, summary = compile_contact(spec, model, centres) if spec.contact is not None else (None, None)
     motions = kinematic_rows(spec, model, state) if spec.contact is not None else []
     forces = compile_force_tables(spec.gravity, spec.forces, model, body_index, centres, contact, motions)
     kinematic_initial_state(forces, model, state)
     return CompiledModel(model, forces, state, summary)
+
+
+# Recordings store times as whole nanoseconds: int64 in .rrd, uint64 in .mcap; the smaller bound [s]
+MAX_RECORDED_TIME = (2**63 - 1) * 1e-9
+
+
+def _check_initial_state(spec: SceneSpec, state: State) -> None:
+    """SceneError, located at each body, when its initial position, momentum or angular momentum is
+    non-finite or beyond STATE_LIMIT (1e100): the run would stop at step 0 as diverged. Found by fuzzing:
+    a velocity of 1e300 loaded, and `rbsim run` then failed with a SimulationDiverged traceback."""
+    issues = []
+    quantities = (
+        ("position", "m", state.x),
+        ("momentum", "kg m/s", state.P),
+        ("angular momentum", "kg m^2/s", state.L),
+    )
+    for b, body in enumerate(spec.bodies):  # once per body at set-up
+        for name, unit, values in quantities:
+            value = values[b]
+            if not np.all(np.abs(value) <= STATE_LIMIT):  # also catches nan
+                issues.append(
+                    SceneIssue(
+                        body.location,
+                        f"body '{body.name}': initial {name} [{', '.join(f'{v:.4g}' for v in value)}] {unit} is beyond "
+                        f"{STATE_LIMIT:g}, where a run counts the state as diverged",
+                        "positions, velocities and angular velocities in SI units, well below 1e100",
+                    )
+                )
+    if issues:
+        raise SceneError(issues)
 
 
 def run_settings(
@@ -180,13 +211,22 @@ def run_settings(
             dt_value if blame == "dt" else duration_value,
             f"dt = {dt_value:g} s is longer than duration = {duration_value:g} s (at least one step is needed)",
         )
+    if duration_value > MAX_RECORDED_TIME:
+        # found by fuzzing: --dt 4.6e16 --duration 4.6e16 ended in a struct.error traceback in the MCAP writer
+        raise refuse(
+            "duration",
+            duration_value,
+            f"longer than {MAX_RECORDED_TIME:.4g} s (292 years), the latest time a recording holds "
+            "(whole nanoseconds in a signed 64-bit integer, as .mcap and .rrd store them)",
+        )
     every = record_every if record_every is not None else sim.record.every
     try:
-        whole = not isinstance(every, bool | str) and int(every) == every >= 1
+        # the compiled loops take it as an int64: 2^70 was an OverflowError traceback (found by fuzzing)
+        whole = not isinstance(every, bool | str) and int(every) == every >= 1 and int(every) < 2**63
     except (TypeError, ValueError, OverflowError):
         whole = False
     if not whole:
-        raise refuse("record_every", every, "must be a whole number of steps, at least 1")
+        raise refuse("record_every", every, "must be a whole number of steps, at least 1 (and below 2^63)")
     name = integrator if integrator is not None else sim.integrator
     from rbcli.physics.integrators import integrator_names
 

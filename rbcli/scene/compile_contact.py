@@ -33,7 +33,7 @@ from rbcli.physics.model import Model
 from rbcli.physics.rotation import quat_to_matrix
 from rbcli.physics.state import State
 from rbcli.scene.compile_forces import KinematicRow
-from rbcli.scene.spec import BodySpec, MaterialSpec, SceneSpec
+from rbcli.scene.spec import BodySpec, MaterialSpec, SceneError, SceneIssue, SceneSpec
 
 
 @dataclass(frozen=True)
@@ -104,7 +104,8 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
     assert contact is not None
     n = model.body_count
     base = contact.material.over(MaterialSpec(None, DEFAULT_RESTITUTION, DEFAULT_FRICTION))
-    g = float(np.linalg.norm(spec.gravity)) if spec.gravity is not None else 0.0
+    with np.errstate(over="ignore"):  # an absurd gravity (1e300) overflows to inf: refused below, no warning
+        g = float(np.linalg.norm(spec.gravity)) if spec.gravity is not None else 0.0
     sphere_body, offsets, radii = [], [], []
     stiffness = np.zeros(n)
     zeta = np.zeros(n)
@@ -135,8 +136,18 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
         if material.stiffness is not None:
             stiffness[b] = material.stiffness
         else:
-            stiffness[b] = float(default_body_stiffness(model.body_mass[b : b + 1], min_radius[b : b + 1], g)[0])
+            with np.errstate(all="ignore"):
+                stiffness[b] = float(default_body_stiffness(model.body_mass[b : b + 1], min_radius[b : b + 1], g)[0])
             stiffness[b] /= support[b]
+            if not 0.0 < stiffness[b] < math.inf:
+                # found by fuzzing: gravity 9.8e300 gave k = inf, numpy warnings on the terminal and NaN forces
+                message = (
+                    f"body '{body.name}': its contact stiffness, from its mass {model.body_mass[b]:.4g} kg, sphere "
+                    f"radius {min_radius[b]:.4g} m and gravity {g:.4g} m/s^2, is {stiffness[b]:.4g} N/m, not a "
+                    "positive finite number"
+                )
+                expected = "masses, sizes and gravity in SI units, or a material stiffness"
+                raise SceneError([SceneIssue(body.location, message, expected)])
     colliding = np.isfinite(min_radius)
     stiffness[~colliding] = 1.0  # never used: such a body has no spheres; keeps the pair formula finite
     # static and kinematic bodies: infinite mass for contact, their wrench held at zero (they keep P and L)
@@ -146,8 +157,9 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
     plane_zeta = [damping_ratio(e)
                   for e in (p.material.over(base).restitution or DEFAULT_RESTITUTION for p in planes)]  # fmt: skip
     movable = colliding & ~static
-    dt_crit, worst = stable_step(model.body_mass, stiffness * support, np.where(colliding, zeta, 0.0), movable,
-                                 planes=bool(planes))  # fmt: skip
+    with np.errstate(all="ignore"):  # a huge stiffness over a tiny mass: dt_crit 0 (a warning of its own)
+        dt_crit, worst = stable_step(model.body_mass, stiffness * support, np.where(colliding, zeta, 0.0), movable,
+                                     planes=bool(planes))  # fmt: skip
     table = contact_table(
         sphere_body=np.concatenate(sphere_body) if sphere_body else [],
         sphere_offset=np.concatenate(offsets) if offsets else np.zeros((0, 3)),
