@@ -10,6 +10,9 @@ of the spacing so a line never passes exactly through a mesh edge or vertex (whi
 
 from __future__ import annotations
 
+import contextlib
+import logging
+from collections.abc import Iterator
 from pathlib import Path
 from types import ModuleType
 
@@ -32,7 +35,8 @@ def read_mesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
             raise MeshError(f"cannot read '{path.name}': only .obj meshes are supported without trimesh installed")
         return _read_obj(path)
     try:
-        mesh = trimesh.load(str(path), force="mesh", process=True)
+        with _quiet_trimesh():
+            mesh = trimesh.load(str(path), force="mesh", process=True)
     except Exception as exc:  # trimesh raises many kinds for bad files; all mean "unreadable"
         raise MeshError(f"cannot read mesh file '{path.name}': {exc}") from None
     vertices = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), dtype=float)
@@ -40,6 +44,20 @@ def read_mesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
     if len(faces) == 0:
         raise MeshError(f"mesh file '{path.name}' holds no triangles")
     return vertices, faces
+
+
+@contextlib.contextmanager
+def _quiet_trimesh() -> Iterator[None]:
+    """trimesh logs what it repairs, with tracebacks (an ASCII STL with a garbled facet normal: "failed to
+    extract face_normals" and two chained tracebacks, while the mesh itself reads fine and rbsim computes
+    its own normals): nothing of it is for the user, whose errors rbsim reports itself."""
+    logger = logging.getLogger("trimesh")
+    level = logger.level
+    logger.setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
 
 
 def _trimesh() -> ModuleType | None:
