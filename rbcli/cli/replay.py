@@ -229,11 +229,19 @@ def _save(file: Path, save: Path) -> None:
         raise messages.fail(f"--save {str(save)!r}: unknown format{guess}", expected="a file name ending in .rrd")
     if save.resolve() == file.resolve():
         raise messages.fail(f"--save {str(save)!r} is the input file", expected="another file name")
-    save.parent.mkdir(parents=True, exist_ok=True)
-    if file.suffix.lower() == ".rrd":
-        shutil.copyfile(file, save)
-        messages.status(f"{file} is already an .rrd; copied to {save}")
-        return
+    from rbcli.record.output_file import OutputError, check_output
+
+    try:  # before any work, as `run -o` does: a folder, a file where a folder should be, no permission
+        check_output(save)
+        save.parent.mkdir(parents=True, exist_ok=True)
+        if file.suffix.lower() == ".rrd":
+            shutil.copyfile(file, save)
+            messages.status(f"{file} is already an .rrd; copied to {save}")
+            return
+    except OutputError as exc:
+        raise messages.fail(str(exc).replace("output ", "--save ", 1)) from None
+    except OSError as exc:
+        raise messages.fail(f"--save {str(save)!r}: {exc.strerror or exc}") from None
     from rbcli.record.convert import mcap_to_rrd
 
     try:
