@@ -46,16 +46,64 @@ def info(
     if file.suffix.lower() == ".parquet":
         _sweep_info(file, as_json)
         return
-    try:
+
+    def read(file: Path) -> tuple[RunInfo, dict[str, str], list[str], str]:
         fmt = recording_format(file)
         summary = summarize(file)
+        return (summary, *invariant_kinds(file, fmt, summary))
+
+    try:
+        # rerun's .rrd reader aborts the process on some damaged files (a Rust panic): read those apart
+        is_rrd = file.suffix.lower() == ".rrd"
+        summary, kinds, terms, why = _in_child(read, file) if is_rrd else read(file)
     except Exception as exc:  # a corrupt or foreign file: say so, never a traceback
         raise messages.fail(f"cannot read {file}: {exc}") from None
-    kinds, terms, why = invariant_kinds(file, fmt, summary)
     if as_json:
         typer.echo(json.dumps(info_json(summary, kinds, terms, why), indent=2))
         return
     typer.echo(info_text(summary, kinds, terms, why))
+
+
+def _in_child(function, *args):  # noqa: ANN001, ANN002, ANN202
+    """function(*args) in a forked child, its result (or exception) pickled back: a reader that aborts
+    the process (rerun-sdk 0.41's .rrd reader panics in arrow on some damaged payloads, found by fuzzing)
+    then costs the child, and the user gets one line. The child's stderr goes nowhere (the panic's
+    backtrace); where fork does not exist, the function runs here."""
+    import os
+    import pickle
+    import signal
+
+    if not hasattr(os, "fork"):  # pragma: no cover - Windows
+        return function(*args)
+    read_end, write_end = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: never returns
+        code = 0
+        try:
+            os.close(read_end)
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, 2)
+            try:
+                payload = pickle.dumps((True, function(*args)))
+            except Exception as exc:  # noqa: BLE001 - handed to the parent as it is
+                payload = pickle.dumps((False, ValueError(messages.one_line(str(exc)) or type(exc).__name__)))
+            with os.fdopen(write_end, "wb") as pipe:
+                pipe.write(payload)
+        except BaseException:  # noqa: BLE001
+            code = 1
+        finally:
+            os._exit(code)
+    os.close(write_end)
+    with os.fdopen(read_end, "rb") as pipe:
+        data = pipe.read()
+    _, status = os.waitpid(pid, 0)
+    if os.WIFSIGNALED(status) or not data:
+        how = f"killed by {signal.Signals(os.WTERMSIG(status)).name}" if os.WIFSIGNALED(status) else "no result"
+        raise ValueError(f"rerun's .rrd reader crashed on this file ({how}): a damaged recording?")
+    ok, value = pickle.loads(data)
+    if not ok:
+        raise value
+    return value
 
 
 def invariant_kinds(file: Path, fmt: str, summary: RunInfo) -> tuple[dict[str, str], list[str], str]:
