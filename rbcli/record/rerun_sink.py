@@ -223,6 +223,9 @@ class SinkRerun:
         rec.log("scene", rr.TextDocument(header.scene_text, media_type=rr.MediaType.TEXT), static=True)
         rec.log("run", rr.TextDocument(_markdown_table(props), media_type=rr.MediaType.MARKDOWN), static=True)
         rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        # on disk now, before any frame: rerun's batcher would write them only at its first flush, often
+        # seconds into a run, and a run killed before that left frames without their run's parameters
+        rec.flush(timeout_sec=10.0)
         # descriptor and arrow type of each Transform3D column, taken from rerun itself, so the per-flush
         # arrays can be built straight from numpy (zero copy) instead of through the archetype helpers
         ref = [

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -183,3 +184,40 @@ def test_packed_colours_are_rerun_own_encoding():
     columns = rr.Points3D.columns(positions=np.zeros((len(PALETTE), 3)), colors=PALETTE)
     colors = next(c for c in columns if "colors" in c.component_descriptor().component)
     assert np.asarray(colors.component_batch.as_arrow_array()).tolist() == _rgba32(PALETTE).tolist()
+
+
+def test_a_run_killed_right_after_open_keeps_its_parameters(tmp_path):
+    """SinkRerun.open flushes the run's parameters and scene to disk: a process SIGKILLed before any frame
+    leaves an .rrd whose truncated read still names the scene, bodies and dt (rerun's batcher used to hold
+    them until its first flush, seconds into a run)."""
+    import os
+    import sys
+
+    from rbcli.record.read import summarize
+
+    path = tmp_path / "run.rrd"
+    script = (
+        "import os, sys\n"
+        "from rbcli.api import prepare\n"
+        "from rbcli.record.rerun_sink import SinkRerun\n"
+        "from rbcli.runner.loop import run_header\n"
+        "sink = SinkRerun(sys.argv[2])  # kept: a collected RecordingStream flushes as it goes\n"
+        "sink.open(run_header(prepare(sys.argv[1])))\n"
+        "os.kill(os.getpid(), 9)\n"
+    )
+    scene = Path(__file__).resolve().parents[2] / "scenes" / "tutorial.yaml"
+    # rerun's batcher told never to flush by itself, as when a run is killed before its first flush tick
+    never = {
+        "RERUN_FLUSH_TICK_SECS": "1000",
+        "RERUN_FLUSH_NUM_BYTES": "1000000000",
+        "RERUN_FLUSH_NUM_ROWS": "1000000000",
+    }
+    env = {**os.environ, **never}
+    done = subprocess.run(
+        [sys.executable, "-c", script, str(scene), str(path)], capture_output=True, timeout=120, env=env
+    )
+    assert done.returncode == -9, done.stderr
+    info = summarize(path)
+    assert info.frames == 0 and info.scene_name == "t-handle"
+    assert info.body_names == ("handle",) and info.dt == 0.001
+    assert "name: t-handle" in read_rrd(path, bodies=False).scene_text
