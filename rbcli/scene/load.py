@@ -176,14 +176,6 @@ def _analyse(
 
         contact = contact_from_mapping(data["contact"], issues)
         check_contact_bodies(bodies, entries, issues)
-        if simulation is not None and simulation.tolerance is not None:
-            # found by fuzzing: run_settings refused this with a ValueError that escaped `validate` as a traceback
-            issues.error(
-                ("simulation", "tolerance"),
-                "adaptive stepping (a tolerance) does not run contact yet: contact forces are not smooth",
-                "no tolerance with a `contact:` section (a fixed dt, and contact.substeps: auto)",
-                key=True,
-            )
         if simulation is not None and "integrator" not in data["simulation"]:
             # the tutorial's default (euler-matrix) gains energy in every bounce; split2 is symplectic,
             # second order and evaluates the contact forces once per step

@@ -23,18 +23,21 @@ def errors(text: str) -> list:
     return [i for i in issues if i.severity == "error"]
 
 
-def test_a_tolerance_with_contact_is_a_located_error():
-    """run_settings refused adaptive stepping with contact by a ValueError that escaped `rbcli.load_scene`
-    and `rbsim validate` as a traceback; now an error at simulation.tolerance."""
+def test_a_tolerance_with_contact_loads_and_compiles():
+    """Found by fuzzing: run_settings refused adaptive stepping with contact by a ValueError that escaped
+    `rbcli.load_scene` and `rbsim validate` as a traceback. Adaptive dopri5 now runs contact
+    (tests/physics/test_adaptive_contact.py): the scene loads and compiles with its tolerance."""
+    from rbcli.scene.compile import compile_scene
+
     text = (
         "simulation: {dt: 0.001, steps: 5, integrator: dopri5, tolerance: 1.0e-6}\n"
         "contact: {ground: 0.0}\n"
         "bodies:\n"
         "  - {name: b, shape: {type: sphere, radius: 0.1}, spacing: 0.05, density: 100, position: [0, 0, 1]}\n"
     )
-    [error] = errors(text)
-    assert (error.location.line, error.location.column) == (1, text.index("tolerance") + 1)  # the key
-    assert error.message.startswith("simulation.tolerance: adaptive stepping (a tolerance) does not run contact")
+    spec, issues = analyse_scene_text(text, "s.yaml")
+    assert spec is not None and not [i for i in issues if i.severity == "error"], issues
+    assert compile_scene(spec).settings.tolerance == 1e-6
 
 
 @pytest.mark.parametrize(

@@ -59,10 +59,10 @@ def test_validate_command_says_ok_or_located_errors(text):
         path = Path(folder) / "scene.yaml"
         path.write_text(text, encoding="utf-8", errors="surrogatepass")
         result = CliRunner().invoke(app, ["validate", str(path)])
-        check_command(result, codes={0, 1}, message_on="stdout")  # validate prints its report on stdout
-        lines = result.stdout.splitlines()
+        check_command(result, codes={0, 1})  # errors on stderr (cli/messages.py), "ok" on stdout
+        lines = result.stderr.splitlines()
         errors = [line for line in lines if ": error: " in line]
-        assert (result.exit_code == 1) == bool(errors), result.stdout
+        assert (result.exit_code == 1) == bool(errors), result.stderr
         for line in errors:
             match = LOCATED.match(line)
             assert match and match["file"] == str(path), line
