@@ -28,8 +28,12 @@ that term (the kick would no longer be symmetric); they are taken out of the kic
 own symmetric flow instead, K(h) = K_c(h/2) D(h) K_c(h/2) (forces/damping.py), which keeps the order.
 
 Round-off: m is carried from one step to the next in the scratch (rebuilt as R^T L only when something
-else wrote q or L) and its sums are compensated, and the turns rotate m in the form m + (cos - 1) m +
-sin m_perp: near the separatrix each of the older choices leaked ~1e-11 rad per step (docs/accuracy.md).
+else wrote q or L), the turns rotate m in the form m + (cos - 1) m + sin m_perp, and in split4 m's sums
+are compensated: near the separatrix each of the older choices leaked ~1e-11 rad per step
+(docs/accuracy.md). split2 skips the compensation: its truncation error is far above that floor at any
+step it is used at, and it would cost ~20 % per body-step. With dampers or drag a step costs the
+dissipation flow besides (the 4-link spring chain: 0.9 -> 2.3 us per step for split2, 4.6 -> 8 us for
+split4, measured on a loaded 2-core machine).
 
 Axis order: which moment gets the outer half steps and which the full middle step changes the error
 constant by up to 1000x. Measured over 20 s at dt = 0.01 against the exact solution (flip:
@@ -91,16 +95,18 @@ WEIGHTS = np.array([1.0])
 @numba.njit(**STEP_KERNEL)
 def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One split2 step of every body, in place (one force evaluation, at t + dt/2)."""
-    compose(model, forces, force_data, t, dt, WEIGHTS, x, q, P, L, F, tau, scratch)
+    compose(model, forces, force_data, t, dt, WEIGHTS, x, q, P, L, F, tau, scratch, False)
 
 
 # compose and its two passes are inlined at numba level: a call boundary costs a reference-count
 # update per array argument (the model and force tables hold dozens), measured 2.25 -> 1.65 us per
 # step for one body, and 93 -> 88 ns per body-step at 100 bodies.
 @numba.njit(cache=True, inline="always")
-def compose(model, forces, force_data, t, h, weights, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001
+def compose(model, forces, force_data, t, h, weights, x, q, P, L, F, tau, scratch, compensate) -> None:  # noqa: ANN001
     """The composition split2(w_{s-1} h) ... split2(w_0 h) of every body, in place.
 
+    compensate: m's sums in the turns compensated (split4, which reaches the round-off floor; split2's
+    error is its truncation long before, and the compensation would cost it ~20 % per body-step).
     weights (s,) must be symmetric for the composition to be; force evaluation i happens at the
     midpoint of stage i, t + (w_0 + ... + w_{i-1} + w_i/2) h.
     With dampers or drag (forces/damping.py) the kick K(h) is K_c(h/2) D(h) K_c(h/2): F_c without the
@@ -108,7 +114,7 @@ def compose(model, forces, force_data, t, h, weights, x, q, P, L, F, tau, scratc
     """
     count = weights.shape[0]
     dissipative = dissipation_present(forces.spring, forces.drag)
-    _drift_to_first_kick(model, weights[0] * h, x, q, P, L, scratch)
+    _drift_to_first_kick(model, weights[0] * h, x, q, P, L, scratch, compensate)
     elapsed = 0.5 * weights[0] * h
     for i in range(count):
         accumulate_wrench(model, forces, force_data, t + elapsed, x, q, P, L, F, tau, not dissipative)
@@ -120,7 +126,9 @@ def compose(model, forces, force_data, t, h, weights, x, q, P, L, F, tau, scratc
             _half_kick(model, forces.has_torque, forces.torque_body, kick, q, P, L, F, tau, scratch)
             dissipation_flow(model, forces.spring, forces.drag, h_prev, x, q, P, L)
             _momentum_change_to_body(model, forces.has_torque, forces.torque_body, q, L, scratch)
-        _kick_and_drift(model, forces.has_torque, forces.torque_body, kick, h_prev, h_next, x, q, P, L, F, tau, scratch)
+        _kick_and_drift(
+            model, forces.has_torque, forces.torque_body, kick, h_prev, h_next, x, q, P, L, F, tau, scratch, compensate
+        )
         elapsed += 0.5 * (h_prev + h_next)
 
 
@@ -162,7 +170,7 @@ def _momentum_change_to_body(model, has_torque, torque_body, q, L, scratch) -> N
 
 
 @numba.njit(cache=True, inline="always")
-def _drift_to_first_kick(model, h, x, q, P, L, scratch) -> None:  # noqa: ANN001
+def _drift_to_first_kick(model, h, x, q, P, L, scratch, compensate) -> None:  # noqa: ANN001
     """D_x(h/2) T_a(h/2) T_b(h/2) T_c(h/2); leaves m and T_c's (cos, sin) in scratch.
     An isotropic body (a ball) turns by its exact free rotation T(h/2) instead (`_turn_isotropic`)."""
     for b in range(x.shape[0]):
@@ -183,11 +191,11 @@ def _drift_to_first_kick(model, h, x, q, P, L, scratch) -> None:  # noqa: ANN001
             m0, m1, m2 = rotate_inverse(w, qx, qy, qz, L[b, 0], L[b, 1], L[b, 2])
             e0, e1, e2 = 0.0, 0.0, 0.0
         c, s = half_turn(ka, 0.5 * h, m0, m1, m2, inv0, inv1, inv2)
-        m0, m1, m2, e0, e1, e2, w, qx, qy, qz = turn(ka, c, s, m0, m1, m2, e0, e1, e2, w, qx, qy, qz)
+        m0, m1, m2, e0, e1, e2, w, qx, qy, qz = turn(ka, c, s, m0, m1, m2, e0, e1, e2, w, qx, qy, qz, compensate)
         c, s = half_turn(kb, 0.5 * h, m0, m1, m2, inv0, inv1, inv2)
-        m0, m1, m2, e0, e1, e2, w, qx, qy, qz = turn(kb, c, s, m0, m1, m2, e0, e1, e2, w, qx, qy, qz)
+        m0, m1, m2, e0, e1, e2, w, qx, qy, qz = turn(kb, c, s, m0, m1, m2, e0, e1, e2, w, qx, qy, qz, compensate)
         c, s = half_turn(kc, 0.5 * h, m0, m1, m2, inv0, inv1, inv2)
-        m0, m1, m2, e0, e1, e2, w, qx, qy, qz = turn(kc, c, s, m0, m1, m2, e0, e1, e2, w, qx, qy, qz)
+        m0, m1, m2, e0, e1, e2, w, qx, qy, qz = turn(kc, c, s, m0, m1, m2, e0, e1, e2, w, qx, qy, qz, compensate)
         q[b, 0], q[b, 1], q[b, 2], q[b, 3] = w, qx, qy, qz
         scratch[b, 0], scratch[b, 1], scratch[b, 2] = m0, m1, m2
         scratch[b, _M_COMP], scratch[b, _M_COMP + 1], scratch[b, _M_COMP + 2] = e0, e1, e2
@@ -195,7 +203,9 @@ def _drift_to_first_kick(model, h, x, q, P, L, scratch) -> None:  # noqa: ANN001
 
 
 @numba.njit(cache=True, inline="always")
-def _kick_and_drift(model, has_torque, torque_body, kick, h_prev, h_next, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001
+def _kick_and_drift(
+    model, has_torque, torque_body, kick, h_prev, h_next, x, q, P, L, F, tau, scratch, compensate
+) -> None:  # noqa: ANN001
     """K(kick) T_c(h_prev/2) T_b(h_prev/2) [T_a D_x]((h_prev + h_next)/2) T_b(h_next/2) T_c(h_next/2).
 
     kick is h_prev, or h_prev / 2 when the dissipation flow took the other half's place (compose).
@@ -243,21 +253,21 @@ def _kick_and_drift(model, has_torque, torque_body, kick, h_prev, h_next, x, q, 
             c, s = half_turn(kc, 0.5 * h_prev, m0, m1, m2, inv0, inv1, inv2)
         else:  # m_c is what it was before the kick: the same turn as T_c of the previous pass
             c, s = scratch[b, 3], scratch[b, 4]
-        m0, m1, m2, e0, e1, e2, w, qx, qy, qz = turn(kc, c, s, m0, m1, m2, e0, e1, e2, w, qx, qy, qz)
+        m0, m1, m2, e0, e1, e2, w, qx, qy, qz = turn(kc, c, s, m0, m1, m2, e0, e1, e2, w, qx, qy, qz, compensate)
         c, s = half_turn(kb, 0.5 * h_prev, m0, m1, m2, inv0, inv1, inv2)
-        m0, m1, m2, e0, e1, e2, w, qx, qy, qz = turn(kb, c, s, m0, m1, m2, e0, e1, e2, w, qx, qy, qz)
+        m0, m1, m2, e0, e1, e2, w, qx, qy, qz = turn(kb, c, s, m0, m1, m2, e0, e1, e2, w, qx, qy, qz, compensate)
         h_mid = 0.5 * (h_prev + h_next)
         c, s = half_turn(ka, h_mid, m0, m1, m2, inv0, inv1, inv2)
-        m0, m1, m2, e0, e1, e2, w, qx, qy, qz = turn(ka, c, s, m0, m1, m2, e0, e1, e2, w, qx, qy, qz)
+        m0, m1, m2, e0, e1, e2, w, qx, qy, qz = turn(ka, c, s, m0, m1, m2, e0, e1, e2, w, qx, qy, qz, compensate)
         drift = h_mid / model.body_mass[b]
         x[b, 0] += drift * P[b, 0]
         x[b, 1] += drift * P[b, 1]
         x[b, 2] += drift * P[b, 2]
         if h_next != 0.0:
             c, s = half_turn(kb, 0.5 * h_next, m0, m1, m2, inv0, inv1, inv2)
-            m0, m1, m2, e0, e1, e2, w, qx, qy, qz = turn(kb, c, s, m0, m1, m2, e0, e1, e2, w, qx, qy, qz)
+            m0, m1, m2, e0, e1, e2, w, qx, qy, qz = turn(kb, c, s, m0, m1, m2, e0, e1, e2, w, qx, qy, qz, compensate)
             c, s = half_turn(kc, 0.5 * h_next, m0, m1, m2, inv0, inv1, inv2)
-            m0, m1, m2, e0, e1, e2, w, qx, qy, qz = turn(kc, c, s, m0, m1, m2, e0, e1, e2, w, qx, qy, qz)
+            m0, m1, m2, e0, e1, e2, w, qx, qy, qz = turn(kc, c, s, m0, m1, m2, e0, e1, e2, w, qx, qy, qz, compensate)
             scratch[b, 3], scratch[b, 4] = c, s
         else:  # end of the step: products of unit quaternions drift off |q| = 1 by round-off, a random walk
             norm = 1.0 / math.sqrt(w * w + qx * qx + qy * qy + qz * qz)
