@@ -315,8 +315,27 @@ Read with the tables below (timings from the machine named above; the ranking do
   they lose the intermediate-axis flip and the thin rod at every step studied, their energy drifts by 10 %
   to over 100 %, and they never reach 1e-6 rad in the studied range. Keep them for teaching and as the
   baseline. `semi-implicit-gyro` (shown in the fast-spin case only) blows up.
-- The intermediate-axis flip is unstable: round-off is amplified between flips, so over 20 s no method's
-  error goes below ~1e-9 to 1e-7 rad there, and the convergent methods flatten out at that level.
+- The intermediate-axis flip is unstable: an error in the distance to the separatrix moves every later
+  flip. rk4 and split4 reach ~7e-11 rad at dt = 1e-4 over 20 s (4e-10 over 100 s, 10^6 steps); the
+  studied steps stop far above that. *Why they once leaked ~1e-11 rad per step:* both rebuilt the body
+  momentum m = R(q)^T L from the state at every step. The flip's timing is set by m's small components
+  (2 E I_2 - |L|^2 = m_1^2 - m_3^2 / 3 for I = diag(1, 2, 3): m_2 = 10 does not enter), and R(q)^T L
+  gives them only to an ulp of |L| (~1e-15 on m_1 = 0.01), since q itself is rounded to an ulp: a fresh
+  error every step, measured as the error growing with the step count, not with dt (rk4 1.6e-7 at
+  dt = 1e-3, 1.4e-6 at 1e-4; split4 1.1e-7 at both). Evidence: carrying m from step to step in the
+  integrator's work array (rebuilt only when something else wrote q or L) took rk4 from 1.4e-6 to 7e-9;
+  compensated (Kahan) sums of m's increments to 7e-11, which no longer changes between dt = 5e-4 and
+  5e-5; the remaining 7e-11 is the float64 reference's own error (it differs by 6e-11 at t = 20 s from a
+  25-digit mpmath Taylor integration, which rk4 at dt = 1e-4 matches to 2.4e-12). split4 needed one
+  more change: its axis turns rotated m by (cos θ, sin θ) built from a cos(θ/2) rounded to an ulp of 1,
+  and a steady spin brings the same angle back every step, so the rounding scaled |m| by the same
+  1 + 1e-16 each time (|m| - |L| grew to 1.7e-10, and 2 E I_2 - |L|^2 jumped by 1e-7 of itself at each
+  flip); the turn is now m + (cos θ - 1) m + sin θ m⊥ with cos θ - 1 = -2 sin²(θ/2), where that rounding
+  enters times sin²(θ/2), and its sums are compensated too (split4: 7e-11 at dt = 1e-4). Energy was
+  never a symptom: it stayed at 1e-13, while the flip needs the separatrix distance, 1e-6 of G², to ~1e-7
+  of itself. Quaternion renormalisation, re-projection (rk4's alignment of q with L) and t (t = n dt,
+  never accumulated) were not the cause: changing the renormalisation to a |q|-independent rotation
+  left the leak as it was.
 """
 
 

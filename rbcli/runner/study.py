@@ -50,6 +50,7 @@ from rbcli.analysis.errors import (
     invariant_drifts,
     roundoff_floor,
     run_errors,
+    smoothness_notes,
 )
 from rbcli.physics.integrators import INTEGRATORS, IntegratorInfo, get_integrator
 from rbcli.record.memory_sink import Trajectory
@@ -504,6 +505,7 @@ def study(
     asked = float(duration if duration is not None else spec.simulation.duration)
     if abs(grid.duration - asked) > 1e-9 * asked:
         notes.append(f"duration {asked:g} s rounded up to {grid.duration:g} s, a whole number of the coarsest step")
+    notes += smoothness_notes(base)
     for info in adaptive:
         for tol in tolerances:
             runs.append(_measure_adaptive(spec, info, tol, grid, ref_path, conserved, min_time))

@@ -19,8 +19,9 @@ from rbcli.physics.rotation import quat_to_matrix
 
 
 @numba.njit(cache=True)
-def accumulate_spring(model, spring, x, q, P, L, F, tau) -> int:  # noqa: ANN001 - numba types
-    """Add every spring's force and moments to both ends; returns the rows evaluated."""
+def accumulate_spring(model, spring, x, q, P, L, F, tau, dissipative=True) -> int:  # noqa: ANN001 - numba types
+    """Add every spring's force and moments to both ends; returns the rows evaluated. dissipative=False
+    leaves the dampers out (the splitting integrators integrate them as their own flow, damping.py)."""
     for row in range(spring.body_a.shape[0]):
         a = spring.body_a[row]
         pa = spring.point_a[row]
@@ -48,7 +49,8 @@ def accumulate_spring(model, spring, x, q, P, L, F, tau) -> int:  # noqa: ANN001
             continue
         ex, ey, ez = dx / length, dy / length, dz / length
         rate = ex * vax + ey * vay + ez * vaz
-        magnitude = -(spring.stiffness[row] * (length - spring.rest_length[row]) + spring.damping[row] * rate)
+        damping = spring.damping[row] if dissipative else 0.0
+        magnitude = -(spring.stiffness[row] * (length - spring.rest_length[row]) + damping * rate)
         fx, fy, fz = magnitude * ex, magnitude * ey, magnitude * ez
         add_force_at(F, tau, a, rax, ray, raz, fx, fy, fz)
         if b >= 0:
@@ -56,7 +58,7 @@ def accumulate_spring(model, spring, x, q, P, L, F, tau) -> int:  # noqa: ANN001
     return spring.body_a.shape[0]
 
 
-def _ends(model, spring: SpringTable, x, q, P=None, L=None):  # noqa: ANN001, ANN202
+def spring_ends(model, spring: SpringTable, x, q, P=None, L=None):  # noqa: ANN001, ANN202
     """World offsets r, positions p and (when P, L given) velocities v of both ends, leading axes kept."""
     other = spring.body_b >= 0
     b = np.where(other, spring.body_b, 0)
@@ -76,7 +78,7 @@ def _ends(model, spring: SpringTable, x, q, P=None, L=None):  # noqa: ANN001, AN
 def spring_numpy(model, spring: SpringTable, x, q, P, L) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001
     """Plain numpy reference of `accumulate_spring`: (F, tau), each (body_count, 3)."""
     F, tau = np.zeros_like(x), np.zeros_like(x)
-    ra, rb, pa, pb, va, vb = _ends(model, spring, x, q, P, L)
+    ra, rb, pa, pb, va, vb = spring_ends(model, spring, x, q, P, L)
     d = pa - pb
     length = np.linalg.norm(d, axis=-1)
     e = np.divide(d, length[:, None], out=np.zeros_like(d), where=length[:, None] > 0)
@@ -92,6 +94,6 @@ def spring_numpy(model, spring: SpringTable, x, q, P, L) -> tuple[np.ndarray, np
 
 def spring_potential(spring: SpringTable, x: np.ndarray, q: np.ndarray) -> np.ndarray:
     """V = sum k (l - l0)^2 / 2 [J]; x (..., body_count, 3) -> (...)."""
-    _, _, pa, pb, _, _ = _ends(None, spring, x, q)
+    _, _, pa, pb, _, _ = spring_ends(None, spring, x, q)
     stretch = np.linalg.norm(pa - pb, axis=-1) - spring.rest_length
     return 0.5 * np.einsum("r,...r->...", spring.stiffness, stretch**2)

@@ -123,19 +123,19 @@ def _torque_stage(torque, schedule, t, q, tau, counts):  # noqa: ANN001, ANN202
     return run
 
 
-def spring_stage(model, spring, x, q, P, L, F, tau, counts) -> None:  # noqa: ANN001
-    """Springs-dampers (forces/spring.py) when the scene has any."""
+def spring_stage(model, spring, x, q, P, L, F, tau, counts, dissipative) -> None:  # noqa: ANN001
+    """Springs-dampers (forces/spring.py) when the scene has any; dampers only when dissipative."""
     _kernel_only()
 
 
 @overload(spring_stage, jit_options=_OPTIONS)
-def _spring_stage(model, spring, x, q, P, L, F, tau, counts):  # noqa: ANN001, ANN202
+def _spring_stage(model, spring, x, q, P, L, F, tau, counts, dissipative):  # noqa: ANN001, ANN202
     if _absent(spring):
-        return lambda model, spring, x, q, P, L, F, tau, counts: None
+        return lambda model, spring, x, q, P, L, F, tau, counts, dissipative: None
 
-    def run(model, spring, x, q, P, L, F, tau, counts):  # noqa: ANN001, ANN202
+    def run(model, spring, x, q, P, L, F, tau, counts, dissipative):  # noqa: ANN001, ANN202
         if spring.body_a.shape[0]:
-            counts[TERM_SPRING] += accumulate_spring(model, spring, x, q, P, L, F, tau)
+            counts[TERM_SPRING] += accumulate_spring(model, spring, x, q, P, L, F, tau, dissipative)
 
     return run
 

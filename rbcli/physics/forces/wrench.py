@@ -43,12 +43,14 @@ from rbcli.physics.step import STEP_KERNEL
 
 
 @numba.njit(**STEP_KERNEL)
-def accumulate_wrench(model, forces, force_data, t, x, q, P, L, F, tau) -> None:  # noqa: ANN001 - numba types
+def accumulate_wrench(model, forces, force_data, t, x, q, P, L, F, tau, dissipative=True) -> None:  # noqa: ANN001 - numba types
     """Set F [N] and tau [N m] (body_count, 3), world frame, about each centre of mass, to the sum of the
     scene's force terms at time t [s]. tau is left untouched (zero) when forces.has_torque is False;
     otherwise it is exactly zero for every body that forces.torque_body does not flag. forces:
     KernelForceTables (or ForceTables); force_data (ForceData) holds what the pass writes besides F and
-    tau: the stage counters and the contact work."""
+    tau: the stage counters and the contact work. dissipative=False leaves out the spring dampers and
+    drag, which the splitting integrators integrate as their own flow (forces/damping.py); contact's
+    dashpots stay in (contact is not smooth, so no integrator keeps its order through it anyway)."""
     F[:, :] = 0.0
     if forces.has_torque:
         tau[:, :] = 0.0
@@ -60,14 +62,21 @@ def accumulate_wrench(model, forces, force_data, t, x, q, P, L, F, tau) -> None:
     field_stage(model, forces.field, forces.schedule, t, x, q, F, tau, counts)
     point_force_stage(forces.point_force, forces.schedule, t, q, F, tau, counts)
     torque_stage(forces.torque, forces.schedule, t, q, tau, counts)
-    spring_stage(model, forces.spring, x, q, P, L, F, tau, counts)
-    drag_stage(model, forces.drag, q, P, L, F, tau, counts)
+    spring_stage(model, forces.spring, x, q, P, L, F, tau, counts, dissipative)
+    if dissipative:
+        drag_stage(model, forces.drag, q, P, L, F, tau, counts)
     contact_stage(model, forces.contact, force_data.contact, t, x, q, P, L, F, tau, counts)
 
 
-def wrench_numpy(model, forces: ForceTables, t: float, x, q, P, L) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001
+def wrench_numpy(  # noqa: ANN001
+    model, forces: ForceTables, t: float, x, q, P, L, dissipative: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
     """Plain numpy reference of `accumulate_wrench` (tests); model: Model or KernelModel. Contact forces
     carry history, so they have their own reference (physics/contact/reference.py), not this one."""
+    spring, drag = forces.spring, forces.drag
+    if not dissipative:
+        spring = spring._replace(damping=np.zeros_like(spring.damping))
+        drag = drag._replace(**{name: getattr(drag, name)[:0] for name in drag._fields})
     if forces.contact.sphere_body.shape[0]:
         raise ValueError("wrench_numpy has no contact forces: compare contact with physics/contact/reference.py")
     F = np.zeros_like(x)
@@ -78,8 +87,8 @@ def wrench_numpy(model, forces: ForceTables, t: float, x, q, P, L) -> tuple[np.n
         field_numpy(model, forces.field, forces.schedule, t, x, q),
         point_force_numpy(forces.point_force, forces.schedule, t, x, q),
         torque_numpy(forces.torque, forces.schedule, t, x, q),
-        spring_numpy(model, forces.spring, x, q, P, L),
-        drag_numpy(model, forces.drag, x, q, P, L),
+        spring_numpy(model, spring, x, q, P, L),
+        drag_numpy(model, drag, x, q, P, L),
     ):
         F += dF
         tau += dtau

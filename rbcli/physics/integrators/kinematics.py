@@ -51,6 +51,21 @@ def rotate(w, x, y, z, vx, vy, vz):  # noqa: ANN001, ANN201
     )
 
 
+@numba.njit(cache=True, inline="always")
+def carried_momentum_valid(s, q_end, l_end, q, L, b):  # noqa: ANN001, ANN201
+    """Whether the state (q, L) of body b is bitwise what the last step wrote into its scratch row s
+    (columns q_end..q_end+3, l_end..l_end+2): then the body momentum m that step carried belongs to it.
+
+    Why carry m: near the separatrix the motion is decided by m's small components, and R(q)^T L gives
+    them only to an ulp of |L| (q is rounded to an ulp), a fresh error at every step (docs/accuracy.md).
+    Anything else that wrote q or L (an impulse, a state set from outside, a reset, the first step's
+    zeroed scratch) fails this test, and the caller rebuilds m as R^T L."""
+    return (
+        q[b, 0] == s[q_end] and q[b, 1] == s[q_end + 1] and q[b, 2] == s[q_end + 2] and q[b, 3] == s[q_end + 3]
+        and L[b, 0] == s[l_end] and L[b, 1] == s[l_end + 1] and L[b, 2] == s[l_end + 2]
+    )  # fmt: skip
+
+
 @numba.njit(cache=True)
 def axis_order(i0, i1, i2):  # noqa: ANN001, ANN201
     """Principal axis indices (a, b, c) sorted by moment: I_a <= I_b <= I_c (ties keep index order)."""
@@ -95,22 +110,65 @@ def small_angle_cos_sin(a):  # noqa: ANN001, ANN201
     return math.cos(a), math.sin(a)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def turn(k, c, s, m0, m1, m2, w, x, y, z):  # noqa: ANN001, ANN201
     """Turn the body about its principal axis k by theta (c = cos(theta/2), s = sin(theta/2)).
 
     Returns (m0, m1, m2, w, x, y, z): m <- Rot_k(-theta) m (m_i' = m_i cos + m_j sin,
     m_j' = m_j cos - m_i sin, (i, j, k) cyclic) and q <- q * (c, s e_k).
     """
-    ct = c * c - s * s  # cos(theta), sin(theta) from the half angle: no second sin/cos
+    # m turns as m + (cos(theta) - 1) m + sin(theta) m_perp with cos(theta) - 1 = -2 s^2 and
+    # sin(theta) = 2 s c from the half angle (no second sin/cos). Why not m cos(theta) + m_perp sin(theta):
+    # c = cos(theta/2) is rounded to an ulp of 1, and at a steady spin the same angle comes back at every
+    # step, so that rounding scales the pair by the same 1 + 1e-16 each time; near the separatrix that
+    # moved the flip (2 E I_2 - |L|^2 changed by 1e-7 of itself per flip, docs/accuracy.md). In this form
+    # the scale is 1 + 4 s^2 (c^2 + s^2 - 1): the rounding of c enters times s^2.
+    cm = -2.0 * s * s
     st = 2.0 * s * c
     if k == 0:
-        return (m0, m1 * ct + m2 * st, m2 * ct - m1 * st,
+        return (m0, m1 + (m1 * cm + m2 * st), m2 + (m2 * cm - m1 * st),
                 w * c - x * s, x * c + w * s, y * c + z * s, z * c - y * s)  # fmt: skip
     if k == 1:
-        return (m0 * ct - m2 * st, m1, m2 * ct + m0 * st,
+        return (m0 + (m0 * cm - m2 * st), m1, m2 + (m2 * cm + m0 * st),
                 w * c - y * s, x * c - z * s, y * c + w * s, z * c + x * s)  # fmt: skip
-    return (m0 * ct + m1 * st, m1 * ct - m0 * st, m2,
+    return (m0 + (m0 * cm + m1 * st), m1 + (m1 * cm - m0 * st), m2,
+            w * c - z * s, x * c + y * s, y * c - x * s, z * c + w * s)  # fmt: skip
+
+
+@numba.njit(cache=True, inline="always")
+def sum_compensated(y, d, e):  # noqa: ANN001, ANN201
+    """(y + d, the part of d that rounding lost), with e the part lost before (Kahan summation)."""
+    d = d + e
+    y_new = y + d
+    return y_new, (y - y_new) + d
+
+
+# inlined at numba level: as a call, its 10-tuple result went through memory at each of split4's 21
+# turns per body-step (measured: split4 per body-step 570 -> 750-900 ns, N = 1 step 1.6 -> 3.3-4.2 us)
+@numba.njit(cache=True, inline="always")
+def turn_compensated(k, c, s, m0, m1, m2, e0, e1, e2, w, x, y, z, compensate=True):  # noqa: ANN001, ANN201
+    """`turn` with m summed with compensation: e = (e0, e1, e2) carries what rounding m + increment
+    lost (Kahan), so the small components of m, which decide the motion near the separatrix, do not
+    random-walk by an ulp of the large one per turn. Returns (m0, m1, m2, e0, e1, e2, w, x, y, z).
+    compensate=False: plain sums, e returned unchanged (split2: its truncation error is far above)."""
+    cm = -2.0 * s * s
+    st = 2.0 * s * c
+    if not compensate:
+        m0n, m1n, m2n, wn, xn, yn, zn = turn(k, c, s, m0, m1, m2, w, x, y, z)
+        return m0n, m1n, m2n, e0, e1, e2, wn, xn, yn, zn
+    if k == 0:
+        m1n, e1 = sum_compensated(m1, m1 * cm + m2 * st, e1)
+        m2n, e2 = sum_compensated(m2, m2 * cm - m1 * st, e2)
+        return (m0, m1n, m2n, e0, e1, e2,
+                w * c - x * s, x * c + w * s, y * c + z * s, z * c - y * s)  # fmt: skip
+    if k == 1:
+        m0n, e0 = sum_compensated(m0, m0 * cm - m2 * st, e0)
+        m2n, e2 = sum_compensated(m2, m2 * cm + m0 * st, e2)
+        return (m0n, m1, m2n, e0, e1, e2,
+                w * c - y * s, x * c - z * s, y * c + w * s, z * c + x * s)  # fmt: skip
+    m0n, e0 = sum_compensated(m0, m0 * cm + m1 * st, e0)
+    m1n, e1 = sum_compensated(m1, m1 * cm - m0 * st, e1)
+    return (m0n, m1n, m2, e0, e1, e2,
             w * c - z * s, x * c + y * s, y * c - x * s, z * c + w * s)  # fmt: skip
 
 

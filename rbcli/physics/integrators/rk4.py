@@ -17,9 +17,22 @@ near the axis) and q only follows it.
 
 L stays the state: L (world) is integrated by the same RK4, so torque-free it is kept exactly, and
 at the end of the step q is turned by the smallest rotation that makes R(q) m parallel to L (the
-"alignment"): then m = R^T L holds again exactly with the accurate |L|, and the turn is of the size
-of the local error, O(h^5), so the order stays 4. Not symplectic: the energy drifts slowly
-(linearly in time), which long runs show; split2 does not drift.
+"alignment"): then R(q) m is parallel to L again, and the turn is of the size of the local error,
+O(h^5), so the order stays 4. Not symplectic: the energy drifts slowly (linearly in time), which long
+runs show; split2 does not drift.
+
+m is carried from one step to the next (in the scratch, with the q and L it belongs to), not rebuilt as
+R(q)^T L at each step, and its sum is compensated (Kahan): near the separatrix the motion is decided by
+the small components of m (the distance to the separatrix, 2 E I_2 - |L|^2 = m_1^2 - m_3^2/3 for
+I = diag(1, 2, 3), does not contain m_2), and R(q)^T L computes them with an absolute error of an ulp
+of |L|, from a q that is itself rounded to an ulp: 0.01 known to ~1e-15, at every step. That error
+piles up in the flip's timing: on I = diag(1, 2, 3), omega0 = (0.01, 5, 0), 20 s, the error grew as
+the step count, 1.6e-7 rad at dt = 1e-3 and 1.4e-6 at 1e-4, whatever the order. Carried, m_1 is
+rounded to an ulp of itself; compensated, the low bits of each step's increment are not lost either
+(carrying alone: 7e-9; both: the error falls as h^4 to 7e-11 at dt = 1e-4, docs/accuracy.md). m is
+not rescaled to |L|: RK4's errors in |m| and in the energy nearly cancel in the distance to the
+separatrix, and projecting |m| alone undid that (2.9e-8 rad at dt = 1e-3 instead of 9e-11); |m| stays
+within the O(h^4) error of |L|, the size of the method's error anyway.
 """
 
 from __future__ import annotations
@@ -30,14 +43,20 @@ import numba
 import numpy as np
 
 from rbcli.physics.forces.wrench import accumulate_wrench, wrench_numpy
-from rbcli.physics.integrators.kinematics import rotate, rotate_inverse
+from rbcli.physics.integrators.kinematics import carried_momentum_valid, rotate, rotate_inverse
 from rbcli.physics.rotation import quat_multiply, quat_rotate, quat_rotate_inverse
 from rbcli.physics.step import STEP_KERNEL
 
-# per body: y0 = (x, q, P, L, m) (16), the weighted sum of stage rates (16), the stage's m (3)
-SCRATCH_WIDTH = 35
+# per body: y0 = (x, q, P, L, m) (16), the weighted sum of stage rates (16), the stage's m (3), then
+# what is carried from one step to the next: the compensation of each component's sum (16, those of q
+# unused), the body momentum m (3) and the q (4) and L (3) it belongs to (the state the step wrote)
+SCRATCH_WIDTH = 61
 _SUM = 16
 _M_STAGE = 32
+_COMP = 35
+_M_CARRIED = 51
+_Q_END = 54
+_L_END = 58
 
 STAGE_FIRST = 0
 STAGE_MIDDLE = 1
@@ -111,6 +130,24 @@ def _advance(s, j, kind, a, h, y, r):  # noqa: ANN001, ANN202
     if kind == STAGE_MIDDLE:
         s[_SUM + j] += 2.0 * r
         return s[j] + a * r
+    # compensated (Kahan) summation: the increment is O(h) y, so the rounding of y0 + increment
+    # would discard its low bits at every step; the lost part is carried into the next increment
+    increment = h / 6.0 * (s[_SUM + j] + r) + s[_COMP + j]
+    y_new = s[j] + increment
+    s[_COMP + j] = (s[j] - y_new) + increment
+    return y_new
+
+
+@numba.njit(cache=True)
+def _advance_plain(s, j, kind, a, h, y, r):  # noqa: ANN001, ANN202
+    """`_advance` without compensation (the quaternion: it is normalised and aligned after the sum)."""
+    if kind == STAGE_FIRST:
+        s[j] = y
+        s[_SUM + j] = r
+        return y + a * r
+    if kind == STAGE_MIDDLE:
+        s[_SUM + j] += 2.0 * r
+        return s[j] + a * r
     return s[j] + h / 6.0 * (s[_SUM + j] + r)
 
 
@@ -118,10 +155,11 @@ def _advance(s, j, kind, a, h, y, r):  # noqa: ANN001, ANN202
 def _stage(model, has_torque, torque_body, kind, a, h, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001
     """Rates k of the current stage (x, q, P, L, m; F and tau evaluated on it), then per component
 
-    first:  y0 = y, sum = k,   y = y0 + a k          (m = R^T L computed from the state)
+    first:  y0 = y, sum = k,   y = y0 + a k          (m carried from the last step, or R^T L)
     middle: sum += 2 k,        y = y0 + a k
-    last:   y = y0 + h/6 (sum + k), then q aligned with L
-    with q normalised after each update. Scratch columns: y0 0..15, sum 16..31, stage m 32..34.
+    last:   y = y0 + h/6 (sum + k) compensated (but q), then q aligned with L; m, q, L kept
+    with q normalised after each update. Scratch columns: y0 0..15, sum 16..31, stage m 32..34,
+    compensations 35..50, carried m 51..53, the q and L the step wrote 54..60.
     tau enters (L and Euler's equations) only for the bodies torque_body flags: the others have tau = 0,
     whose RK4 update of L is the identity, so L and its scratch columns are left alone.
     """
@@ -130,7 +168,12 @@ def _stage(model, has_torque, torque_body, kind, a, h, x, q, P, L, F, tau, scrat
         inv_mass = 1.0 / model.body_mass[b]
         w, qx, qy, qz = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
         if kind == STAGE_FIRST:
-            m0, m1, m2 = rotate_inverse(w, qx, qy, qz, L[b, 0], L[b, 1], L[b, 2])
+            if carried_momentum_valid(s, _Q_END, _L_END, q, L, b):
+                m0, m1, m2 = s[_M_CARRIED], s[_M_CARRIED + 1], s[_M_CARRIED + 2]
+            else:  # m rebuilt from the state: the compensations of m and L belong to the old one
+                m0, m1, m2 = rotate_inverse(w, qx, qy, qz, L[b, 0], L[b, 1], L[b, 2])
+                for k in range(10, 16):
+                    s[_COMP + k] = 0.0
         else:
             m0, m1, m2 = s[_M_STAGE], s[_M_STAGE + 1], s[_M_STAGE + 2]
         inv = model.body_inertia_inv
@@ -147,12 +190,15 @@ def _stage(model, has_torque, torque_body, kind, a, h, x, q, P, L, F, tau, scrat
         m0 = _advance(s, 13, kind, a, h, m0, dm0)
         m1 = _advance(s, 14, kind, a, h, m1, dm1)
         m2 = _advance(s, 15, kind, a, h, m2, dm2)
-        w = _advance(s, 3, kind, a, h, w, dw)
-        qx = _advance(s, 4, kind, a, h, qx, dx)
-        qy = _advance(s, 5, kind, a, h, qy, dy)
-        qz = _advance(s, 6, kind, a, h, qz, dz)
+        w = _advance_plain(s, 3, kind, a, h, w, dw)
+        qx = _advance_plain(s, 4, kind, a, h, qx, dx)
+        qy = _advance_plain(s, 5, kind, a, h, qy, dy)
+        qz = _advance_plain(s, 6, kind, a, h, qz, dz)
         if kind == STAGE_LAST:
             w, qx, qy, qz = align(w, qx, qy, qz, m0, m1, m2, L[b, 0], L[b, 1], L[b, 2])
+            s[_M_CARRIED], s[_M_CARRIED + 1], s[_M_CARRIED + 2] = m0, m1, m2
+            s[_Q_END], s[_Q_END + 1], s[_Q_END + 2], s[_Q_END + 3] = w, qx, qy, qz
+            s[_L_END], s[_L_END + 1], s[_L_END + 2] = L[b, 0], L[b, 1], L[b, 2]
         else:
             norm = 1.0 / math.sqrt(w * w + qx * qx + qy * qy + qz * qz)
             w, qx, qy, qz = w * norm, qx * norm, qy * norm, qz * norm

@@ -23,7 +23,17 @@ Why the kick sits in the middle: every step then needs exactly ONE force evaluat
 midpoint (t + h/2, x_1/2, q_1/2), always fresh. The kick-drift-kick order needs the force at both ends;
 reusing the end-of-step force at the start of the next call would save one evaluation but is only
 valid if nothing (impulses, a restarted run, a changed dt) touched the state in between — it is not
-done. Velocity-dependent forces (drag) make this, like velocity Verlet, first order in that term.
+done. Velocity-dependent forces (dampers, drag) would make this, like velocity Verlet, first order in
+that term (the kick would no longer be symmetric); they are taken out of the kick and integrated as their
+own symmetric flow instead, K(h) = K_c(h/2) D(h) K_c(h/2) (forces/damping.py), which keeps the order.
+
+Round-off: m is carried from one step to the next in the scratch (rebuilt as R^T L only when something
+else wrote q or L), the turns rotate m in the form m + (cos - 1) m + sin m_perp, and in split4 m's sums
+are compensated: near the separatrix each of the older choices leaked ~1e-11 rad per step
+(docs/accuracy.md). split2 skips the compensation: its truncation error is far above that floor at any
+step it is used at, and it would cost ~20 % per body-step. With dampers or drag a step costs the
+dissipation flow besides (the 4-link spring chain: 0.9 -> 2.3 us per step for split2, 4.6 -> 8 us for
+split4, measured on a loaded 2-core machine).
 
 Axis order: which moment gets the outer half steps and which the full middle step changes the error
 constant by up to 1000x. Measured over 20 s at dt = 0.01 against the exact solution (flip:
@@ -52,21 +62,31 @@ import math
 import numba
 import numpy as np
 
+from rbcli.physics.forces.damping import dissipation_flow, dissipation_flow_numpy, dissipation_present
 from rbcli.physics.forces.wrench import accumulate_wrench, wrench_numpy
 from rbcli.physics.integrators.kinematics import (
     axis_order,
     axis_order_numpy,
     body_momentum_numpy,
+    carried_momentum_valid,
     half_turn,
     rotate_inverse,
-    turn,
+    sum_compensated,
     turn_numpy,
+)
+from rbcli.physics.integrators.kinematics import (
+    turn_compensated as turn,
 )
 from rbcli.physics.rotation import quat_multiply
 from rbcli.physics.step import STEP_KERNEL
 
-# per body: body-frame angular momentum m (3), cos and sin of the half angle of the last T_c (2)
-SCRATCH_WIDTH = 5
+# per body: body-frame angular momentum m (3), cos and sin of the half angle of the last T_c (2), and
+# the q (4) and L (3) the last step wrote, to which the m carried to the next step belongs
+SCRATCH_WIDTH = 18
+_Q_END = 5
+_L_END = 9
+_M_COMP = 12  # the compensation of m's sums (kinematics.turn_compensated)
+_L_SAVED = 15  # L before the dissipation flow (damped scenes), to turn its change into m's
 
 # a single stage: the plain Strang step
 WEIGHTS = np.array([1.0])
@@ -75,32 +95,82 @@ WEIGHTS = np.array([1.0])
 @numba.njit(**STEP_KERNEL)
 def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One split2 step of every body, in place (one force evaluation, at t + dt/2)."""
-    compose(model, forces, force_data, t, dt, WEIGHTS, x, q, P, L, F, tau, scratch)
+    compose(model, forces, force_data, t, dt, WEIGHTS, x, q, P, L, F, tau, scratch, False)
 
 
 # compose and its two passes are inlined at numba level: a call boundary costs a reference-count
 # update per array argument (the model and force tables hold dozens), measured 2.25 -> 1.65 us per
 # step for one body, and 93 -> 88 ns per body-step at 100 bodies.
 @numba.njit(cache=True, inline="always")
-def compose(model, forces, force_data, t, h, weights, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001
+def compose(model, forces, force_data, t, h, weights, x, q, P, L, F, tau, scratch, compensate) -> None:  # noqa: ANN001
     """The composition split2(w_{s-1} h) ... split2(w_0 h) of every body, in place.
 
+    compensate: m's sums in the turns compensated (split4, which reaches the round-off floor; split2's
+    error is its truncation long before, and the compensation would cost it ~20 % per body-step).
     weights (s,) must be symmetric for the composition to be; force evaluation i happens at the
     midpoint of stage i, t + (w_0 + ... + w_{i-1} + w_i/2) h.
+    With dampers or drag (forces/damping.py) the kick K(h) is K_c(h/2) D(h) K_c(h/2): F_c without the
+    dissipative terms, D their own symmetric flow, so the step stays symmetric and keeps its order.
     """
     count = weights.shape[0]
-    _drift_to_first_kick(model, weights[0] * h, x, q, P, L, scratch)
+    dissipative = dissipation_present(forces.spring, forces.drag)
+    _drift_to_first_kick(model, weights[0] * h, x, q, P, L, scratch, compensate)
     elapsed = 0.5 * weights[0] * h
     for i in range(count):
-        accumulate_wrench(model, forces, force_data, t + elapsed, x, q, P, L, F, tau)
+        accumulate_wrench(model, forces, force_data, t + elapsed, x, q, P, L, F, tau, not dissipative)
         h_prev = weights[i] * h
         h_next = weights[i + 1] * h if i + 1 < count else 0.0
-        _kick_and_drift(model, forces.has_torque, forces.torque_body, h_prev, h_next, x, q, P, L, F, tau, scratch)
+        kick = h_prev
+        if dissipative:
+            kick = 0.5 * h_prev
+            _half_kick(model, forces.has_torque, forces.torque_body, kick, q, P, L, F, tau, scratch)
+            dissipation_flow(model, forces.spring, forces.drag, h_prev, x, q, P, L)
+            _momentum_change_to_body(model, forces.has_torque, forces.torque_body, q, L, scratch)
+        _kick_and_drift(
+            model, forces.has_torque, forces.torque_body, kick, h_prev, h_next, x, q, P, L, F, tau, scratch, compensate
+        )
         elapsed += 0.5 * (h_prev + h_next)
 
 
 @numba.njit(cache=True, inline="always")
-def _drift_to_first_kick(model, h, x, q, P, L, scratch) -> None:  # noqa: ANN001
+def _half_kick(model, has_torque, torque_body, kick, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001
+    """K_c(kick) before the dissipation flow: P += kick F, and for torque bodies L += kick tau with m
+    following (m += kick R^T tau); L is then saved for `_momentum_change_to_body`."""
+    for b in range(P.shape[0]):
+        P[b, 0] += kick * F[b, 0]
+        P[b, 1] += kick * F[b, 1]
+        P[b, 2] += kick * F[b, 2]
+        if has_torque and torque_body[b]:
+            t0, t1, t2 = tau[b, 0], tau[b, 1], tau[b, 2]
+            L[b, 0] += kick * t0
+            L[b, 1] += kick * t1
+            L[b, 2] += kick * t2
+            tb0, tb1, tb2 = rotate_inverse(q[b, 0], q[b, 1], q[b, 2], q[b, 3], t0, t1, t2)
+            scratch[b, 0], scratch[b, _M_COMP] = sum_compensated(scratch[b, 0], kick * tb0, scratch[b, _M_COMP])
+            scratch[b, 1], scratch[b, _M_COMP + 1] = sum_compensated(scratch[b, 1], kick * tb1, scratch[b, _M_COMP + 1])
+            scratch[b, 2], scratch[b, _M_COMP + 2] = sum_compensated(scratch[b, 2], kick * tb2, scratch[b, _M_COMP + 2])
+            scratch[b, _L_SAVED], scratch[b, _L_SAVED + 1], scratch[b, _L_SAVED + 2] = L[b, 0], L[b, 1], L[b, 2]
+
+
+@numba.njit(cache=True, inline="always")
+def _momentum_change_to_body(model, has_torque, torque_body, q, L, scratch) -> None:  # noqa: ANN001
+    """m += R^T (L - L_saved): the dissipation flow's change of L (q held) in the body frame. Only
+    torque bodies can have one (a damper off the centre of mass or angular drag flags its body)."""
+    if not has_torque:
+        return
+    for b in range(L.shape[0]):
+        if torque_body[b]:
+            d0 = L[b, 0] - scratch[b, _L_SAVED]
+            d1 = L[b, 1] - scratch[b, _L_SAVED + 1]
+            d2 = L[b, 2] - scratch[b, _L_SAVED + 2]
+            db0, db1, db2 = rotate_inverse(q[b, 0], q[b, 1], q[b, 2], q[b, 3], d0, d1, d2)
+            scratch[b, 0], scratch[b, _M_COMP] = sum_compensated(scratch[b, 0], db0, scratch[b, _M_COMP])
+            scratch[b, 1], scratch[b, _M_COMP + 1] = sum_compensated(scratch[b, 1], db1, scratch[b, _M_COMP + 1])
+            scratch[b, 2], scratch[b, _M_COMP + 2] = sum_compensated(scratch[b, 2], db2, scratch[b, _M_COMP + 2])
+
+
+@numba.njit(cache=True, inline="always")
+def _drift_to_first_kick(model, h, x, q, P, L, scratch, compensate) -> None:  # noqa: ANN001
     """D_x(h/2) T_a(h/2) T_b(h/2) T_c(h/2); leaves m and T_c's (cos, sin) in scratch.
     An isotropic body (a ball) turns by its exact free rotation T(h/2) instead (`_turn_isotropic`)."""
     for b in range(x.shape[0]):
@@ -114,22 +184,31 @@ def _drift_to_first_kick(model, h, x, q, P, L, scratch) -> None:  # noqa: ANN001
             continue
         ka, kb, kc = axis_order(model.body_inertia[b, 0], model.body_inertia[b, 1], model.body_inertia[b, 2])
         w, qx, qy, qz = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
-        m0, m1, m2 = rotate_inverse(w, qx, qy, qz, L[b, 0], L[b, 1], L[b, 2])
+        if carried_momentum_valid(scratch[b], _Q_END, _L_END, q, L, b):  # m of the last step, not R^T L
+            m0, m1, m2 = scratch[b, 0], scratch[b, 1], scratch[b, 2]
+            e0, e1, e2 = scratch[b, _M_COMP], scratch[b, _M_COMP + 1], scratch[b, _M_COMP + 2]
+        else:
+            m0, m1, m2 = rotate_inverse(w, qx, qy, qz, L[b, 0], L[b, 1], L[b, 2])
+            e0, e1, e2 = 0.0, 0.0, 0.0
         c, s = half_turn(ka, 0.5 * h, m0, m1, m2, inv0, inv1, inv2)
-        m0, m1, m2, w, qx, qy, qz = turn(ka, c, s, m0, m1, m2, w, qx, qy, qz)
+        m0, m1, m2, e0, e1, e2, w, qx, qy, qz = turn(ka, c, s, m0, m1, m2, e0, e1, e2, w, qx, qy, qz, compensate)
         c, s = half_turn(kb, 0.5 * h, m0, m1, m2, inv0, inv1, inv2)
-        m0, m1, m2, w, qx, qy, qz = turn(kb, c, s, m0, m1, m2, w, qx, qy, qz)
+        m0, m1, m2, e0, e1, e2, w, qx, qy, qz = turn(kb, c, s, m0, m1, m2, e0, e1, e2, w, qx, qy, qz, compensate)
         c, s = half_turn(kc, 0.5 * h, m0, m1, m2, inv0, inv1, inv2)
-        m0, m1, m2, w, qx, qy, qz = turn(kc, c, s, m0, m1, m2, w, qx, qy, qz)
+        m0, m1, m2, e0, e1, e2, w, qx, qy, qz = turn(kc, c, s, m0, m1, m2, e0, e1, e2, w, qx, qy, qz, compensate)
         q[b, 0], q[b, 1], q[b, 2], q[b, 3] = w, qx, qy, qz
         scratch[b, 0], scratch[b, 1], scratch[b, 2] = m0, m1, m2
+        scratch[b, _M_COMP], scratch[b, _M_COMP + 1], scratch[b, _M_COMP + 2] = e0, e1, e2
         scratch[b, 3], scratch[b, 4] = c, s
 
 
 @numba.njit(cache=True, inline="always")
-def _kick_and_drift(model, has_torque, torque_body, h_prev, h_next, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001
-    """K(h_prev) T_c(h_prev/2) T_b(h_prev/2) [T_a D_x]((h_prev + h_next)/2) T_b(h_next/2) T_c(h_next/2).
+def _kick_and_drift(
+    model, has_torque, torque_body, kick, h_prev, h_next, x, q, P, L, F, tau, scratch, compensate
+) -> None:  # noqa: ANN001
+    """K(kick) T_c(h_prev/2) T_b(h_prev/2) [T_a D_x]((h_prev + h_next)/2) T_b(h_next/2) T_c(h_next/2).
 
+    kick is h_prev, or h_prev / 2 when the dissipation flow took the other half's place (compose).
     h_next = 0 ends the step (the last two turns are skipped). The torque kick runs only for the bodies
     torque_body flags; the others have tau = 0, so their m_c is unchanged and T_c reuses the turn
     of the previous pass (the very same (cos, sin): bitwise the result of the torque path with tau = 0).
@@ -138,13 +217,13 @@ def _kick_and_drift(model, has_torque, torque_body, h_prev, h_next, x, q, P, L, 
         inv0, inv1, inv2 = model.body_inertia_inv[b, 0], model.body_inertia_inv[b, 1], model.body_inertia_inv[b, 2]
         if inv0 == inv1 and inv1 == inv2:  # K(h_prev), then T((h_prev + h_next)/2) D_x((h_prev + h_next)/2)
             h_mid = 0.5 * (h_prev + h_next)
-            P[b, 0] += h_prev * F[b, 0]
-            P[b, 1] += h_prev * F[b, 1]
-            P[b, 2] += h_prev * F[b, 2]
+            P[b, 0] += kick * F[b, 0]
+            P[b, 1] += kick * F[b, 1]
+            P[b, 2] += kick * F[b, 2]
             if has_torque and torque_body[b]:
-                L[b, 0] += h_prev * tau[b, 0]
-                L[b, 1] += h_prev * tau[b, 1]
-                L[b, 2] += h_prev * tau[b, 2]
+                L[b, 0] += kick * tau[b, 0]
+                L[b, 1] += kick * tau[b, 1]
+                L[b, 2] += kick * tau[b, 2]
             _turn_isotropic(q, L, b, h_mid * inv0)
             drift = h_mid / model.body_mass[b]
             x[b, 0] += drift * P[b, 0]
@@ -158,42 +237,46 @@ def _kick_and_drift(model, has_torque, torque_body, h_prev, h_next, x, q, P, L, 
         ka, kb, kc = axis_order(model.body_inertia[b, 0], model.body_inertia[b, 1], model.body_inertia[b, 2])
         w, qx, qy, qz = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
         m0, m1, m2 = scratch[b, 0], scratch[b, 1], scratch[b, 2]
-        P[b, 0] += h_prev * F[b, 0]
-        P[b, 1] += h_prev * F[b, 1]
-        P[b, 2] += h_prev * F[b, 2]
+        e0, e1, e2 = scratch[b, _M_COMP], scratch[b, _M_COMP + 1], scratch[b, _M_COMP + 2]
+        P[b, 0] += kick * F[b, 0]
+        P[b, 1] += kick * F[b, 1]
+        P[b, 2] += kick * F[b, 2]
         if has_torque and torque_body[b]:
             t0, t1, t2 = tau[b, 0], tau[b, 1], tau[b, 2]
-            L[b, 0] += h_prev * t0
-            L[b, 1] += h_prev * t1
-            L[b, 2] += h_prev * t2
+            L[b, 0] += kick * t0
+            L[b, 1] += kick * t1
+            L[b, 2] += kick * t2
             tb0, tb1, tb2 = rotate_inverse(w, qx, qy, qz, t0, t1, t2)
-            m0 += h_prev * tb0
-            m1 += h_prev * tb1
-            m2 += h_prev * tb2
+            m0, e0 = sum_compensated(m0, kick * tb0, e0)
+            m1, e1 = sum_compensated(m1, kick * tb1, e1)
+            m2, e2 = sum_compensated(m2, kick * tb2, e2)
             c, s = half_turn(kc, 0.5 * h_prev, m0, m1, m2, inv0, inv1, inv2)
         else:  # m_c is what it was before the kick: the same turn as T_c of the previous pass
             c, s = scratch[b, 3], scratch[b, 4]
-        m0, m1, m2, w, qx, qy, qz = turn(kc, c, s, m0, m1, m2, w, qx, qy, qz)
+        m0, m1, m2, e0, e1, e2, w, qx, qy, qz = turn(kc, c, s, m0, m1, m2, e0, e1, e2, w, qx, qy, qz, compensate)
         c, s = half_turn(kb, 0.5 * h_prev, m0, m1, m2, inv0, inv1, inv2)
-        m0, m1, m2, w, qx, qy, qz = turn(kb, c, s, m0, m1, m2, w, qx, qy, qz)
+        m0, m1, m2, e0, e1, e2, w, qx, qy, qz = turn(kb, c, s, m0, m1, m2, e0, e1, e2, w, qx, qy, qz, compensate)
         h_mid = 0.5 * (h_prev + h_next)
         c, s = half_turn(ka, h_mid, m0, m1, m2, inv0, inv1, inv2)
-        m0, m1, m2, w, qx, qy, qz = turn(ka, c, s, m0, m1, m2, w, qx, qy, qz)
+        m0, m1, m2, e0, e1, e2, w, qx, qy, qz = turn(ka, c, s, m0, m1, m2, e0, e1, e2, w, qx, qy, qz, compensate)
         drift = h_mid / model.body_mass[b]
         x[b, 0] += drift * P[b, 0]
         x[b, 1] += drift * P[b, 1]
         x[b, 2] += drift * P[b, 2]
         if h_next != 0.0:
             c, s = half_turn(kb, 0.5 * h_next, m0, m1, m2, inv0, inv1, inv2)
-            m0, m1, m2, w, qx, qy, qz = turn(kb, c, s, m0, m1, m2, w, qx, qy, qz)
+            m0, m1, m2, e0, e1, e2, w, qx, qy, qz = turn(kb, c, s, m0, m1, m2, e0, e1, e2, w, qx, qy, qz, compensate)
             c, s = half_turn(kc, 0.5 * h_next, m0, m1, m2, inv0, inv1, inv2)
-            m0, m1, m2, w, qx, qy, qz = turn(kc, c, s, m0, m1, m2, w, qx, qy, qz)
+            m0, m1, m2, e0, e1, e2, w, qx, qy, qz = turn(kc, c, s, m0, m1, m2, e0, e1, e2, w, qx, qy, qz, compensate)
             scratch[b, 3], scratch[b, 4] = c, s
         else:  # end of the step: products of unit quaternions drift off |q| = 1 by round-off, a random walk
             norm = 1.0 / math.sqrt(w * w + qx * qx + qy * qy + qz * qz)
             w, qx, qy, qz = w * norm, qx * norm, qy * norm, qz * norm
+            scratch[b, _Q_END], scratch[b, _Q_END + 1], scratch[b, _Q_END + 2], scratch[b, _Q_END + 3] = w, qx, qy, qz
+            scratch[b, _L_END], scratch[b, _L_END + 1], scratch[b, _L_END + 2] = L[b, 0], L[b, 1], L[b, 2]
         q[b, 0], q[b, 1], q[b, 2], q[b, 3] = w, qx, qy, qz
         scratch[b, 0], scratch[b, 1], scratch[b, 2] = m0, m1, m2
+        scratch[b, _M_COMP], scratch[b, _M_COMP + 1], scratch[b, _M_COMP + 2] = e0, e1, e2
 
 
 @numba.njit(cache=True, inline="always")
@@ -236,11 +319,24 @@ def compose_numpy(model, forces, t, h, weights, x, q, P, L) -> None:  # noqa: AN
         for axis in (order[:, 0], order[:, 1], order[:, 2]):
             m, q[:] = turn_numpy(axis, 0.5 * s, m, q, inv)
         q[iso] = q_iso[iso]
-        F, tau = wrench_numpy(model, forces, t + elapsed + 0.5 * s, x, q, P, L)
-        P += s * F
-        if forces.has_torque:
-            L += s * tau
-            m = m + s * body_momentum_numpy(q, tau)
+        drag = forces.drag
+        coefficients = np.concatenate([drag.linear, drag.quadratic, drag.angular_linear, drag.angular_quadratic])
+        dissipative = bool(np.any(forces.spring.damping != 0.0) or np.any(coefficients != 0.0))
+        F, tau = wrench_numpy(model, forces, t + elapsed + 0.5 * s, x, q, P, L, dissipative=not dissipative)
+        if dissipative:  # K_c(s/2) D(s) K_c(s/2)
+            P += 0.5 * s * F
+            L += 0.5 * s * tau
+            L_before = L.copy()
+            dissipation_flow_numpy(model, forces.spring, forces.drag, s, x, q, P, L)
+            m = m + 0.5 * s * body_momentum_numpy(q, tau) + body_momentum_numpy(q, L - L_before)
+            P += 0.5 * s * F
+            L += 0.5 * s * tau
+            m = m + 0.5 * s * body_momentum_numpy(q, tau)
+        else:
+            P += s * F
+            if forces.has_torque:
+                L += s * tau
+                m = m + s * body_momentum_numpy(q, tau)
         q_iso = _turn_isotropic_numpy(q, L, 0.5 * s * inv[:, 0])
         for axis in (order[:, 2], order[:, 1], order[:, 0]):
             m, q[:] = turn_numpy(axis, 0.5 * s, m, q, inv)
