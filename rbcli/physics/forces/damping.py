@@ -55,7 +55,7 @@ def dissipation_present(spring, drag) -> bool:  # noqa: ANN001
     return False
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _inverse_inertia_times(model, q, b, vx, vy, vz):  # noqa: ANN001, ANN202
     """I_b^-1 v in world axes: R diag(1/I) R^T v."""
     lx, ly, lz = rotate_inverse(q, b, vx, vy, vz)
@@ -65,7 +65,7 @@ def _inverse_inertia_times(model, q, b, vx, vy, vz):  # noqa: ANN001, ANN202
 
 # the row flows are inlined at numba level: a call boundary costs a reference-count update per array of
 # the model and tables it takes (measured: 200-400 ns per row application as calls)
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _damper_flow(model, spring, row, h, x, q, P, L) -> None:  # noqa: ANN001
     """The exact flow over time h of damper `row` alone (module docstring), x and q held."""
     c = spring.damping[row]
@@ -122,7 +122,7 @@ def _damper_flow(model, spring, row, h, x, q, P, L) -> None:  # noqa: ANN001
         L[b, 2] += j * nbz
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _drag_flow(model, drag, row, h, q, P, L) -> None:  # noqa: ANN001
     """The flow over time h of drag `row` alone (module docstring), q held."""
     b = drag.body[row]

@@ -51,7 +51,7 @@ def rotate(w, x, y, z, vx, vy, vz):  # noqa: ANN001, ANN201
     )
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def carried_momentum_valid(s, q_end, l_end, q, L, b):  # noqa: ANN001, ANN201
     """Whether the state (q, L) of body b is bitwise what the last step wrote into its scratch row s
     (columns q_end..q_end+3, l_end..l_end+2): then the body momentum m that step carried belongs to it.
@@ -110,7 +110,7 @@ def small_angle_cos_sin(a):  # noqa: ANN001, ANN201
     return math.cos(a), math.sin(a)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def turn(k, c, s, m0, m1, m2, w, x, y, z):  # noqa: ANN001, ANN201
     """Turn the body about its principal axis k by theta (c = cos(theta/2), s = sin(theta/2)).
 
@@ -135,7 +135,7 @@ def turn(k, c, s, m0, m1, m2, w, x, y, z):  # noqa: ANN001, ANN201
             w * c - z * s, x * c + y * s, y * c - x * s, z * c + w * s)  # fmt: skip
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def sum_compensated(y, d, e):  # noqa: ANN001, ANN201
     """(y + d, the part of d that rounding lost), with e the part lost before (Kahan summation)."""
     d = d + e
@@ -145,7 +145,7 @@ def sum_compensated(y, d, e):  # noqa: ANN001, ANN201
 
 # inlined at numba level: as a call, its 10-tuple result went through memory at each of split4's 21
 # turns per body-step (measured: split4 per body-step 570 -> 750-900 ns, N = 1 step 1.6 -> 3.3-4.2 us)
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def turn_compensated(k, c, s, m0, m1, m2, e0, e1, e2, w, x, y, z, compensate=True):  # noqa: ANN001, ANN201
     """`turn` with m summed with compensation: e = (e0, e1, e2) carries what rounding m + increment
     lost (Kahan), so the small components of m, which decide the motion near the separatrix, do not

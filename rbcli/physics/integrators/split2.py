@@ -132,7 +132,7 @@ def compose(model, forces, force_data, t, h, weights, x, q, P, L, F, tau, scratc
         elapsed += 0.5 * (h_prev + h_next)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _half_kick(model, has_torque, torque_body, kick, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001
     """K_c(kick) before the dissipation flow: P += kick F, and for torque bodies L += kick tau with m
     following (m += kick R^T tau); L is then saved for `_momentum_change_to_body`."""
@@ -152,7 +152,7 @@ def _half_kick(model, has_torque, torque_body, kick, q, P, L, F, tau, scratch) -
             scratch[b, _L_SAVED], scratch[b, _L_SAVED + 1], scratch[b, _L_SAVED + 2] = L[b, 0], L[b, 1], L[b, 2]
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _momentum_change_to_body(model, has_torque, torque_body, q, L, scratch) -> None:  # noqa: ANN001
     """m += R^T (L - L_saved): the dissipation flow's change of L (q held) in the body frame. Only
     torque bodies can have one (a damper off the centre of mass or angular drag flags its body)."""
