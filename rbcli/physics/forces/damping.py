@@ -63,8 +63,8 @@ def _inverse_inertia_times(model, q, b, vx, vy, vz):  # noqa: ANN001, ANN202
     return rotate(q, b, lx * inv[b, 0], ly * inv[b, 1], lz * inv[b, 2])
 
 
-# the row flows are inlined at numba level: a call boundary costs a reference-count update per array of
-# the model and tables it takes (measured: 200-400 ns per row application as calls)
+# the row flows are calls (a reference-count update per array they take, 200-400 ns per row application):
+# inline="always" saved that but, with the turns inlined too, quadrupled split2/split4 compile times
 @numba.njit(cache=True)
 def _damper_flow(model, spring, row, h, x, q, P, L) -> None:  # noqa: ANN001
     """The exact flow over time h of damper `row` alone (module docstring), x and q held."""

@@ -143,8 +143,8 @@ def sum_compensated(y, d, e):  # noqa: ANN001, ANN201
     return y_new, (y - y_new) + d
 
 
-# inlined at numba level: as a call, its 10-tuple result went through memory at each of split4's 21
-# turns per body-step (measured: split4 per body-step 570 -> 750-900 ns, N = 1 step 1.6 -> 3.3-4.2 us)
+# a call, not inline="always": inlined into each of split4's 21 turns per body-step it saved ~20 % of
+# split4's step but made every split2/split4 loop compile for 40+ s instead of ~10 s (a first run, the suite)
 @numba.njit(cache=True)
 def turn_compensated(k, c, s, m0, m1, m2, e0, e1, e2, w, x, y, z, compensate=True):  # noqa: ANN001, ANN201
     """`turn` with m summed with compensation: e = (e0, e1, e2) carries what rounding m + increment
