@@ -4,7 +4,8 @@
 the flow of a body many times from the same anchor state (each recorded frame, each step's end), and
 most of that call depends on the anchor only: the body momentum m0 = R^T L, the working frame, the
 amplitudes, lambda, the parameter mc, u_0 = F(phi_0|m) (a Carlson R_F), Pi(-N; phi_0|m) (R_F + R_J),
-K, the complete Pi (R_F + R_J again), the rotation P(m0) and its product with q(t0). `anchor_prepare`
+K, the complete Pi (R_F + R_J again), the descending AGM of the Jacobi functions (it depends on mc
+only), the rotation P(m0) and its product with q(t0). `anchor_prepare`
 computes them once into ANCHOR_CONSTANTS floats (a row of the integrator's scratch); `anchor_evaluate`
 then needs the Jacobi functions at u_0 + lambda h, one incomplete Pi (or a short quadrature) and the
 quaternion products. The equations, branches and accuracy are those of `free_rotation_exact`'s
@@ -19,11 +20,14 @@ import numba
 import numpy as np
 
 from rbcli.physics.elliptic import (
+    JACOBI_PREPARED_SIZE,
     ellipj_mc_work,
+    ellipj_prepared,
     ellipk_mc,
     ellippi_complete_mc,
     ellippi_sc,
     elliprf,
+    jacobi_prepare,
 )
 from rbcli.physics.free_rotation_exact import (
     _gauss_legendre_psi,
@@ -52,7 +56,8 @@ _LAM, _U0, _MC, _A1, _A2, _A3, _G, _TWO_E, _C3, _DIST = range(12, 22)
 _QUADRATURE = 22  # 1.0: psi by quadrature always (the closed form is ill-conditioned for this body)
 _NN, _SQ, _PI0, _TH0, _K, _PIC, _COEF, _G_I3, _PERIOD, _WHOLE = range(23, 33)
 _M = 33  # (3) STEADY: the fixed working-frame momentum
-ANCHOR_CONSTANTS = 36
+_JACOBI = 36  # (JACOBI_PREPARED_SIZE) the Jacobi functions' AGM for this mc (elliptic.jacobi_prepare)
+ANCHOR_CONSTANTS = _JACOBI + JACOBI_PREPARED_SIZE
 
 
 @numba.njit(cache=True, inline="always")
@@ -163,6 +168,7 @@ def _prepare_working(
         c[_RATE] = a3 / i3 + a1 * a1 / ((g + a3) * i1)
         return
     c[_KIND] = KIND_ELLIPTIC
+    jacobi_prepare(mc, c[_JACOBI:ANCHOR_CONSTANTS])
     c[_DIST] = min(1.0, math.atan(1.0 / math.sqrt(nn))) if nn > 0.0 else 1.0
     amplification = g * g / two_e * max(1.0 / i3, abs(1.0 / i1 - 1.0 / i3))
     c[_QUADRATURE] = 1.0 if amplification > 16.0 else 0.0
@@ -232,7 +238,7 @@ def anchor_evaluate(c: np.ndarray, h: float, q_out: np.ndarray, work: np.ndarray
         span = c[_LAM] * h
         u1 = c[_U0] + span
         mc = c[_MC]
-        sn, cn, dn = ellipj_mc_work(u1, mc, work)
+        sn, cn, dn = ellipj_prepared(u1, mc, c[_JACOBI:ANCHOR_CONSTANTS], work)
         m1n, m2n, m3n = c[_A1] * cn, c[_A2] * sn, c[_A3] * dn
         dpsi = math.nan
         if abs(span) <= 0.5 * c[_DIST] or c[_QUADRATURE] == 1.0:
