@@ -6,7 +6,9 @@ writes lives here, so kernels never allocate and a run's memory is known when it
     x, q, P, L   the state (physics/state.py has the frames and units); `step` counts grid steps
     F, tau       wrench accumulators [N], [N m], shape (body_count, 3), world frame, about each centre
                  of mass: the force pass sets them, the integrator reads them
-    scratch      the integrator's work columns, shape (body_count, SCRATCH_WIDTH of its module)
+    scratch      the integrator's work columns, shape (body_count, SCRATCH_WIDTH of its module); `exact`
+                 keeps each body's anchor there (the state its closed form starts from, with the flow's
+                 constants and an evaluation counter), so clear_work (set_state, reset) restarts it
     force        what the force pass writes besides F and tau (forces/tables.py ForceData): stage
                  counters, and the contact stage's grid, per-evaluation arrays and contact history
                  (None without a contact stage, so the kernels compile none of it)

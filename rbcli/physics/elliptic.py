@@ -288,6 +288,67 @@ def ellipj_mc_work(u: float, mc: float, work: np.ndarray) -> tuple[float, float,
     return sn, cn, dn
 
 
+# what jacobi_prepare keeps of the AGM of (1, sqrt(mc)): levels, its limit c, then (a_i, sqrt term) pairs
+# for at most 14 levels (13 reach the smallest double; one more for safety)
+JACOBI_PREPARED_SIZE = 2 + 2 * 14
+
+
+@numba.njit(cache=True)
+def jacobi_prepare(mc: float, prepared: np.ndarray) -> None:
+    """Keep the descending AGM of `ellipj_mc_work` for this mc (it depends on mc only) in `prepared`
+    (JACOBI_PREPARED_SIZE,), so `ellipj_prepared` evaluates sn, cn, dn at any u without it, bitwise as
+    `ellipj_mc_work` does. For mc = 0 or 1 (closed forms) or nan, levels is 0 and mc is kept instead."""
+    prepared[0] = 0.0
+    prepared[1] = mc
+    if not (0.0 < mc < 1.0):
+        return
+    a = 1.0
+    emc = mc
+    c = 1.0
+    for i in range(_JACOBI_LEVELS):
+        if 2 + 2 * i + 1 >= prepared.shape[0]:
+            prepared[0] = -1.0  # more levels than kept (not for a double mc): evaluate in full
+            return
+        prepared[0] = i + 1
+        prepared[2 + 2 * i] = a
+        emc = math.sqrt(emc)
+        prepared[2 + 2 * i + 1] = emc
+        c = 0.5 * (a + emc)
+        if abs(a - emc) <= _AGM_TOL * a:
+            break
+        emc *= a
+        a = c
+    prepared[1] = c
+
+
+@numba.njit(cache=True)
+def ellipj_prepared(u: float, mc: float, prepared: np.ndarray, work: np.ndarray) -> tuple[float, float, float]:
+    """(sn, cn, dn)(u | m) with the AGM that `jacobi_prepare(mc)` kept: the ascending half of Bulirsch's
+    ``sncndn`` only, bitwise equal to `ellipj_mc_work(u, mc, work)` (work is used only where nothing
+    was kept)."""
+    levels = int(prepared[0])
+    if levels <= 0 or math.isnan(u):
+        return ellipj_mc_work(u, mc, work)
+    c = prepared[1]
+    v = u * c
+    sn = math.sin(v)
+    cn = math.cos(v)
+    dn = 1.0
+    if sn != 0.0:
+        a = cn / sn
+        c *= a
+        for ii in range(levels - 1, -1, -1):
+            b = prepared[2 + 2 * ii]
+            a *= c
+            c *= dn
+            dn = (prepared[2 + 2 * ii + 1] + a) / (b + a)
+            a = c / b
+        a = 1.0 / math.sqrt(c * c + 1.0)
+        sn = a if sn >= 0.0 else -a
+        cn = c * sn
+    return sn, cn, dn
+
+
 @numba.njit(cache=True)
 def ellipj_mc(u: float, mc: float) -> tuple[float, float, float]:
     """(sn, cn, dn)(u | m) given the complementary parameter mc = 1 - m in [0, 1] (see ellipj_mc_work)."""

@@ -65,6 +65,7 @@ class Stage:
     imports: tuple[str, ...]
     code: str  # lines of the loop body, without indentation
     substep: bool = False  # runs data.substeps times per step, at ts = t + sub h, h = dt / data.substeps
+    integrators: tuple[str, ...] = ()  # the integrator modules whose loops have it (empty: every one)
 
 
 STEP_STAGES: tuple[Stage, ...] = (
@@ -108,6 +109,13 @@ STEP_STAGES: tuple[Stage, ...] = (
         ("from rbcli.physics.forces.stages import contact_commit_stage",),
         "contact_commit_stage(model, forces.contact, data.force.contact, x, q, P, L)",
         substep=True,
+    ),
+    Stage(
+        "materialise",
+        "materialise: exact defers torque-free bodies under constant forces; write them when due",
+        ("from rbcli.physics.integrators.exact import materialise",),
+        "materialise(model, forces, t, dt, x, q, P, L, data.scratch, {due})",
+        integrators=("exact",),
     ),
     Stage(
         "contact_record",
@@ -166,7 +174,8 @@ def _import_lines(module: str, stages: tuple[Stage, ...]) -> str:
         source, _, imported = line.removeprefix("from ").partition(" import ")
         names.setdefault(source, set()).update(name.strip() for name in imported.split(","))
     integrator = f"rbcli.physics.integrators.{module}"
-    lines = [(integrator, f"from {integrator} import SCRATCH_WIDTH"),
+    own = sorted({"SCRATCH_WIDTH"} | names.pop(integrator, set()))  # a stage of the integrator's own module
+    lines = [(integrator, f"from {integrator} import {', '.join(own)}"),
              (integrator, f"from {integrator} import step as integrator_step")]  # fmt: skip
     for source, found in names.items():
         line = f"from {source} import {', '.join(sorted(found))}"
@@ -176,17 +185,27 @@ def _import_lines(module: str, stages: tuple[Stage, ...]) -> str:
     return "\n".join(line for _, line in sorted(lines))
 
 
+def _state_due(later: tuple[Stage, ...]) -> str:
+    """When `materialise` must write a deferred state: on recording steps and at the chunk's end, or at
+    every step when a stage after it (other than the recording ones, which read it only when due) may
+    read or write the state, as a stage added to the list would."""
+    if all(stage.name in ("contact_record", "record") for stage in later):
+        return "(index + 1) % record_every == 0 or k + 1 == n_steps"
+    return "True"
+
+
 def chunk_source(module: str, name: str, stages: tuple[Stage, ...] = STEP_STAGES) -> str:
     """The Python source of the chunk loop of integrator module `module` (registry name `name`)."""
     body = []
     in_substeps = False
-    for stage in stages:
+    stages = tuple(stage for stage in stages if not stage.integrators or module in stage.integrators)
+    for i, stage in enumerate(stages):
         if stage.substep and not in_substeps:
             # h = dt / 1 and ts = t + 0 * h are exactly dt and t: one sub-step is bitwise the plain step
             body.append(_indent("h = dt / data.substeps\nfor sub in range(data.substeps):\n    ts = t + sub * h", 8))
         in_substeps = stage.substep
         depth = 12 if stage.substep else 8
         body.append(_indent(f"# {stage.why}", depth))
-        body.append(_indent(stage.code, depth))
+        body.append(_indent(stage.code.replace("{due}", _state_due(stages[i + 1 :])), depth))
     head = _HEADER.format(name=name, imports=_import_lines(module, stages))
     return head + "".join(body) + _FOOTER

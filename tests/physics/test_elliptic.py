@@ -211,3 +211,14 @@ def test_ellippi_periodicity_and_domain():
     below, above = E.ellippi(n, math.pi / 2 - 1e-9, m), E.ellippi(n, math.pi / 2 + 1e-9, m)
     assert abs(above - below) < 1e-8
     assert math.isnan(E.ellippi(2.0, 4.0, 0.5))  # n > 1 beyond pi/2: no finite complete integral
+
+
+def test_prepared_jacobi_functions_are_bitwise_the_full_ones():
+    # jacobi_prepare keeps the descending AGM (a function of mc alone): the ascending half then gives
+    # the very bits of ellipj_mc_work, for mc from 1e-300 to 1 and the closed-form ends 0 and 1
+    rng = np.random.default_rng(8)
+    work, prepared = np.empty(E.JACOBI_WORK_SIZE), np.empty(E.JACOBI_PREPARED_SIZE)
+    for mc in [0.0, 1.0, 1e-300, 1e-17, *(10.0 ** rng.uniform(-16, 0, 40))]:
+        E.jacobi_prepare(mc, prepared)
+        for u in [0.0, *rng.uniform(-3000.0, 3000.0, 20)]:
+            assert E.ellipj_prepared(u, mc, prepared, work) == E.ellipj_mc_work(u, mc, work), (mc, u)

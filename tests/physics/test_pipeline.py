@@ -39,8 +39,11 @@ def test_committed_chunk_loops_are_generated_from_the_stage_list(name):
 
 def test_stage_list_is_impulses_contact_update_record():
     names = ["impulses", "contact_begin", "kinematic_begin", "update", "kinematic_end", "contact_commit",
-             "contact_record", "record"]  # fmt: skip
+             "materialise", "contact_record", "record"]  # fmt: skip
     assert [stage.name for stage in STEP_STAGES] == names
+    # materialise belongs to exact's loop alone (it writes the states exact defers)
+    assert [stage.name for stage in STEP_STAGES if stage.integrators] == ["materialise"]
+    assert "materialise(" in chunk_source("exact", "exact") and "materialise(" not in chunk_source("split2", "split2")
     assert [stage.name for stage in STEP_STAGES if stage.substep] == names[1:6]
 
 

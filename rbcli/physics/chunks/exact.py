@@ -13,7 +13,7 @@ from rbcli.physics.forces.stages import (
     kinematic_begin_stage,
     kinematic_end_stage,
 )
-from rbcli.physics.integrators.exact import SCRATCH_WIDTH
+from rbcli.physics.integrators.exact import SCRATCH_WIDTH, materialise
 from rbcli.physics.integrators.exact import step as integrator_step
 from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, chunk_status, record_if_due
 
@@ -47,6 +47,8 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
             kinematic_end_stage(model, forces, ts + h, x, q, P, L)
             # contact_commit: the (sub-)step is complete: its last evaluation's contacts become the history
             contact_commit_stage(model, forces.contact, data.force.contact, x, q, P, L)
+        # materialise: exact defers torque-free bodies under constant forces; write them when due
+        materialise(model, forces, t, dt, x, q, P, L, data.scratch, (index + 1) % record_every == 0 or k + 1 == n_steps)
         # contact_record: on recording steps, the step's contact count, deepest overlap and energy
         contact_record_stage(data.force.contact, frames, filled, (index + 1) % record_every == 0)
         # record: on recording steps, the divergence check and the state copied into the next frame

@@ -8,35 +8,231 @@ free rigid body motion and its use in splitting methods", SIAM J. Sci. Comput. 3
   D(h/2) K(h) D(h/2),  D(s): x += s P/M and q <- exact free flow over s (L fixed in the world),
                        K(s): P += s F, L += s tau, one wrench evaluation at t + h/2.
 
-Torque-free the rotation is exact to round-off for any dt (D(h/2) D(h/2) = D(h) by the flow
-property), so the only error is the splitting against the forces: second order, symplectic,
-time-reversible, and for uniform gravity exact as well (leapfrog is exact for constant forces).
-Like split2 the kick sits in the middle so that each step takes one fresh force evaluation; the
-price is two exact flows per step even when torque-free (a force can depend on the orientation at
-the midpoint, e.g. a body-frame thrust through the centre of mass). `compose` merges the half-flows
-of adjacent stages of a composition (exact4): s stages cost s + 1 flows and s force evaluations.
+Exact at any horizon: from its ANCHOR. A body without torque keeps L, so its orientation at time t is
+one call of the free flow from the orientation q_a it had at the anchor time t_a, q(t) = flow(q_a, L,
+t - t_a), not a chain of per-step calls each restarting from its own rounded result (that chain grew
+like the number of steps: 1e-8 rad on the flip at dt = 3e-4 over 20 s). Likewise a body whose force F
+has not changed (bitwise) since its translation anchor is in free flight there: x = x_a + (t - t_a)
+(P_a + (t - t_a) F / 2) / M, P = P_a + (t - t_a) F, which is what leapfrog computes for a constant
+force, without its per-step rounding. The anchors (scratch columns below, in the run's Data) are
+taken at the start of a run, after `Simulation.set_state` / `reset` (which clear the scratch), and
+whenever the state differs from what this integrator last wrote (an impulse, any outside write); a
+translation anchor also when F changes (a spring: then each step is the leapfrog step). Bodies with
+a torque chain the flow through the kicks as before (second order through the forces).
+
+Evaluated only when needed: when the scene's only force is uniform gravity (no other force type, no
+impulses, no contact: `forces_are_constant`) nothing between recorded frames depends on the states in
+between, so inside a chunk loop the step only keeps the anchors and the pipeline's `materialise`
+stage evaluates the closed form on recording steps and at the chunk's end: the cost is per recorded
+frame. The stage's first call sets a flag in the scratch that lets `step` defer; `step` called on its
+own (tests, benchmarks) never sees it and writes the state every step. The results are bitwise the
+same either way (the same closed form at the same elapsed time (t - t_a) + h).
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import numba
 import numpy as np
+from numba.core import types
+from numba.extending import overload
 
 from rbcli.physics.elliptic import JACOBI_WORK_SIZE
 from rbcli.physics.forces.wrench import accumulate_wrench, wrench_numpy
-from rbcli.physics.free_rotation_exact import free_rotation_exact_batch
+from rbcli.physics.free_rotation_anchored import ANCHOR_CONSTANTS, anchor_evaluate, anchor_prepare
+from rbcli.physics.free_rotation_exact import _free_rotation_exact_work, free_rotation_exact_batch
+from rbcli.physics.step import STEP_KERNEL
 
-# per body: the orientation at the current force evaluation, when torque-free (see `compose`)
-# per body: the orientation at the force evaluation (4); row 0 also holds the Jacobi functions' work
-SCRATCH_WIDTH = 4 + JACOBI_WORK_SIZE
+# Scratch columns per body (the run's Data.scratch, zeroed by Data.clear_work: no anchor):
+Q_MID = 0  # (4) orientation at the force evaluation (the wrench reads it as its q: first columns)
+X_START = 4  # (3) centre of mass at the step's start (x holds the midpoint during the force pass)
+ROT_ANCHORED = 7  # 1.0 when the rotation anchor below is the body's (torque-free) motion
+ROT_T = 8  # anchor time t_a [s]
+ROT_Q = 9  # (4) orientation at t_a, wxyz world-from-principal
+ROT_L = 13  # (3) world angular momentum at t_a [kg m^2/s]
+TR_ANCHORED = 16  # 1.0 when the translation anchor below is the body's (constant-force) motion
+TR_T = 17  # anchor time [s]
+TR_X = 18  # (3) centre of mass at the anchor [m]
+TR_P = 21  # (3) momentum at the anchor [kg m/s]
+TR_F = 24  # (3) the constant force [N] (nan: not known yet)
+LAST_X = 27  # (3) the state this integrator last wrote: a difference means someone else changed it
+LAST_Q = 30  # (4)
+LAST_P = 34  # (3)
+LAST_L = 37  # (3)
+EVALUATIONS = 40  # closed-form evaluations of this body's motion since the scratch was cleared
+DEFERRED = 41  # row 0: 1.0 once a chunk loop's materialise stage has run (the step may then defer)
+ROT_CONSTANTS = 42  # (ANCHOR_CONSTANTS) the flow's constants at the rotation anchor (free_rotation_anchored)
+WORK = ROT_CONSTANTS + ANCHOR_CONSTANTS  # row 0: the Jacobi functions' work
+SCRATCH_WIDTH = WORK + JACOBI_WORK_SIZE
 
 WEIGHTS = np.array([1.0])
 
+# typed Any: numba's stubs type jit_options as a TypedDict without STEP_KERNEL's private `_nrt`
+_OPTIONS: Any = STEP_KERNEL
 
-@numba.njit(cache=True)
+
+def forces_are_constant(forces) -> bool:  # noqa: ANN001
+    """True when uniform gravity is the scene's only force (no other type, no impulses, no contact):
+    every body's F = M g is constant and its tau zero, so no state between recorded frames matters."""
+    raise TypeError("forces_are_constant runs in compiled kernels only")
+
+
+def _table_rows(table) -> int:  # noqa: ANN001
+    raise TypeError("_table_rows runs in compiled kernels only")
+
+
+@overload(_table_rows, jit_options=_OPTIONS)
+def _table_rows_overload(table):  # noqa: ANN001, ANN202
+    if isinstance(table, types.NoneType):  # absent from ForceTables.kernel(): known when compiling
+        return lambda table: 0
+    if "sphere_body" in table.fields:  # the contact table: spheres or static bodies
+        return lambda table: table.sphere_body.shape[0] + table.static_body.shape[0]
+    return lambda table: table[0].shape[0]  # every force table's first column has one entry per row
+
+
+@overload(forces_are_constant, jit_options=_OPTIONS)
+def _forces_are_constant_overload(forces):  # noqa: ANN001, ANN202
+    def run(forces):  # noqa: ANN001, ANN202
+        rows = _table_rows(forces.field) + _table_rows(forces.point_force) + _table_rows(forces.torque)
+        rows += _table_rows(forces.spring) + _table_rows(forces.drag) + _table_rows(forces.impulse)
+        return rows + _table_rows(forces.contact) == 0
+
+    return run
+
+
+@numba.njit(**STEP_KERNEL)
 def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
-    """One `exact` step of every body, in place (one force evaluation, at t + dt/2)."""
-    compose(model, forces, force_data, t, dt, WEIGHTS, x, q, P, L, F, tau, scratch)
+    """One `exact` step of every body, in place (one force evaluation, at t + dt/2, unless the forces are
+    constant); defers writing the state only once a chunk loop's `materialise` stage has said it runs."""
+    _step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch)
+
+
+@numba.njit(cache=True, inline="always")
+def _same(scratch, b, column, values, count) -> bool:  # noqa: ANN001
+    """values[b, :count] == scratch[b, column : column + count], bitwise (nan never equal)."""
+    for k in range(count):
+        if values[b, k] != scratch[b, column + k]:
+            return False
+    return True
+
+
+@numba.njit(cache=True, inline="always")
+def _keep_anchors(model, forces, b, t, x, q, P, L, scratch, torque_free, constant, work) -> None:  # noqa: ANN001
+    """Take body b's anchors from its state at time t where the state is not what was last written."""
+    row = scratch[b]
+    written = _same(scratch, b, LAST_X, x, 3) and _same(scratch, b, LAST_P, P, 3)
+    turned = _same(scratch, b, LAST_Q, q, 4) and _same(scratch, b, LAST_L, L, 3)
+    if not (written and row[TR_ANCHORED] == 1.0):
+        row[TR_ANCHORED], row[TR_T] = 1.0, t
+        for k in range(3):
+            row[TR_X + k], row[TR_P + k] = x[b, k], P[b, k]
+            row[TR_F + k] = np.nan  # unknown until the force pass says (a constant scene: M g, below)
+            if constant:  # F = M g exactly as accumulate_gravity forms it (0 + M g)
+                row[TR_F + k] = 0.0 + model.body_mass[b] * forces.gravity[k] if forces.has_gravity else 0.0
+    if torque_free and not (turned and row[ROT_ANCHORED] == 1.0):
+        row[ROT_ANCHORED], row[ROT_T] = 1.0, t
+        for k in range(4):
+            row[ROT_Q + k] = q[b, k]
+        for k in range(3):
+            row[ROT_L + k] = L[b, k]
+        anchor_prepare(model.body_inertia[b], q[b], L[b], row[ROT_CONSTANTS:WORK], work)
+    elif not torque_free:
+        row[ROT_ANCHORED] = 0.0
+
+
+@numba.njit(cache=True, inline="always")
+def _anchored_flow(model, row, b, elapsed, q_out, work) -> None:  # noqa: ANN001
+    """q_out = the free flow from body b's rotation anchor (row: its scratch row) over elapsed [s]."""
+    anchor_evaluate(row[ROT_CONSTANTS:WORK], elapsed, q_out, work)
+    row[EVALUATIONS] += 1.0
+
+
+@numba.njit(cache=True, inline="always")
+def _write_from_anchor(model, b, elapsed_rot, elapsed_tr, x, q, P, L, scratch, work) -> None:  # noqa: ANN001
+    """Body b's state at its anchors' times plus the elapsed times [s]: the closed forms, then recorded
+    as last written."""
+    row = scratch[b]
+    if row[ROT_ANCHORED] == 1.0:
+        _anchored_flow(model, row, b, elapsed_rot, q[b], work)
+        for k in range(3):
+            L[b, k] = row[ROT_L + k]
+    s = elapsed_tr
+    inverse_mass = 1.0 / model.body_mass[b]
+    for k in range(3):
+        P[b, k] = row[TR_P + k] + s * row[TR_F + k]
+        x[b, k] = row[TR_X + k] + s * inverse_mass * (row[TR_P + k] + 0.5 * s * row[TR_F + k])
+    _remember(b, x, q, P, L, scratch)
+
+
+@numba.njit(cache=True, inline="always")
+def _remember(b, x, q, P, L, scratch) -> None:  # noqa: ANN001
+    row = scratch[b]
+    for k in range(3):
+        row[LAST_X + k], row[LAST_P + k], row[LAST_L + k] = x[b, k], P[b, k], L[b, k]
+    for k in range(4):
+        row[LAST_Q + k] = q[b, k]
+
+
+@numba.njit(**STEP_KERNEL)
+def _step(model, forces, force_data, t, h, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001
+    """The step of the module docstring."""
+    n = x.shape[0]
+    if n == 0:
+        return
+    work = scratch[0, WORK:]
+    constant = forces_are_constant(forces)
+    torque = forces.has_torque
+    for b in range(n):
+        _keep_anchors(model, forces, b, t, x, q, P, L, scratch, not (torque and forces.torque_body[b]), constant, work)
+    if constant:
+        if scratch[0, DEFERRED] == 1.0:
+            return  # materialise writes the state when it is due
+        for b in range(n):
+            row = scratch[b]
+            _write_from_anchor(model, b, (t - row[ROT_T]) + h, (t - row[TR_T]) + h, x, q, P, L, scratch, work)
+        return
+    # the force evaluation at the midpoint: x + (h/2) P/M, the flow at t + h/2
+    for b in range(n):
+        row = scratch[b]
+        drift = 0.5 * h / model.body_mass[b]
+        for k in range(3):
+            row[X_START + k] = x[b, k]
+            x[b, k] += drift * P[b, k]
+        if row[ROT_ANCHORED] == 1.0:
+            _anchored_flow(model, row, b, (t - row[ROT_T]) + 0.5 * h, row[Q_MID : Q_MID + 4], work)
+        else:
+            _free_rotation_exact_work(model.body_inertia[b], q[b], L[b], 0.5 * h, row[Q_MID : Q_MID + 4], work)
+    accumulate_wrench(model, forces, force_data, t + 0.5 * h, x, scratch, P, L, F, tau)
+    for b in range(n):
+        row = scratch[b]
+        if row[ROT_ANCHORED] != 1.0:  # a torque: kick L, then the second half-flow from the midpoint
+            for k in range(3):
+                L[b, k] += h * tau[b, k]
+            _free_rotation_exact_work(model.body_inertia[b], row[Q_MID : Q_MID + 4], L[b], 0.5 * h, q[b], work)
+        if not _same(scratch, b, TR_F, F, 3):
+            # a new force: the translation restarts from the step's start, F constant over the step
+            row[TR_T] = t
+            for k in range(3):
+                row[TR_X + k], row[TR_P + k], row[TR_F + k] = row[X_START + k], P[b, k], F[b, k]
+        _write_from_anchor(model, b, (t - row[ROT_T]) + h, (t - row[TR_T]) + h, x, q, P, L, scratch, work)
+
+
+@numba.njit(**STEP_KERNEL)
+def materialise(model, forces, t, h, x, q, P, L, scratch, due) -> None:  # noqa: ANN001
+    """The chunk loop's stage after each step [t, t + h): when the forces are constant (the step then
+    defers) and the state is due (a recording step or the chunk's last), write every body's state from
+    its anchors. Its first call (after the scratch was cleared) tells `step` it may defer from now on."""
+    if x.shape[0] == 0 or not forces_are_constant(forces):
+        return
+    if scratch[0, DEFERRED] != 1.0:
+        scratch[0, DEFERRED] = 1.0  # this step was written already; the next ones need not be
+        return
+    if due:
+        work = scratch[0, WORK:]
+        for b in range(x.shape[0]):
+            row = scratch[b]
+            _write_from_anchor(model, b, (t - row[ROT_T]) + h, (t - row[TR_T]) + h, x, q, P, L, scratch, work)
 
 
 @numba.njit(cache=True)

@@ -1,0 +1,270 @@
+"""The exact torque-free flow from an anchor: constants prepared once, then one cheap evaluation per time.
+
+`free_rotation_exact` computes q(t0 + h) from (q(t0), L) in one call. The `exact` integrator evaluates
+the flow of a body many times from the same anchor state (each recorded frame, each step's end), and
+most of that call depends on the anchor only: the body momentum m0 = R^T L, the working frame, the
+amplitudes, lambda, the parameter mc, u_0 = F(phi_0|m) (a Carlson R_F), Pi(-N; phi_0|m) (R_F + R_J),
+K, the complete Pi (R_F + R_J again), the descending AGM of the Jacobi functions (it depends on mc
+only), the rotation P(m0) and its product with q(t0). `anchor_prepare`
+computes them once into ANCHOR_CONSTANTS floats (a row of the integrator's scratch); `anchor_evaluate`
+then needs the Jacobi functions at u_0 + lambda h, one incomplete Pi (or a short quadrature) and the
+quaternion products. The equations, branches and accuracy are those of `free_rotation_exact`'s
+docstring; the same formulas are used, only split at the anchor, so the two agree to rounding (tested).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from rbcli.physics.elliptic import (
+    JACOBI_PREPARED_SIZE,
+    ellipj_mc_work,
+    ellipj_prepared,
+    ellipk_mc,
+    ellippi_complete_mc,
+    ellippi_sc,
+    elliprf,
+    jacobi_prepare,
+)
+from rbcli.physics.free_rotation_exact import (
+    _gauss_legendre_psi,
+    _pick,
+    _psi_rate,
+    _quat_e3_to,
+    _quat_mul,
+    _scatter,
+)
+from rbcli.physics.step import STEP_KERNEL
+
+# what the body does, constant 0 of a prepared row
+KIND_FIXED = 0.0  # L = 0: q stays
+KIND_SPHERE = 1.0  # equal moments: q(h) = exp(h omega / 2) q, omega = L / I
+KIND_STEADY = 2.0  # m is an eigenvector (a principal-axis spin): m stays, psi grows at a constant rate
+KIND_PRECESSION = 3.0  # two equal moments (I_1 = I_2 in the working frame): regular precession
+KIND_ELLIPTIC = 4.0  # the general case: Jacobi functions and Pi (or quadrature of psi')
+
+# columns of a prepared row
+_KIND = 0
+_A = 1  # (4) q(t0) for FIXED / SPHERE; q(t0) C^T P(m0) C (the anchor's rotation into the L frame) otherwise
+_AXIS = 5  # (3) working axes w1, w2, w3 (principal indices); SPHERE: omega (3) [rad/s], world
+_SIGN = 8  # (3) their signs s1, s2, s3
+_RATE = 11  # psi' [rad/s] of STEADY / PRECESSION
+_LAM, _U0, _MC, _A1, _A2, _A3, _G, _TWO_E, _C3, _DIST = range(12, 22)
+_QUADRATURE = 22  # 1.0: psi by quadrature always (the closed form is ill-conditioned for this body)
+_NN, _SQ, _PI0, _TH0, _K, _PIC, _COEF, _G_I3, _PERIOD, _WHOLE = range(23, 33)
+_M = 33  # (3) STEADY: the fixed working-frame momentum
+_JACOBI = 36  # (JACOBI_PREPARED_SIZE) the Jacobi functions' AGM for this mc (elliptic.jacobi_prepare)
+ANCHOR_CONSTANTS = _JACOBI + JACOBI_PREPARED_SIZE
+
+
+@numba.njit(cache=True, inline="always")
+def _set4(c: np.ndarray, at: int, w: float, x: float, y: float, z: float) -> None:
+    c[at], c[at + 1], c[at + 2], c[at + 3] = w, x, y, z
+
+
+@numba.njit(**STEP_KERNEL)
+def anchor_prepare(inertia: np.ndarray, q: np.ndarray, L: np.ndarray, c: np.ndarray, work: np.ndarray) -> None:
+    """Write into c (ANCHOR_CONSTANTS,) what the flow from (q, L) needs at every time (module docstring).
+
+    inertia: principal moments (3,) [kg m^2]; q: wxyz world-from-principal (normalised here); L: world
+    angular momentum [kg m^2/s]. work: the Jacobi functions' scratch (JACOBI_WORK_SIZE)."""
+    qn = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    w, x, y, z = q[0] / qn, q[1] / qn, q[2] / qn, q[3] / qn
+    lx, ly, lz = L[0], L[1], L[2]
+    _set4(c, _A, w, x, y, z)
+    c[_KIND] = KIND_FIXED
+    if lx == 0.0 and ly == 0.0 and lz == 0.0:
+        return
+    mp0 = (1.0 - 2.0 * (y * y + z * z)) * lx + 2.0 * (x * y + w * z) * ly + 2.0 * (x * z - w * y) * lz
+    mp1 = 2.0 * (x * y - w * z) * lx + (1.0 - 2.0 * (x * x + z * z)) * ly + 2.0 * (y * z + w * x) * lz
+    mp2 = 2.0 * (x * z + w * y) * lx + 2.0 * (y * z - w * x) * ly + (1.0 - 2.0 * (x * x + y * y)) * lz
+    ia, ib, ic = 0, 1, 2
+    if inertia[ia] > inertia[ib]:
+        ia, ib = ib, ia
+    if inertia[ib] > inertia[ic]:
+        ib, ic = ic, ib
+    if inertia[ia] > inertia[ib]:
+        ia, ib = ib, ia
+    big_a, big_b, big_c = inertia[ia], inertia[ib], inertia[ic]
+    if big_a == big_c:
+        c[_KIND] = KIND_SPHERE
+        c[_AXIS], c[_AXIS + 1], c[_AXIS + 2] = lx / big_a, ly / big_a, lz / big_a
+        return
+    if big_b == big_c:
+        major = False
+    elif big_a == big_b:
+        major = True
+    else:
+        m_a, m_c = _pick(mp0, mp1, mp2, ia), _pick(mp0, mp1, mp2, ic)
+        major = m_c * m_c * (big_c - big_b) / big_c >= m_a * m_a * (big_b - big_a) / big_a
+    w1, w2, w3 = (ia, ib, ic) if major else (ic, ib, ia)
+    s1 = 1.0 if (w1 + 1) % 3 == w2 else -1.0
+    s2 = 1.0
+    s3 = 1.0
+    m1, m2, m3 = _pick(mp0, mp1, mp2, w1), _pick(mp0, mp1, mp2, w2), _pick(mp0, mp1, mp2, w3)
+    if m3 < 0.0:
+        s2, s3 = -s2, -s3
+    if s1 * m1 < 0.0:
+        s1, s2 = -s1, -s2
+    c[_AXIS], c[_AXIS + 1], c[_AXIS + 2] = w1, w2, w3
+    c[_SIGN], c[_SIGN + 1], c[_SIGN + 2] = s1, s2, s3
+    m1, m2, m3 = s1 * m1, s2 * m2, s3 * m3
+    i1, i2, i3 = inertia[w1], inertia[w2], inertia[w3]
+    # A = q(t0) C^T P(m0) C: the working-frame rotation P(m0) taken back to principal axes
+    pw, px, py, pz = _quat_e3_to(m1, m2, m3)
+    ex, ey, ez = s1 * px, s2 * py, s3 * pz
+    a = _quat_mul(w, x, y, z, pw, _scatter(ex, ey, ez, w1, w2, w3, 0), _scatter(ex, ey, ez, w1, w2, w3, 1),
+                  _scatter(ex, ey, ez, w1, w2, w3, 2))  # fmt: skip
+    _set4(c, _A, a[0], a[1], a[2], a[3])
+    _prepare_working(i1, i2, i3, m1, m2, m3, c, work)
+
+
+@numba.njit(**STEP_KERNEL)
+def _prepare_working(
+    i1: float, i2: float, i3: float, m1: float, m2: float, m3: float, c: np.ndarray, work: np.ndarray
+) -> None:
+    """The working-frame constants (free_rotation_exact._working_frame_step's anchor half)."""
+    g = math.sqrt(m1 * m1 + m2 * m2 + m3 * m3)
+    d21, d32, d31 = abs(i2 - i1), abs(i3 - i2), abs(i3 - i1)
+    big_d1 = m2 * m2 * d21 / i2 + m3 * m3 * d31 / i3
+    big_d3 = m1 * m1 * d31 / i1 + m2 * m2 * d32 / i2
+    lam = math.sqrt(d32 * big_d1 / (i1 * i2 * i3))
+    c[_M], c[_M + 1], c[_M + 2] = m1, m2, m3
+    c[_KIND] = KIND_STEADY
+    c[_RATE] = _psi_rate(i1, i2, i3, m1, m2, m3)
+    if lam == 0.0:
+        return
+    k2 = d21 * big_d3 / (d32 * big_d1)
+    d2 = m3 * m3 * d32 / i3 - m1 * m1 * d21 / i1
+    mc = max(d31 * d2 / (d32 * big_d1), 0.0)
+    if k2 <= 0.5:
+        mc = 1.0 - k2
+    mc = min(mc, 1.0)
+    r = i1 * d32 / (i2 * d31)
+    a1 = math.sqrt(m1 * m1 + r * m2 * m2)
+    a2 = math.sqrt(m1 * m1 / r + m2 * m2)
+    a3 = math.sqrt(m3 * m3 + m2 * m2 * i3 * d21 / (i2 * d31))
+    sgn = 1.0 if i3 > i1 else -1.0
+    sphi = sgn * m2 * math.sqrt(r)
+    cphi = m1
+    rho = math.hypot(sphi, cphi)
+    if rho == 0.0:
+        sphi, cphi = 0.0, 1.0
+    else:
+        sphi, cphi = sphi / rho, cphi / rho
+    if cphi == 0.0 and mc == 0.0:
+        return  # the intermediate-axis equilibrium: steady
+    c2 = cphi * cphi
+    nn = i3 * d21 / (i1 * d32)
+    two_e = m1 * m1 / i1 + m2 * m2 / i2 + m3 * m3 / i3
+    c[_LAM], c[_MC], c[_A1], c[_A2], c[_A3], c[_G], c[_TWO_E] = lam, mc, a1, sgn * a2, a3, g, two_e
+    c[_U0] = sphi * elliprf(c2, c2 + mc * sphi * sphi, 1.0)
+    c[_C3] = g * a3 / i3
+    if nn == 0.0 and mc == 1.0:
+        c[_KIND] = KIND_PRECESSION
+        c[_RATE] = a3 / i3 + a1 * a1 / ((g + a3) * i1)
+        return
+    c[_KIND] = KIND_ELLIPTIC
+    jacobi_prepare(mc, c[_JACOBI:ANCHOR_CONSTANTS])
+    c[_DIST] = min(1.0, math.atan(1.0 / math.sqrt(nn))) if nn > 0.0 else 1.0
+    amplification = g * g / two_e * max(1.0 / i3, abs(1.0 / i1 - 1.0 / i3))
+    c[_QUADRATURE] = 1.0 if amplification > 16.0 else 0.0
+    sq = math.sqrt(1.0 + nn)
+    c[_NN], c[_SQ] = nn, sq
+    c[_PI0] = ellippi_sc(-nn, sphi, cphi, mc)
+    c[_TH0] = math.atan2(sq * sphi, cphi)
+    kk = ellipk_mc(mc) if mc > 0.0 else math.inf
+    c[_K] = kk
+    c[_PIC] = ellippi_complete_mc(-nn, mc) if mc > 0.0 else math.inf
+    c[_COEF] = (i3 - i1) / (i1 * i3 * lam)
+    c[_G_I3] = g / i3
+    c[_PERIOD] = 2.0 * kk
+    c[_WHOLE] = math.nan
+    if c[_QUADRATURE] == 1.0 and mc > 0.0:
+        # psi' integrated over one whole period by the trapezoidal rule (free_rotation_exact._quadrature_psi)
+        points = int(math.ceil(14.7 * kk / c[_DIST])) + 1
+        if points <= 4000:
+            whole = 0.0
+            for k in range(points):
+                _, _, dn = ellipj_mc_work(c[_U0] + k * 2.0 * kk / points, mc, work)
+                whole += (two_e + c[_C3] * dn) / (g + a3 * dn)
+            c[_WHOLE] = whole * 2.0 * kk / points
+
+
+@numba.njit(**STEP_KERNEL)
+def _psi_by_quadrature(c: np.ndarray, span: float, work: np.ndarray) -> float:
+    """int of psi' over u in [u0, u0 + span] (whole periods from the prepared sum); nan when too costly."""
+    sign, start = 1.0, c[_U0]
+    if span < 0.0:
+        start, span, sign = start + span, -span, -1.0
+    count = 0.0
+    if c[_MC] > 0.0:
+        count = math.floor(span / c[_PERIOD])
+    if count > 0.0 and math.isnan(c[_WHOLE]):
+        return math.nan
+    rest = span - count * c[_PERIOD]
+    if 10.0 * math.ceil(rest / (0.5 * c[_DIST])) > 4000.0:
+        return math.nan
+    whole = count * c[_WHOLE] if count > 0.0 else 0.0
+    rest_integral = _gauss_legendre_psi(c[_TWO_E], c[_C3], c[_G], c[_A3], start, rest, c[_MC], c[_DIST], work)
+    return sign * (whole + rest_integral)
+
+
+@numba.njit(**STEP_KERNEL)
+def anchor_evaluate(c: np.ndarray, h: float, q_out: np.ndarray, work: np.ndarray) -> None:
+    """q_out (4,) = the orientation h [s] after the anchor whose constants c `anchor_prepare` wrote."""
+    kind = c[_KIND]
+    if kind == KIND_FIXED:
+        _set4(q_out, 0, c[_A], c[_A + 1], c[_A + 2], c[_A + 3])
+        return
+    if kind == KIND_SPHERE:
+        ox, oy, oz = c[_AXIS], c[_AXIS + 1], c[_AXIS + 2]
+        rate = math.sqrt(ox * ox + oy * oy + oz * oz)
+        sh = math.sin(0.5 * rate * h) / rate
+        out = _quat_mul(math.cos(0.5 * rate * h), sh * ox, sh * oy, sh * oz, c[_A], c[_A + 1], c[_A + 2], c[_A + 3])
+        _set4(q_out, 0, out[0], out[1], out[2], out[3])
+        return
+    if kind == KIND_STEADY:
+        m1n, m2n, m3n = c[_M], c[_M + 1], c[_M + 2]
+        dpsi = h * c[_RATE]
+    elif kind == KIND_PRECESSION:
+        u1 = c[_U0] + c[_LAM] * h
+        m1n, m2n, m3n = c[_A1] * math.cos(u1), c[_A2] * math.sin(u1), c[_A3]
+        dpsi = h * c[_RATE]
+    else:
+        span = c[_LAM] * h
+        u1 = c[_U0] + span
+        mc = c[_MC]
+        sn, cn, dn = ellipj_prepared(u1, mc, c[_JACOBI:ANCHOR_CONSTANTS], work)
+        m1n, m2n, m3n = c[_A1] * cn, c[_A2] * sn, c[_A3] * dn
+        dpsi = math.nan
+        if abs(span) <= 0.5 * c[_DIST] or c[_QUADRATURE] == 1.0:
+            dpsi = _psi_by_quadrature(c, span, work) / c[_LAM]
+        if math.isnan(dpsi):
+            nn, sq = c[_NN], c[_SQ]
+            rho1 = math.hypot(sn, cn)
+            s1 = (sn if cn >= 0.0 else -sn) / rho1
+            c1 = abs(cn) / rho1
+            pi1 = ellippi_sc(-nn, s1, c1, mc)
+            th1 = math.atan2(sq * s1, c1)
+            if mc > 0.0:
+                j = round((0.5 * math.pi * u1 / c[_K] - math.atan2(s1, c1)) / math.pi)
+                if j != 0.0:
+                    pi1 += 2.0 * j * c[_PIC]
+                    th1 += j * math.pi
+            bracket = c[_G] * (pi1 - c[_PI0]) - c[_A3] * (th1 - c[_TH0]) / sq
+            dpsi = c[_G_I3] * h + c[_COEF] * bracket
+    # D' = Rz(dpsi) P(m1)^T in the working frame, taken to principal axes, after A
+    pw, px, py, pz = _quat_e3_to(m1n, m2n, m3n)
+    half = 0.5 * dpsi
+    cw, sz = math.cos(half), math.sin(half)
+    dw, dx, dy, dz = _quat_mul(cw, 0.0, 0.0, sz, pw, -px, -py, -pz)
+    w1, w2, w3 = int(c[_AXIS]), int(c[_AXIS + 1]), int(c[_AXIS + 2])
+    ex, ey, ez = c[_SIGN] * dx, c[_SIGN + 1] * dy, c[_SIGN + 2] * dz
+    out = _quat_mul(c[_A], c[_A + 1], c[_A + 2], c[_A + 3], dw, _scatter(ex, ey, ez, w1, w2, w3, 0),
+                    _scatter(ex, ey, ez, w1, w2, w3, 1), _scatter(ex, ey, ez, w1, w2, w3, 2))  # fmt: skip
+    norm = math.sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2] + out[3] * out[3])
+    _set4(q_out, 0, out[0] / norm, out[1] / norm, out[2] / norm, out[3] / norm)
