@@ -36,6 +36,7 @@ from rbcli.physics.free_rotation_exact import (
     _quat_e3_to,
     _quat_mul,
     _scatter,
+    working_frame,
 )
 from rbcli.physics.step import STEP_KERNEL
 
@@ -81,34 +82,12 @@ def anchor_prepare(inertia: np.ndarray, q: np.ndarray, L: np.ndarray, c: np.ndar
     mp0 = (1.0 - 2.0 * (y * y + z * z)) * lx + 2.0 * (x * y + w * z) * ly + 2.0 * (x * z - w * y) * lz
     mp1 = 2.0 * (x * y - w * z) * lx + (1.0 - 2.0 * (x * x + z * z)) * ly + 2.0 * (y * z + w * x) * lz
     mp2 = 2.0 * (x * z + w * y) * lx + 2.0 * (y * z - w * x) * ly + (1.0 - 2.0 * (x * x + y * y)) * lz
-    ia, ib, ic = 0, 1, 2
-    if inertia[ia] > inertia[ib]:
-        ia, ib = ib, ia
-    if inertia[ib] > inertia[ic]:
-        ib, ic = ic, ib
-    if inertia[ia] > inertia[ib]:
-        ia, ib = ib, ia
-    big_a, big_b, big_c = inertia[ia], inertia[ib], inertia[ic]
-    if big_a == big_c:
+    sphere, big_a, w1, w2, w3, s1, s2, s3 = working_frame(inertia, mp0, mp1, mp2)
+    if sphere:
         c[_KIND] = KIND_SPHERE
         c[_AXIS], c[_AXIS + 1], c[_AXIS + 2] = lx / big_a, ly / big_a, lz / big_a
         return
-    if big_b == big_c:
-        major = False
-    elif big_a == big_b:
-        major = True
-    else:
-        m_a, m_c = _pick(mp0, mp1, mp2, ia), _pick(mp0, mp1, mp2, ic)
-        major = m_c * m_c * (big_c - big_b) / big_c >= m_a * m_a * (big_b - big_a) / big_a
-    w1, w2, w3 = (ia, ib, ic) if major else (ic, ib, ia)
-    s1 = 1.0 if (w1 + 1) % 3 == w2 else -1.0
-    s2 = 1.0
-    s3 = 1.0
     m1, m2, m3 = _pick(mp0, mp1, mp2, w1), _pick(mp0, mp1, mp2, w2), _pick(mp0, mp1, mp2, w3)
-    if m3 < 0.0:
-        s2, s3 = -s2, -s3
-    if s1 * m1 < 0.0:
-        s1, s2 = -s1, -s2
     c[_AXIS], c[_AXIS + 1], c[_AXIS + 2] = w1, w2, w3
     c[_SIGN], c[_SIGN + 1], c[_SIGN + 2] = s1, s2, s3
     m1, m2, m3 = s1 * m1, s2 * m2, s3 * m3

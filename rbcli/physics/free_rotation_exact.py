@@ -300,6 +300,44 @@ def free_rotation_exact(inertia: np.ndarray, q: np.ndarray, L: np.ndarray, h: fl
 
 
 @numba.njit(cache=True)
+def working_frame(inertia: np.ndarray, mp0: float, mp1: float, mp2: float) -> tuple:
+    """The working frame of the torque-free flow for principal moments `inertia` and body momentum m:
+    (sphere, I_min, w1, w2, w3, s1, s2, s3). sphere: all moments equal (the flow is a uniform spin
+    about L / I_min, the rest unused). Otherwise the principal axes relabelled w1, w2, w3 (the largest
+    moment first when m lies in the major-axis region, m_c^2 (I_c - I_b) / I_c >= m_a^2 (I_b - I_a) / I_a,
+    else the smallest) with signs s_i making the frame proper and s3 m3 >= 0, s1 m1 >= 0. One home for
+    the one-shot flow and the anchored one (free_rotation_anchored.py), which must agree bit for bit."""
+    # sort the axes by moment: ia <= ib <= ic
+    ia, ib, ic = 0, 1, 2
+    if inertia[ia] > inertia[ib]:
+        ia, ib = ib, ia
+    if inertia[ib] > inertia[ic]:
+        ib, ic = ic, ib
+    if inertia[ia] > inertia[ib]:
+        ia, ib = ib, ia
+    big_a, big_b, big_c = inertia[ia], inertia[ib], inertia[ic]
+    if big_a == big_c:
+        return True, big_a, ia, ib, ic, 1.0, 1.0, 1.0
+    if big_b == big_c:
+        major = False
+    elif big_a == big_b:
+        major = True
+    else:
+        m_a, m_c = _pick(mp0, mp1, mp2, ia), _pick(mp0, mp1, mp2, ic)
+        major = m_c * m_c * (big_c - big_b) / big_c >= m_a * m_a * (big_b - big_a) / big_a
+    w1, w2, w3 = (ia, ib, ic) if major else (ic, ib, ia)
+    # proper working frame: an odd relabelling flips axis 1; then m3 >= 0, m1 >= 0 by pair flips
+    s1 = 1.0 if (w1 + 1) % 3 == w2 else -1.0
+    s2 = 1.0
+    s3 = 1.0
+    if _pick(mp0, mp1, mp2, w3) < 0.0:
+        s2, s3 = -s2, -s3
+    if s1 * _pick(mp0, mp1, mp2, w1) < 0.0:
+        s1, s2 = -s1, -s2
+    return False, big_a, w1, w2, w3, s1, s2, s3
+
+
+@numba.njit(cache=True)
 def _free_rotation_exact_work(
     inertia: np.ndarray, q: np.ndarray, L: np.ndarray, h: float, q_out: np.ndarray, work: np.ndarray
 ) -> None:
@@ -314,16 +352,8 @@ def _free_rotation_exact_work(
     mp0 = (1.0 - 2.0 * (y * y + z * z)) * lx + 2.0 * (x * y + w * z) * ly + 2.0 * (x * z - w * y) * lz
     mp1 = 2.0 * (x * y - w * z) * lx + (1.0 - 2.0 * (x * x + z * z)) * ly + 2.0 * (y * z + w * x) * lz
     mp2 = 2.0 * (x * z + w * y) * lx + 2.0 * (y * z - w * x) * ly + (1.0 - 2.0 * (x * x + y * y)) * lz
-    # sort the axes by moment: ia <= ib <= ic
-    ia, ib, ic = 0, 1, 2
-    if inertia[ia] > inertia[ib]:
-        ia, ib = ib, ia
-    if inertia[ib] > inertia[ic]:
-        ib, ic = ic, ib
-    if inertia[ia] > inertia[ib]:
-        ia, ib = ib, ia
-    big_a, big_b, big_c = inertia[ia], inertia[ib], inertia[ic]
-    if big_a == big_c:
+    sphere, big_a, w1, w2, w3, s1, s2, s3 = working_frame(inertia, mp0, mp1, mp2)
+    if sphere:
         # sphere: omega = L / I is constant in the world, R(t) = exp(h [omega]x) R(0)
         angle = math.sqrt(lx * lx + ly * ly + lz * lz) / big_a * h
         axis = 1.0 / math.sqrt(lx * lx + ly * ly + lz * lz)
@@ -331,23 +361,7 @@ def _free_rotation_exact_work(
         out = _quat_mul(math.cos(0.5 * angle), sh * lx, sh * ly, sh * lz, w, x, y, z)
         q_out[0], q_out[1], q_out[2], q_out[3] = out[0], out[1], out[2], out[3]
         return
-    if big_b == big_c:
-        major = False
-    elif big_a == big_b:
-        major = True
-    else:
-        m_a, m_c = _pick(mp0, mp1, mp2, ia), _pick(mp0, mp1, mp2, ic)
-        major = m_c * m_c * (big_c - big_b) / big_c >= m_a * m_a * (big_b - big_a) / big_a
-    w1, w2, w3 = (ia, ib, ic) if major else (ic, ib, ia)
-    # proper working frame: an odd relabelling flips axis 1; then m3 >= 0, m1 >= 0 by pair flips
-    s1 = 1.0 if (w1 + 1) % 3 == w2 else -1.0
-    s2 = 1.0
-    s3 = 1.0
     m1, m2, m3 = _pick(mp0, mp1, mp2, w1), _pick(mp0, mp1, mp2, w2), _pick(mp0, mp1, mp2, w3)
-    if m3 < 0.0:
-        s2, s3 = -s2, -s3
-    if s1 * m1 < 0.0:
-        s1, s2 = -s1, -s2
     dw, dx, dy, dz = _working_frame_step(inertia[w1], inertia[w2], inertia[w3], s1 * m1, s2 * m2, s3 * m3, h, work)
     # back to principal components: the axis of D is C^T d, (C^T d)[w_i] = s_i d_i
     d0 = _scatter(s1 * dx, s2 * dy, s3 * dz, w1, w2, w3, 0)
