@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import io
 import json
 import os
 import random
@@ -45,11 +44,14 @@ sys.path.insert(0, str(REPO / "tests"))
 
 from fuzz_cases import (  # noqa: E402
     LOCATED,
+    TINY,
+    analyse_mesh_file,
     broken_scene,
     check_analysis,
     check_command,
     damaged,
     dump,
+    load_scene_file,
     planned_steps,
     run_arguments,
     valid_scene,
@@ -72,14 +74,6 @@ WEIGHTS = {
     "rrd-damaged": 0.03,
     "mesh-damaged": 0.10,
 }
-TINY = """\
-name: tiny
-simulation: {dt: 0.001, steps: 10, integrator: split2}
-bodies:
-  - name: b
-    particles: {positions: [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], masses: 1}
-    angular_velocity: [1, 2, 3]
-"""
 RECORDED = TINY.replace("split2}", "split2, record: {streams: [bodies, invariants, particles]}}")
 
 
@@ -122,8 +116,7 @@ def runner_app():
 def property_for(target: str, findings: Findings, stop_at: float):  # noqa: C901 - one branch per target
     """The hypothesis test of one target; it records failures instead of raising them."""
     import rbcli
-    from rbcli.scene.load import analyse_scene, analyse_scene_text
-    from rbcli.scene.spec import SceneError
+    from rbcli.scene.load import analyse_scene_text
 
     runner, app = runner_app()
 
@@ -163,12 +156,7 @@ def property_for(target: str, findings: Findings, stop_at: float):  # noqa: C901
         @guarded
         def test(text):
             with tempfile.TemporaryDirectory() as folder:
-                path = Path(folder) / "broken.yaml"
-                path.write_text(text, encoding="utf-8", errors="surrogatepass")
-                try:
-                    spec, issues = rbcli.load_scene(path), []
-                except SceneError as exc:
-                    spec, issues = None, exc.issues
+                spec, issues, _ = load_scene_file(text, Path(folder))
                 findings.outcome(target, "loaded" if spec else "refused")
                 check_analysis(spec, issues, text)
 
@@ -250,17 +238,10 @@ def property_for(target: str, findings: Findings, stop_at: float):  # noqa: C901
         def test(case):
             name, data = case
             with tempfile.TemporaryDirectory() as folder:
-                (Path(folder) / name).write_bytes(data)
-                scene = Path(folder) / "mesh.yaml"
-                body = f"{{name: m, mesh: {{file: {name}, scale: 0.5}}, spacing: 0.05, density: 100}}"
-                text = f"simulation: {{dt: 0.001, steps: 2}}\nbodies:\n  - {body}\n"
-                scene.write_text(text)
-                stderr = io.StringIO()
-                with contextlib.redirect_stderr(stderr):
-                    spec, issues = analyse_scene(scene)
+                spec, issues, text, stderr = analyse_mesh_file(name, data, Path(folder))
                 findings.outcome(target, "read" if spec else "refused")
-                if "Traceback" in stderr.getvalue():
-                    findings.fail(target, f"{name}: a traceback logged to stderr:\n{stderr.getvalue()[-1500:]}", data)
+                if "Traceback" in stderr:
+                    findings.fail(target, f"{name}: a traceback logged to stderr:\n{stderr[-1500:]}", data)
                 check_analysis(spec, issues, text)
 
     else:

@@ -586,3 +586,49 @@ def write_mesh_files() -> dict[str, bytes]:
     files["box_ascii.stl"] = box.export(file_type="stl_ascii").encode()
     files["box.ply"] = box.export(file_type="ply")
     return files
+
+
+# --- the properties' shared steps (the suite's tests and benchmarks/fuzz_long.py run the same ones) ----
+
+# a scene that runs in a few milliseconds: the base of the option and file fuzzers
+TINY = """\
+name: tiny
+simulation: {dt: 0.001, steps: 10, integrator: split2}
+bodies:
+  - name: b
+    particles: {positions: [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], masses: 1}
+    angular_velocity: [1, 2, 3]
+"""
+
+
+def load_scene_file(text: str, folder: Path):  # noqa: ANN201 - (SceneSpec | None, issues, path)
+    """`text` written to a real file in `folder` and loaded through the public API: (spec, [], path) or
+    (None, the SceneError's issues, path)."""
+    import rbcli
+    from rbcli.scene.spec import SceneError
+
+    path = Path(folder) / "broken.yaml"
+    path.write_text(text, encoding="utf-8", errors="surrogatepass")
+    try:
+        return rbcli.load_scene(path), [], path
+    except SceneError as exc:
+        return None, exc.issues, path
+
+
+def analyse_mesh_file(name: str, raw: bytes, folder: Path):  # noqa: ANN201 - (spec, issues, text, stderr)
+    """A scene whose one body is the mesh file `name` holding `raw`, analysed with stderr captured (a
+    library's logged traceback would reach the terminal): (spec, issues, scene text, what was printed)."""
+    import contextlib
+    import io
+
+    from rbcli.scene.load import analyse_scene
+
+    (Path(folder) / name).write_bytes(raw)
+    scene = Path(folder) / "mesh.yaml"
+    body = f"{{name: m, mesh: {{file: {name}, scale: 0.5}}, spacing: 0.05, density: 100}}"
+    text = f"simulation: {{dt: 0.001, steps: 2}}\nbodies:\n  - {body}\n"
+    scene.write_text(text)
+    stderr = io.StringIO()
+    with contextlib.redirect_stderr(stderr):
+        spec, issues = analyse_scene(scene)
+    return spec, issues, text, stderr.getvalue()

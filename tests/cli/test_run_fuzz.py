@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 from fuzz_cases import (
     LOCATED,
+    TINY,
     broken_scene,
     check_command,
     ci_settings,
@@ -35,14 +36,6 @@ from rbcli.cli.app import app
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")  # no numpy warning may reach a terminal
 CI_SCENES = dict(forces=False, contact=False, integrators=("split2", "dopri5"))
-TINY = """\
-name: tiny
-simulation: {dt: 0.001, steps: 10, integrator: split2}
-bodies:
-  - name: b
-    particles: {positions: [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], masses: 1}
-    angular_velocity: [1, 2, 3]
-"""
 
 
 def files_in(folder: Path) -> set[Path]:

@@ -11,22 +11,19 @@ rerun's reader aborts the process on some bit flips (`test_rerun_reader_crash_on
 
 from __future__ import annotations
 
-import contextlib
-import io
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
 import pytest
-from fuzz_cases import check_analysis, check_command, ci_settings, damaged, write_mesh_files
+from fuzz_cases import analyse_mesh_file, check_analysis, check_command, ci_settings, damaged, write_mesh_files
 from hypothesis import given
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 import rbcli
 from rbcli.cli.app import app
-from rbcli.scene.load import analyse_scene
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 DATA = Path(__file__).parent / "data"
@@ -122,13 +119,6 @@ MESHES = write_mesh_files()
 def test_damaged_mesh_files_are_read_or_refused_located(case):
     name, raw = case
     with tempfile.TemporaryDirectory() as folder:
-        (Path(folder) / name).write_bytes(raw)
-        scene = Path(folder) / "mesh.yaml"
-        body = f"{{name: m, mesh: {{file: {name}, scale: 0.5}}, spacing: 0.05, density: 100}}"
-        text = f"simulation: {{dt: 0.001, steps: 2}}\nbodies:\n  - {body}\n"
-        scene.write_text(text)
-        stderr = io.StringIO()
-        with contextlib.redirect_stderr(stderr):  # a library's logged traceback would reach the terminal
-            spec, issues = analyse_scene(scene)
+        spec, issues, text, stderr = analyse_mesh_file(name, raw, Path(folder))
         check_analysis(spec, issues, text)
-        assert "Traceback" not in stderr.getvalue(), stderr.getvalue()
+        assert "Traceback" not in stderr, stderr

@@ -13,15 +13,22 @@ import tempfile
 from pathlib import Path
 
 import pytest
-from fuzz_cases import LOCATED, broken_scene, check_analysis, check_command, ci_settings, dump, valid_scene
+from fuzz_cases import (
+    LOCATED,
+    broken_scene,
+    check_analysis,
+    check_command,
+    ci_settings,
+    dump,
+    load_scene_file,
+    valid_scene,
+)
 from hypothesis import given
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
-import rbcli
 from rbcli.cli.app import app
 from rbcli.scene.load import analyse_scene_text
-from rbcli.scene.spec import SceneError
 
 # a number that slips past the checks shows as a numpy warning: make it fail the test
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
@@ -41,12 +48,7 @@ def test_generated_valid_scenes_load(scene):
 def test_generated_broken_scenes_load_or_are_refused_located(text):
     """Through the public API and a real file: a SceneSpec, or SceneError whose issues are all located."""
     with tempfile.TemporaryDirectory() as folder:
-        path = Path(folder) / "broken.yaml"
-        path.write_text(text, encoding="utf-8", errors="surrogatepass")
-        try:
-            spec, issues = rbcli.load_scene(path), []
-        except SceneError as exc:
-            spec, issues = None, exc.issues
+        spec, issues, path = load_scene_file(text, Path(folder))
         check_analysis(spec, issues, text)
         assert all(issue.location.file == str(path) for issue in issues)
 
