@@ -3,6 +3,10 @@ frame and the normal force at each, read back with the mcap library and with rer
 
 from __future__ import annotations
 
+import os
+import signal
+from pathlib import Path
+
 import numpy as np
 import pytest
 from mcap.reader import make_reader
@@ -10,7 +14,13 @@ from mcap_protobuf.decoder import DecoderFactory
 from rerun.chunk import RrdReader
 
 import rbcli
+import rbcli.runner.loop as loop
+from rbcli.record.mcap_sink import SinkMcap
+from rbcli.runner.resume import plan_resume, resume_run
+from rbcli.runner.simulation import Simulation
 from rbcli.scene.load import load_scene_text
+
+ROOT = Path(__file__).resolve().parents[2]
 
 # a 0.1 x 0.1 x 0.05 m box lying on the ground (touching at t = 0): its 8 x 8 bottom lattice spheres
 SCENE = """name: resting-box
@@ -75,3 +85,38 @@ def test_no_contacts_stream_no_contact_points(tmp_path):
     compiled = rbcli.prepare(load_scene_text(SCENE.format(streams="[bodies, invariants]")))
     rbcli.run_to_file(compiled, tmp_path / "box.mcap")
     assert mcap_contacts(tmp_path / "box.mcap") == ([], [])
+
+
+def test_a_resumed_run_records_the_contacts_of_the_run_never_stopped(tmp_path, monkeypatch):
+    """The frames a resume copies from its log get their contact points recomputed from their state (the
+    log's user-frame orientation turned back to the internal frame): as the uninterrupted run's, to
+    round-off; the frames after the checkpoint are computed as in any run."""
+    monkeypatch.setattr(loop, "CHUNK_SECONDS", 0.002)  # many chunks, so the stop falls mid-run
+    text = (ROOT / "scenes" / "contact" / "box_drop.yaml").read_text()
+    text = text.replace("record: {every: 10}", "record: {every: 7, streams: [bodies, invariants, contacts]}")
+    text = text.replace("duration: 4.0", "duration: 0.6")
+    assert "contacts" in text and "0.6" in text
+    Simulation(load_scene_text(text)).run(sinks=[SinkMcap(tmp_path / "whole.mcap")])
+    calls = []
+
+    def stop(done: int, total: int) -> None:  # after the brick has landed (t ~ 0.26 s), before the end
+        calls.append(done)
+        if done >= 400 and len([c for c in calls if c >= 400]) == 1:
+            os.kill(os.getpid(), signal.SIGINT)
+
+    assert Simulation(load_scene_text(text)).run(sinks=[SinkMcap(tmp_path / "cut.mcap")], progress=stop).status == (
+        "interrupted"
+    )
+    plan = plan_resume(tmp_path / "cut.mcap")
+    resume_run(plan, [SinkMcap(tmp_path / "resumed.mcap")])
+    (t_whole, whole), (t_resumed, resumed) = (
+        mcap_contacts(tmp_path / "whole.mcap"),
+        mcap_contacts(tmp_path / "resumed.mcap"),
+    )
+    assert t_resumed == t_whole and sum(len(f) for f in whole) > 0
+    copied = sum(t < plan.checkpoint.t * 1e9 for t in t_whole)
+    assert copied < len(t_whole) and sum(len(f) for f in whole[:copied]) > 0  # copied frames with contacts
+    for a, b in zip(resumed, whole, strict=True):
+        assert a.shape == b.shape
+        np.testing.assert_allclose(a[:, :3], b[:, :3], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(a[:, 3], b[:, 3], rtol=1e-9, atol=1e-9)
