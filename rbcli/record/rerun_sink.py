@@ -393,7 +393,8 @@ class SinkRerun:
             forces = np.concatenate([f for p in pending for f in p["forces"]])
             columns = [
                 *rr.Points3D.columns(positions=positions).partition(lengths),
-                *rr.AnyValues.columns(normal_force=forces).partition(lengths),
+                # typed explicitly: an empty float64 array (no contact in any frame) would be dropped as untyped
+                *rr.AnyValues.columns(normal_force=pa.array(forces, type=pa.float64())).partition(lengths),
             ]
             self._rec.send_columns("contacts", indexes=times, columns=columns)
         self.frames_written += k_count

@@ -120,3 +120,12 @@ def test_a_resumed_run_records_the_contacts_of_the_run_never_stopped(tmp_path, m
         assert a.shape == b.shape
         np.testing.assert_allclose(a[:, :3], b[:, :3], rtol=0, atol=1e-12)
         np.testing.assert_allclose(a[:, 3], b[:, 3], rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("suffix", [".mcap", ".rrd"])
+def test_frames_without_contacts_are_empty_clouds(tmp_path, suffix):
+    """A box still falling: every recorded frame has its (empty) message, in both formats."""
+    text = SCENE.format(streams="[bodies, contacts]").replace("position: [0, 0, 0.025]", "position: [0, 0, 1]")
+    rbcli.run_to_file(rbcli.prepare(load_scene_text(text)), tmp_path / f"air{suffix}")
+    index, frames = (mcap_contacts if suffix == ".mcap" else rrd_contacts)(tmp_path / f"air{suffix}")
+    assert len(index) == 5 and all(f.shape == (0, 4) for f in frames)
