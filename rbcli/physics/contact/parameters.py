@@ -19,8 +19,8 @@ because a plane is a partner of infinite mass: a contact against it has m_eff = 
 equal bodies has M / 2, so k_body * support / rest <= 2 k_body keeps the plane's frequency
 (k_plane support / M) within the pair's (2 k_body / M) and the stable step unchanged. A box or a
 one-sphere ball (rest = support) keeps k_plane = k; it is not a blanket factor of 2, which made a brick
-resting flat at dt = 1 ms rock in a period-2 limit cycle (its rocking-sliding mode then sat at the
-stable step estimate, which is ~10 % optimistic for it).
+resting flat at dt = 1 ms rock in a period-2 limit cycle: dt was then 0.9 of its estimated stable step,
+so the estimate is at least 10 % optimistic for its coupled rocking-sliding mode (1.5x was still stable).
 
 Damping from restitution. The linear spring-dashpot m d'' + c d' + k d = 0 with c = 2 zeta sqrt(k m)
 would give e = exp(-pi zeta / sqrt(1 - zeta^2)) if the contact lasted half a period; but the force is
