@@ -7,6 +7,8 @@ Topics; log_time = publish_time = simulated time [ns], so identical runs give by
     /bodies/<name>/particles   foxglove.PointCloud once at t = 0, in the body's frame (frame_id = name)
     /rbsim/invariants          rbsim.Invariants per recorded step (only when the run has invariants)
     /particles                 foxglove.PointCloud of all particles, world frame (only with that stream)
+    /contacts                  foxglove.PointCloud of the frame's contact points, world frame, fields
+                               x, y, z [m] and normal_force [N] (only with that stream)
     /rbsim/checkpoint          rbsim.Checkpoint: what the run carries between steps, at most every
                                10 s of wall time and when it stops (`rbsim run --resume`)
 
@@ -54,6 +56,7 @@ TOPIC_STATE = "/rbsim/state"
 TOPIC_TF = "/tf"
 TOPIC_INVARIANTS = "/rbsim/invariants"
 TOPIC_PARTICLES = "/particles"
+TOPIC_CONTACTS = "/contacts"
 TOPIC_CHECKPOINT = "/rbsim/checkpoint"
 TOPIC_BODY_PARTICLES = "/bodies/particles"  # every body's cloud, when one channel per body would not fit
 WORLD_FRAME = "world"
@@ -73,9 +76,10 @@ STATE_FIELDS = (
 )
 
 
-# Channels besides the per-body clouds: /rbsim/state, /tf, /rbsim/invariants, /particles, /rbsim/checkpoint.
-FIXED_CHANNELS = 5
-BODY_CHANNELS_MAX = MAX_ID - FIXED_CHANNELS  # 65,530 bodies still get a channel each
+# Channels besides the per-body clouds: /rbsim/state, /tf, /rbsim/invariants, /particles, /contacts,
+# /rbsim/checkpoint.
+FIXED_CHANNELS = 6
+BODY_CHANNELS_MAX = MAX_ID - FIXED_CHANNELS  # 65,529 bodies still get a channel each
 
 
 def particle_topic(body_name: str) -> str:
@@ -390,6 +394,16 @@ def _point_cloud(points: np.ndarray, frame_id: str, ns: int) -> PointCloud:
     return cloud
 
 
+def _contact_cloud(points: np.ndarray, force: np.ndarray, ns: int) -> PointCloud:
+    """A foxglove.PointCloud of contact points: float64 x, y, z [m] and normal_force [N], world frame."""
+    packed = np.empty((len(points), 4), "<f8")
+    packed[:, :3], packed[:, 3] = points, force
+    cloud = _point_cloud(np.zeros((0, 3)), WORLD_FRAME, ns)
+    cloud.point_stride, cloud.data = 32, packed.tobytes()
+    cloud.fields.add(name="normal_force", offset=24, type=PackedElementField.FLOAT64)
+    return cloud
+
+
 # --- the sink --------------------------------------------------------------------------------------
 
 
@@ -447,6 +461,7 @@ class SinkMcap:
             meta = {"invariant_names": json.dumps(list(self._invariant_names))}
             self._ch_inv = self._channel(TOPIC_INVARIANTS, fdp, meta)
         self._ch_particles: int | None = None
+        self._ch_contacts: int | None = None
         self._ch_checkpoint: int | None = None
         w.add_metadata(METADATA_RUN, run_metadata(header))
         w.add_attachment(0, 0, SCENE_ATTACHMENT, "application/yaml", header.scene_text.encode())
@@ -486,6 +501,9 @@ class SinkMcap:
         particles = block.particle_position
         if particles is not None and self._ch_particles is None:
             self._ch_particles = self._channel(TOPIC_PARTICLES, PointCloud)
+        contacts, forces = block.contact_point, block.contact_force
+        if contacts is not None and self._ch_contacts is None:
+            self._ch_contacts = self._channel(TOPIC_CONTACTS, PointCloud)
         for k in range(k_count):
             seq = steps[k] & 0xFFFFFFFF
             self._add(self._ch_state, ns[k], states[k], seq)
@@ -495,6 +513,9 @@ class SinkMcap:
             if particles is not None and self._ch_particles is not None:
                 cloud = _point_cloud(particles[k], WORLD_FRAME, ns[k]).SerializeToString()
                 self._add(self._ch_particles, ns[k], cloud, seq)
+            if contacts is not None and forces is not None and self._ch_contacts is not None:
+                cloud = _contact_cloud(contacts[k], forces[k], ns[k]).SerializeToString()
+                self._add(self._ch_contacts, ns[k], cloud, seq)
         self._writer.flush_chunk()  # no frame waits in the open chunk for the next block
         self.frames_written += k_count
 
@@ -626,7 +647,9 @@ def _block_from_messages(
     }
     for s in steps.tolist():
         inv_rows.pop(s, None)
-    return FrameBlock(step=steps, t=np.array([m.time for m in rows], dtype=np.float64), invariants=invariants, **arrays)
+    t = np.array([m.time for m in rows], dtype=np.float64)
+    a = arrays
+    return FrameBlock(steps, t, a["x"], a["q"], a["v"], a["omega"], a["P"], a["L"], invariants=invariants)
 
 
 def read_mcap_invariants(path: str | Path) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:

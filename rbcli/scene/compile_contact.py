@@ -20,8 +20,10 @@ import numpy as np
 from rbcli.physics.contact.parameters import (
     DEFAULT_FRICTION,
     DEFAULT_RESTITUTION,
+    PENETRATION_AT_REST,
     damping_ratio_for_restitution,
     default_body_stiffness,
+    plane_stiffness,
     stable_step,
     support_count,
 )
@@ -111,6 +113,7 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
     zeta = np.zeros(n)
     friction = np.zeros(n)
     support = np.ones(n)
+    plane_k = np.zeros(n)
     min_radius = np.full(n, np.inf)
     ratio_cache: dict[float, float] = {}
 
@@ -148,8 +151,15 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
                 )
                 expected = "masses, sizes and gravity in SI units, or a material stiffness"
                 raise SceneError([SceneIssue(body.location, message, expected)])
+        plane_k[b] = stiffness[b]
+        if material.stiffness is None:  # carried at rest by fewer spheres than `support` (parameters.py)
+            rest = support_count(off, rad, E=quat_to_matrix(model.body_frame_q[b]),
+                                 tolerance=PENETRATION_AT_REST * min_radius[b])  # fmt: skip
+            plane_k[b] = plane_stiffness(stiffness[b], int(support[b]), rest)
     colliding = np.isfinite(min_radius)
-    stiffness[~colliding] = 1.0  # never used: such a body has no spheres; keeps the pair formula finite
+    stiffness[~colliding] = plane_k[~colliding] = (
+        1.0  # never used: such a body has no spheres; keeps the pair formula finite
+    )
     # static and kinematic bodies: infinite mass for contact, their wrench held at zero (they keep P and L)
     static = np.array([b.static or b.kinematic for b in spec.bodies], dtype=bool)
     inv_mass = np.where(static, 0.0, support / model.body_mass)
@@ -159,13 +169,14 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
     movable = colliding & ~static
     with np.errstate(all="ignore"):  # a huge stiffness over a tiny mass: dt_crit 0 (a warning of its own)
         dt_crit, worst = stable_step(model.body_mass, stiffness * support, np.where(colliding, zeta, 0.0), movable,
-                                     planes=bool(planes))  # fmt: skip
+                                     planes=bool(planes), plane_stiffness=plane_k * support)  # fmt: skip
     table = contact_table(
         sphere_body=np.concatenate(sphere_body) if sphere_body else [],
         sphere_offset=np.concatenate(offsets) if offsets else np.zeros((0, 3)),
         sphere_radius=np.concatenate(radii) if radii else [],
         body_inv_contact_mass=inv_mass,
         body_stiffness=stiffness,
+        body_plane_stiffness=plane_k,
         body_damping_ratio=zeta,
         body_friction=friction,
         static_body=np.flatnonzero(static),
