@@ -22,24 +22,29 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from rbcli.sweeps.batches import batch_size, chunks
+from rbcli.sweeps.batches import Batcher
 from rbcli.sweeps.execute import STATUS_ERROR, SweepJob, run_batch, warm_up
 
 Variant = tuple[int, tuple[Any, ...]]
+# Tasks submitted per slot at a time: the one running and the next, queued on the worker (Dask's scheduler
+# keeps it there, worker-saturation 1.1 rounding up), so a worker starts its next task without a round trip.
+IN_FLIGHT_PER_SLOT = 2
 Rows = list[dict[str, Any]]
 
 
 @dataclass
 class ClusterInfo:
     """What the sweep ran on: workers (processes), slots (threads in all), the dashboard (None without
-    bokeh), the seconds to start or reach the cluster and to warm every worker's kernels."""
+    bokeh), the seconds to start or reach the cluster and to warm every worker's kernels, the largest
+    task's variants and the number of tasks."""
 
     workers: int
     slots: int
     dashboard: str | None
     startup_s: float
     warmup_s: float
-    batch: int = 0
+    batch: int = 0  # the largest task's variants
+    tasks: int = 0
 
 
 def default_workers() -> int:
@@ -136,34 +141,33 @@ def _run_batches(
     batch: int | None,
     futures: list[Any],
 ) -> None:
+    """Keep IN_FLIGHT_PER_SLOT tasks per slot submitted, each sized when it is submitted from the time of
+    every row back so far (batches.Batcher): a worker always has its next task queued, so it never waits
+    for the client, and the last tasks are the short ones."""
     from distributed import as_completed
 
     shared = client.scatter(job, broadcast=True)  # sent once per worker, not once per task
     groups: dict[Any, list[Variant]] = {}  # each task's variants, for the failed rows should it fail
+    batcher = Batcher(pending, info.slots, fixed=batch)
 
-    def submit(group: list[Variant]) -> Any:
+    def submit() -> list[Any]:
+        group = batcher.next_group()
+        if not group:
+            return []
         future = client.submit(run_batch, shared, group, pure=False, retries=1)
         groups[future.key] = group
         futures.append(future)
-        return future
+        return [future]
 
-    if batch is not None:
-        info.batch = batch
-        queue = as_completed([submit(group) for group in chunks(pending, batch)])
-        rest: list[Variant] = []
-    else:  # one variant per slot first; their time sizes the rest
-        first = min(len(pending), info.slots)
-        queue = as_completed([submit([v]) for v in pending[:first]])
-        rest = pending[first:]
+    queue = as_completed([f for _ in range(IN_FLIGHT_PER_SLOT * info.slots) for f in submit()])
     for future in queue:
         rows = _rows_of(future, groups.pop(future.key))
-        on_rows(rows)
-        if rest:
-            seconds = sum(float(r.get("wall_s") or 0.0) for r in rows) / max(1, len(rows))
-            info.batch = batch_size(seconds, len(rest), info.slots)
-            queue.update([submit(group) for group in chunks(rest, info.batch)])
-            rest = []
         futures.remove(future)
+        batcher.measured(rows)
+        queue.update(submit())  # before the rows are handed on: the part's write does not delay it
+        on_rows(rows)
+    info.batch = max(batcher.sizes, default=0)
+    info.tasks = len(batcher.sizes)
 
 
 def _rows_of(future: Any, group: list[Variant]) -> Rows:

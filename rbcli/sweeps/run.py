@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from rbcli.scene.spec import SceneError
-from rbcli.sweeps.batches import batch_size, chunks
+from rbcli.sweeps.batches import Batcher
 from rbcli.sweeps.execute import SweepJob, run_batch, warm_up
 from rbcli.sweeps.spec import SweepSpec
 
@@ -190,17 +190,13 @@ def run_sweep(
 
 
 def _run_serial(job: SweepJob, pending: list[tuple[int, tuple[Any, ...]]], keep: Callable, batch: int | None) -> None:
-    """Every pending variant in this process, in order; one part per batch (sized as Dask's would be)."""
-    if not pending:
-        return
-    rest = pending
-    if batch is None:
-        first = run_batch(job, rest[:1])
-        keep(first)
-        rest = rest[1:]
-        batch = batch_size(float(first[0].get("wall_s") or 0.0), len(rest), 1)
-    for group in chunks(rest, batch):
-        keep(run_batch(job, group))
+    """Every pending variant in this process, in order, through the same `run_batch` a Dask worker runs;
+    one part per batch, sized as on one Dask slot (batches.Batcher)."""
+    batcher = Batcher(pending, 1, fixed=batch)
+    while group := batcher.next_group():
+        rows = run_batch(job, group)
+        batcher.measured(rows)
+        keep(rows)
 
 
 def _job(spec: SweepSpec, log_dir: Path | None) -> SweepJob:
