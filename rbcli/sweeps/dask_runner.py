@@ -35,8 +35,8 @@ Rows = list[dict[str, Any]]
 @dataclass
 class ClusterInfo:
     """What the sweep ran on: workers (processes), slots (threads in all), the dashboard (None without
-    bokeh), the seconds to start or reach the cluster and to warm every worker's kernels, the largest
-    task's variants and the number of tasks."""
+    bokeh), the seconds to start or reach the cluster, to warm every worker's kernels and to close the
+    client and cluster at the end, the largest task's variants and the number of tasks."""
 
     workers: int
     slots: int
@@ -45,6 +45,7 @@ class ClusterInfo:
     warmup_s: float
     batch: int = 0  # the largest task's variants
     tasks: int = 0
+    shutdown_s: float = 0.0
 
 
 def default_workers() -> int:
@@ -86,6 +87,7 @@ def run_on_dask(
         )
         client, own_client = Client(cluster), True
     futures: list[Any] = []
+    info: ClusterInfo | None = None
     try:
         if cluster is None:
             client.wait_for_workers(1, timeout=60)
@@ -97,19 +99,27 @@ def run_on_dask(
             startup_s=time.perf_counter() - started,
             warmup_s=0.0,
         )
+        shared = None
         if pending:
-            info.warmup_s = _warm_workers(client, job, pending[0][1], list(slots_by_worker))
+            warming = time.perf_counter()
+            shared = client.scatter(job, broadcast=True)  # sent once per worker, not once per task
+            _warm_workers(client, shared, pending[0][1], list(slots_by_worker))
+            info.warmup_s = time.perf_counter() - warming
         if on_ready is not None:
             on_ready(info)
-        _run_batches(client, job, pending, on_rows, info, batch, futures)
+        if shared is not None:
+            _run_batches(client, shared, pending, on_rows, info, batch, futures)
         return info
     finally:
+        closing = time.perf_counter()
         if futures:
             client.cancel(futures)
         if own_client:
             client.close()
         if cluster is not None:
             cluster.close()
+        if info is not None:  # the shut-down is reported apart, as the start-up is
+            info.shutdown_s = time.perf_counter() - closing
 
 
 def _dashboard(client: Any) -> str | None:
@@ -121,20 +131,19 @@ def _dashboard(client: Any) -> str | None:
         return None
 
 
-def _warm_workers(client: Any, job: SweepJob, values: tuple[Any, ...], addresses: list[str]) -> float:
-    """Load the first variant's kernels on every worker (in parallel), so no timed batch pays for it."""
-    started = time.perf_counter()
+def _warm_workers(client: Any, shared: Any, values: tuple[Any, ...], addresses: list[str]) -> None:
+    """Load the first variant's kernels on every worker (in parallel), so no timed batch pays for it; the
+    scattered job is unpickled there on the way, once per worker."""
     warm = [
-        client.submit(warm_up, job, values, workers=[address], allow_other_workers=False, pure=False)
+        client.submit(warm_up, shared, values, workers=[address], allow_other_workers=False, pure=False)
         for address in addresses
     ]
     client.gather(warm, errors="skip")
-    return time.perf_counter() - started
 
 
 def _run_batches(
     client: Any,
-    job: SweepJob,
+    shared: Any,
     pending: list[Variant],
     on_rows: Callable[[Rows], None],
     info: ClusterInfo,
@@ -146,7 +155,6 @@ def _run_batches(
     for the client, and the last tasks are the short ones."""
     from distributed import as_completed
 
-    shared = client.scatter(job, broadcast=True)  # sent once per worker, not once per task
     groups: dict[Any, list[Variant]] = {}  # each task's variants, for the failed rows should it fail
     batcher = Batcher(pending, info.slots, fixed=batch)
 

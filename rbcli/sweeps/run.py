@@ -50,7 +50,7 @@ class SweepRun:
     resumed: int  # finished before this run (skipped)
     ran: int
     failed: int  # rows of this run whose status is not "completed"
-    wall_s: float  # from the first variant started to the last row (cluster start-up, kernel warm-up excluded)
+    wall_s: float  # from the first variant started to the last row (cluster start-up, warm-up, shut-down excluded)
     cluster: ClusterInfo | None = None
     complete: bool = True
 
@@ -172,7 +172,7 @@ def run_sweep(
         if folder is not None:
             _merge(spec, folder)
         raise
-    wall = time.perf_counter() - started
+    wall = time.perf_counter() - started - (cluster.shutdown_s if cluster is not None else 0.0)
     results = (
         _merge(spec, folder) if folder is not None else tables.merge(spec, tables.rows_table(collected), complete=True)
     )
