@@ -38,7 +38,7 @@ def batch_size(seconds_per_variant: float, remaining: int, slots: int) -> int:
     cost = max(seconds_per_variant, 1e-6)
     guided = math.ceil(remaining / (max(1, slots) * GUIDED_FACTOR))
     size = min(guided, TASK_SECONDS / cost, MAX_BATCH)
-    size = max(size, min(TAIL_SECONDS / cost, remaining))  # a tail task is never below the floor's work
+    size = max(size, min(math.ceil(TAIL_SECONDS / cost), remaining))  # a tail task does the floor's work
     return int(max(1, min(size, remaining)))
 
 
