@@ -15,8 +15,7 @@ apart); the serial run is warmed the same way. Reported: wall times, speed-up se
 extra time goes: idle (slots x wall minus the variants' own time, the rows' wall_s summed), its variants
 running slower than serially, the CPU time Dask itself spends per variant (the client process, with the
 scheduler and nannies), and the workers' CPU time against the serial run's (a measure that the load of
-other processes leaves alone, unlike wall times). Every run's rows are checked
-equal (wall time aside).
+other processes leaves alone, unlike wall times). Every run's rows are checked equal (wall time aside).
 
     python benchmarks/bench_sweep.py            # both sweeps (about 6 minutes on 2 cores)
     python benchmarks/bench_sweep.py --quick    # fewer variants and steps: a smoke run
