@@ -86,9 +86,9 @@ def lattice_surface(points: np.ndarray, spacing: float) -> np.ndarray:
     return np.flatnonzero(surface)
 
 
-def _spheres(body: BodySpec, model: Model, b: int, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(offsets in the principal frame (k, 3), radii (k,)) of body b's contact spheres."""
-    E = quat_to_matrix(model.body_frame_q[b])  # user-from-principal
+def _spheres(body: BodySpec, model: Model, b: int, centre: np.ndarray, E: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(offsets in the principal frame (k, 3), radii (k,)) of body b's contact spheres; E is its
+    user-from-principal rotation."""
     if body.contact_geometry == "sphere":
         return ((np.zeros(3) - centre) @ E)[None, :], np.array([body.contact_size])
     start, count = int(model.body_particle_start[b]), int(model.body_particle_count[b])
@@ -116,6 +116,9 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
     plane_k = np.zeros(n)
     min_radius = np.full(n, np.inf)
     ratio_cache: dict[float, float] = {}
+    frames = quat_to_matrix(model.body_frame_q)  # user-from-principal, all bodies in one call
+    # (support, rest) per distinct sphere set: a pile of identical bodies counts its layers once
+    support_cache: dict[bytes, tuple[int, int]] = {}
 
     def damping_ratio(e: float) -> float:  # a bisection per distinct restitution, not per body
         if e not in ratio_cache:
@@ -130,12 +133,18 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
         friction[b] = material.friction
         if not body.collide:
             continue
-        off, rad = _spheres(body, model, b, centres_user[b])
+        off, rad = _spheres(body, model, b, centres_user[b], frames[b])
         sphere_body.append(np.full(len(rad), b))
         offsets.append(off)
         radii.append(rad)
         min_radius[b] = float(rad.min())
-        support[b] = support_count(off, rad, E=quat_to_matrix(model.body_frame_q[b]))
+        key = off.tobytes() + b"|" + rad.tobytes() + b"|" + frames[b].tobytes()
+        if key not in support_cache:
+            support_cache[key] = (
+                support_count(off, rad, E=frames[b]),
+                support_count(off, rad, E=frames[b], tolerance=PENETRATION_AT_REST * min_radius[b]),
+            )
+        support[b], rest = support_cache[key]
         if material.stiffness is not None:
             stiffness[b] = material.stiffness
         else:
@@ -153,8 +162,6 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
                 raise SceneError([SceneIssue(body.location, message, expected)])
         plane_k[b] = stiffness[b]
         if material.stiffness is None:  # carried at rest by fewer spheres than `support` (parameters.py)
-            rest = support_count(off, rad, E=quat_to_matrix(model.body_frame_q[b]),
-                                 tolerance=PENETRATION_AT_REST * min_radius[b])  # fmt: skip
             plane_k[b] = plane_stiffness(stiffness[b], int(support[b]), rest)
     colliding = np.isfinite(min_radius)
     stiffness[~colliding] = plane_k[~colliding] = (
