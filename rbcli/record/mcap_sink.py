@@ -42,8 +42,6 @@ from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
 from foxglove_schemas_protobuf.PackedElementField_pb2 import PackedElementField
 from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
-from mcap.reader import make_reader
-from mcap_protobuf.decoder import DecoderFactory
 from mcap_protobuf.schema import build_file_descriptor_set
 
 from rbcli.record.frame import RECORDING_FORMAT_VERSION, Checkpoint, FrameBlock, RunHeader, RunSummary
@@ -92,7 +90,22 @@ def particle_channels_shared(body_count: int) -> bool:
     return body_count > BODY_CHANNELS_MAX
 
 
+def _decoder_factory() -> Any:  # noqa: ANN401 - mcap_protobuf's DecoderFactory
+    """The protobuf decoder of the readers (imported here: writing a run needs no reader, ~0.02 s)."""
+    from mcap_protobuf.decoder import DecoderFactory
+
+    return DecoderFactory()
+
+
+def _reader(f: IO[bytes]) -> Any:  # noqa: ANN401 - mcap's McapReader
+    """An MCAP reader of `f` that decodes protobuf messages."""
+    from mcap.reader import make_reader
+
+    return make_reader(f, decoder_factories=[_decoder_factory()])
+
+
 # --- project message descriptors, built at run time (their text is schemas/rbsim_*.proto) ----------
+
 
 _FDP = descriptor_pb2.FieldDescriptorProto
 
@@ -570,7 +583,7 @@ def _invariant_names(summary: Any) -> tuple[str, ...]:
 def read_mcap_contents(path: str | Path) -> McapContents:
     """Metadata, scene attachment, message counts and the t = 0 particle clouds of an rbsim MCAP file."""
     with open(path, "rb") as f:
-        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        reader = _reader(f)
         try:
             header, summary = reader.get_header(), reader.get_summary()
         except Exception as exc:  # the mcap library raises several types for a damaged file
@@ -612,7 +625,7 @@ def _cloud_points(cloud: Any) -> np.ndarray:
 def iter_mcap_blocks(path: str | Path, block_frames: int = 256) -> Iterator[FrameBlock]:
     """FrameBlocks decoded from /rbsim/state and /rbsim/invariants with the file's own schemas."""
     with open(path, "rb") as f:
-        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        reader = _reader(f)
         inv_names = _invariant_names(reader.get_summary())
         inv_fields = invariant_field_names(inv_names)
         rows: list[Any] = []
@@ -655,7 +668,7 @@ def _block_from_messages(
 def read_mcap_invariants(path: str | Path) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
     """(t [s], step, name -> series) from /rbsim/invariants alone: cheap, whatever the body count."""
     with open(path, "rb") as f:
-        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        reader = _reader(f)
         names = _invariant_names(reader.get_summary())
         fields = invariant_field_names(names)
         rows = [msg for _, _, _, msg in reader.iter_decoded_messages(topics=[TOPIC_INVARIANTS], log_time_order=False)]
@@ -791,7 +804,7 @@ def read_mcap_prefix(path: str | Path) -> McapPrefix:
     last_states: list[Message] = []  # the last two: the last complete frame is one of them
     inv_rows: list[Any] = []
     decoders: dict[int, Any] = {}
-    factory = DecoderFactory()
+    factory = _decoder_factory()
     for record in _prefix_records(path, cut):
         if isinstance(record, Message):
             topic = topics.get(record.channel_id, "")
@@ -971,7 +984,7 @@ def read_mcap_resume_point(path: str | Path) -> McapResumePoint:
     checkpoint = None
     if last is not None:
         channel = channels[last.channel_id]
-        decode = DecoderFactory().decoder_for(channel.message_encoding, schemas.get(channel.schema_id))
+        decode = _decoder_factory().decoder_for(channel.message_encoding, schemas.get(channel.schema_id))
         if decode is None:
             raise ValueError(f"no decoder for {TOPIC_CHECKPOINT} ({channel.message_encoding})")
         checkpoint = decode_checkpoint(decode(last.data))
@@ -986,7 +999,7 @@ def iter_mcap_frames_before(path: str | Path, step: int, block_frames: int = 256
     schemas: dict[int, Schema] = {}
     channels: dict[int, Channel] = {}
     decoders: dict[int, Any] = {}
-    factory = DecoderFactory()
+    factory = _decoder_factory()
     inv_names: tuple[str, ...] = ()
     rows: list[Any] = []
     inv_rows: dict[int, Any] = {}
