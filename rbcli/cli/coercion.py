@@ -23,6 +23,12 @@ _INT = re.compile(r"-?[0-9]+")
 _FLOAT = re.compile(r"-?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?")
 
 _installed = False
+_active = False
+
+
+def active() -> bool:
+    """Whether plain parameters are converted here (False with a typer whose internals differ)."""
+    return _active
 
 
 def plain_type(annotation: Any, parameter_info: Any) -> type | None:  # noqa: ANN401 - typer's types
@@ -65,7 +71,7 @@ def convert(kind: type, value: Any) -> tuple[bool, Any]:  # noqa: ANN401 - a com
 
 def install() -> None:
     """Convert plain parameters' values without pydantic (idempotent; see the module docstring)."""
-    global _installed
+    global _installed, _active
     if _installed:
         return
     _installed = True
@@ -108,3 +114,4 @@ def install() -> None:
         return self._runtime_param
 
     _TyperParameter.get_runtime_param = get_runtime_param  # type: ignore[method-assign]
+    _active = True

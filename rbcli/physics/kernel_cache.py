@@ -15,7 +15,9 @@ itself before compiling anything (`CompilerBase.__init__`), so a process that la
 `install()` makes loads of rbcli's own kernels (functions defined in `rbcli.*` modules) skip that first
 refresh; every other function's loads go through numba's code unchanged. A load that fails this way is
 retried the ordinary way. It relies on numba internals (`Cache._load_overload`, `rtsys.initialize`),
-checked when installing: with a numba that lacks them nothing is changed.
+checked when installing, and it is installed only on the numba versions it was verified on
+(VERIFIED_NUMBA: a newer numba may change what a load needs, and a load that went wrong would not
+raise, it would crash): elsewhere nothing is changed and start-up costs what numba's own path costs.
 tests/physics/test_compile_only_what_is_used.py checks that a fresh process loads its kernels this way,
 without importing numba.np.arraymath, and gets the bits of the process that compiled them.
 """
@@ -24,19 +26,32 @@ from __future__ import annotations
 
 from typing import Any
 
+# (major, minor) releases of numba whose cache loads were checked to work without the registry build
+# (tests/physics/test_compile_only_what_is_used.py, the whole suite, NUMBA_BOUNDSCHECK runs)
+VERIFIED_NUMBA = ((0, 68),)
+
 _installed = False
+_active = False
+
+
+def active() -> bool:
+    """Whether loads of rbcli's kernels skip the registry build in this process."""
+    return _active
 
 
 def install() -> None:
     """Make cache loads of rbcli's kernels skip numba's registry refresh (idempotent)."""
-    global _installed
+    global _installed, _active
     if _installed:
         return
     _installed = True
     try:
+        import numba
         from numba.core.caching import Cache
         from numba.core.runtime import rtsys
     except ImportError:  # pragma: no cover - a numba without these internals: leave it as it is
+        return
+    if tuple(int(p) for p in numba.__version__.split(".")[:2]) not in VERIFIED_NUMBA:  # pragma: no cover
         return
     ordinary = Cache.load_overload
     if not hasattr(Cache, "_load_overload") or getattr(ordinary, "_rbcli", False):  # pragma: no cover
@@ -54,3 +69,4 @@ def install() -> None:
 
     load_overload._rbcli = True  # type: ignore[attr-defined]
     Cache.load_overload = load_overload  # type: ignore[method-assign]
+    _active = True
