@@ -268,6 +268,15 @@ def initial_state(spec: SceneSpec, model: Model) -> State:
     q = internal_orientation(model, q_user)
     P = np.zeros((n, 3))
     L = np.zeros((n, 3))
+    with np.errstate(over="ignore", invalid="ignore"):  # M v or I w beyond float64: inf, refused by
+        _fill_momenta(spec, model, q_user, q, P, L)  # _check_initial_state with the body named (fuzzing)
+    return State(x=x, q=q, P=P, L=L, step=0)
+
+
+def _fill_momenta(
+    spec: SceneSpec, model: Model, q_user: np.ndarray, q: np.ndarray, P: np.ndarray, L: np.ndarray
+) -> None:
+    """P and L of every body (initial_state), from momenta or from velocities through mass and inertia."""
     for i, body in enumerate(spec.bodies):  # once per body at set-up, not in a step
         if body.momentum is not None:
             P[i] = body.momentum
@@ -281,4 +290,3 @@ def initial_state(spec: SceneSpec, model: Model) -> State:
                 omega = quat_rotate(q_user[i], omega)
             # L = I omega = R diag(I) R^T omega
             L[i] = quat_rotate(q[i], model.body_inertia[i] * quat_rotate_inverse(q[i], omega))
-    return State(x=x, q=q, P=P, L=L, step=0)

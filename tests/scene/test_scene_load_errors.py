@@ -456,3 +456,11 @@ def test_current_scene_format_version_is_accepted():
 def test_scene_format_version_must_be_a_positive_integer():
     assert at(the_issue(issues_of("version: 0\n" + SIM + "bodies:\n" + HANDLE), "out of range")) == (1, 10)
     assert at(the_issue(issues_of("version: one\n" + SIM + "bodies:\n" + HANDLE), "wrong type")) == (1, 10)
+
+
+@pytest.mark.filterwarnings("error")
+def test_a_velocity_whose_momentum_overflows_is_a_located_error_not_a_warning():
+    """Found by fuzzing: M v beyond float64 raised numpy's overflow RuntimeWarning out of the loader."""
+    issues = issues_of(SIM + "bodies:\n" + HANDLE + "    velocity: [7.989747266054737e+307, 0, 0]\n")
+    issue = the_issue(issues, "initial momentum [inf, 0, 0]")
+    assert issue.severity == "error" and at(issue)[0] == 3
