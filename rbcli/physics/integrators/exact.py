@@ -63,8 +63,12 @@ LAST_L = 37  # (3)
 EVALUATIONS = 40  # closed-form evaluations of this body's motion since the scratch was cleared
 DEFERRED = 41  # row 0: 1.0 once a chunk loop's materialise stage has run (the step may then defer)
 ROT_CONSTANTS = 42  # (ANCHOR_CONSTANTS) the flow's constants at the rotation anchor (free_rotation_anchored)
-WORK = ROT_CONSTANTS + ANCHOR_CONSTANTS  # row 0: the Jacobi functions' work
-SCRATCH_WIDTH = WORK + JACOBI_WORK_SIZE
+SCRATCH_WIDTH = ROT_CONSTANTS + ANCHOR_CONSTANTS
+# The anchored flow needs no work array (its Jacobi AGM is kept in the constants). A body with a torque
+# chains the one-shot flow, whose Jacobi functions need JACOBI_WORK_SIZE floats of work: its own row's
+# ROT_CONSTANTS columns, unused while it has no rotation anchor. (A shared work area in row 0 made every
+# row 48 columns wider, and the evaluation, which streams through the rows, a third slower: measured.)
+assert ANCHOR_CONSTANTS >= JACOBI_WORK_SIZE
 
 WEIGHTS = np.array([1.0])
 
@@ -118,7 +122,7 @@ def _same(scratch, b, column, values, count) -> bool:  # noqa: ANN001
 
 
 @numba.njit(cache=True, inline="always")
-def _keep_anchors(model, forces, b, t, x, q, P, L, scratch, torque_free, constant, work) -> None:  # noqa: ANN001
+def _keep_anchors(model, forces, b, t, x, q, P, L, scratch, torque_free, constant) -> None:  # noqa: ANN001
     """Take body b's anchors from its state at time t where the state is not what was last written."""
     row = scratch[b]
     written = _same(scratch, b, LAST_X, x, 3) and _same(scratch, b, LAST_P, P, 3)
@@ -136,25 +140,25 @@ def _keep_anchors(model, forces, b, t, x, q, P, L, scratch, torque_free, constan
             row[ROT_Q + k] = q[b, k]
         for k in range(3):
             row[ROT_L + k] = L[b, k]
-        anchor_prepare(model.body_inertia[b], q[b], L[b], row[ROT_CONSTANTS:WORK], work)
+        anchor_prepare(model.body_inertia[b], q[b], L[b], row[ROT_CONSTANTS:SCRATCH_WIDTH])
     elif not torque_free:
         row[ROT_ANCHORED] = 0.0
 
 
 @numba.njit(cache=True, inline="always")
-def _anchored_flow(model, row, b, elapsed, q_out, work) -> None:  # noqa: ANN001
+def _anchored_flow(model, row, b, elapsed, q_out) -> None:  # noqa: ANN001
     """q_out = the free flow from body b's rotation anchor (row: its scratch row) over elapsed [s]."""
-    anchor_evaluate(row[ROT_CONSTANTS:WORK], elapsed, q_out, work)
+    anchor_evaluate(row[ROT_CONSTANTS:SCRATCH_WIDTH], elapsed, q_out)
     row[EVALUATIONS] += 1.0
 
 
 @numba.njit(cache=True, inline="always")
-def _write_from_anchor(model, b, elapsed_rot, elapsed_tr, x, q, P, L, scratch, work) -> None:  # noqa: ANN001
+def _write_from_anchor(model, b, elapsed_rot, elapsed_tr, x, q, P, L, scratch) -> None:  # noqa: ANN001
     """Body b's state at its anchors' times plus the elapsed times [s]: the closed forms, then recorded
     as last written."""
     row = scratch[b]
     if row[ROT_ANCHORED] == 1.0:
-        _anchored_flow(model, row, b, elapsed_rot, q[b], work)
+        _anchored_flow(model, row, b, elapsed_rot, q[b])
         for k in range(3):
             L[b, k] = row[ROT_L + k]
     s = elapsed_tr
@@ -180,17 +184,16 @@ def _step(model, forces, force_data, t, h, x, q, P, L, F, tau, scratch) -> None:
     n = x.shape[0]
     if n == 0:
         return
-    work = scratch[0, WORK:]
     constant = forces_are_constant(forces)
     torque = forces.has_torque
     for b in range(n):
-        _keep_anchors(model, forces, b, t, x, q, P, L, scratch, not (torque and forces.torque_body[b]), constant, work)
+        _keep_anchors(model, forces, b, t, x, q, P, L, scratch, not (torque and forces.torque_body[b]), constant)
     if constant:
         if scratch[0, DEFERRED] == 1.0:
             return  # materialise writes the state when it is due
         for b in range(n):
             row = scratch[b]
-            _write_from_anchor(model, b, (t - row[ROT_T]) + h, (t - row[TR_T]) + h, x, q, P, L, scratch, work)
+            _write_from_anchor(model, b, (t - row[ROT_T]) + h, (t - row[TR_T]) + h, x, q, P, L, scratch)
         return
     # the force evaluation at the midpoint: x + (h/2) P/M, the flow at t + h/2
     for b in range(n):
@@ -200,8 +203,9 @@ def _step(model, forces, force_data, t, h, x, q, P, L, F, tau, scratch) -> None:
             row[X_START + k] = x[b, k]
             x[b, k] += drift * P[b, k]
         if row[ROT_ANCHORED] == 1.0:
-            _anchored_flow(model, row, b, (t - row[ROT_T]) + 0.5 * h, row[Q_MID : Q_MID + 4], work)
+            _anchored_flow(model, row, b, (t - row[ROT_T]) + 0.5 * h, row[Q_MID : Q_MID + 4])
         else:
+            work = row[ROT_CONSTANTS : ROT_CONSTANTS + JACOBI_WORK_SIZE]  # free: no rotation anchor
             _free_rotation_exact_work(model.body_inertia[b], q[b], L[b], 0.5 * h, row[Q_MID : Q_MID + 4], work)
     accumulate_wrench(model, forces, force_data, t + 0.5 * h, x, scratch, P, L, F, tau)
     for b in range(n):
@@ -209,13 +213,14 @@ def _step(model, forces, force_data, t, h, x, q, P, L, F, tau, scratch) -> None:
         if row[ROT_ANCHORED] != 1.0:  # a torque: kick L, then the second half-flow from the midpoint
             for k in range(3):
                 L[b, k] += h * tau[b, k]
+            work = row[ROT_CONSTANTS : ROT_CONSTANTS + JACOBI_WORK_SIZE]
             _free_rotation_exact_work(model.body_inertia[b], row[Q_MID : Q_MID + 4], L[b], 0.5 * h, q[b], work)
         if not _same(scratch, b, TR_F, F, 3):
             # a new force: the translation restarts from the step's start, F constant over the step
             row[TR_T] = t
             for k in range(3):
                 row[TR_X + k], row[TR_P + k], row[TR_F + k] = row[X_START + k], P[b, k], F[b, k]
-        _write_from_anchor(model, b, (t - row[ROT_T]) + h, (t - row[TR_T]) + h, x, q, P, L, scratch, work)
+        _write_from_anchor(model, b, (t - row[ROT_T]) + h, (t - row[TR_T]) + h, x, q, P, L, scratch)
 
 
 @numba.njit(**STEP_KERNEL)
@@ -229,10 +234,9 @@ def materialise(model, forces, t, h, x, q, P, L, scratch, due) -> None:  # noqa:
         scratch[0, DEFERRED] = 1.0  # this step was written already; the next ones need not be
         return
     if due:
-        work = scratch[0, WORK:]
         for b in range(x.shape[0]):
             row = scratch[b]
-            _write_from_anchor(model, b, (t - row[ROT_T]) + h, (t - row[TR_T]) + h, x, q, P, L, scratch, work)
+            _write_from_anchor(model, b, (t - row[ROT_T]) + h, (t - row[TR_T]) + h, x, q, P, L, scratch)
 
 
 @numba.njit(cache=True)
