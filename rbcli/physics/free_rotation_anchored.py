@@ -5,11 +5,21 @@ the flow of a body many times from the same anchor state (each recorded frame, e
 most of that call depends on the anchor only: the body momentum m0 = R^T L, the working frame, the
 amplitudes, lambda, the parameter mc, u_0 = F(phi_0|m) (a Carlson R_F), Pi(-N; phi_0|m) (R_F + R_J),
 K, the complete Pi (R_F + R_J again), the descending AGM of the Jacobi functions (it depends on mc
-only), the rotation P(m0) and its product with q(t0). `anchor_prepare`
-computes them once into ANCHOR_CONSTANTS floats (a row of the integrator's scratch); `anchor_evaluate`
-then needs the Jacobi functions at u_0 + lambda h, one incomplete Pi (or a short quadrature) and the
-quaternion products. The equations, branches and accuracy are those of `free_rotation_exact`'s
-docstring; the same formulas are used, only split at the anchor, so the two agree to rounding (tested).
+only), the rotation P(m0) and its product with q(t0). `anchor_prepare` computes them once into
+ANCHOR_CONSTANTS floats (a row of the integrator's scratch); `anchor_evaluate` then needs the
+ascending half of the Jacobi functions at u_0 + lambda h, psi, and the quaternion products. The
+equations, branches and accuracy are those of `free_rotation_exact`'s docstring, split at the anchor,
+with two differences in how psi is evaluated (both measured against the 50-digit reference in the tests):
+
+- psi by a Fourier series in u (`_prepare_fourier`): psi' is a 2K-periodic function of u, so psi is
+  its mean rate times h plus a periodic part kept as at most FOURIER_TERMS sine coefficients at the
+  anchor: one cosine/sine pair and a Clenshaw sum per evaluation instead of the incomplete Pi (two
+  Carlson integrals) and an arctangent. Used where the coefficients fall below EPS within that many
+  terms (97% of the benchmark's random bodies); near the separatrix and for N >> 1 the closed form
+  with Pi stays (its half-turn count now round(u / 2K), no arctangent of the amplitude).
+- the short-arc and thin-rod quadratures read the kept AGM (`ellipj_kept`), so no work array is needed.
+
+Cost (benchmarks/bench_exact.py, 10,000 bodies): see docs/integrators.md.
 """
 
 from __future__ import annotations
@@ -58,7 +68,13 @@ _LAM, _U0, _MC, _A1, _A2, _A3, _G, _TWO_E, _C3, _DIST = range(12, 22)
 _QUADRATURE = 22  # 1.0: psi by quadrature always (the closed form is ill-conditioned for this body)
 _NN, _SQ, _PI0, _TH0, _K, _PIC, _COEF, _G_I3, _PERIOD, _WHOLE = range(23, 33)
 _M = 33  # (3) STEADY: the fixed working-frame momentum
-_JACOBI = 36  # (JACOBI_PREPARED_SIZE) the Jacobi functions' AGM for this mc (elliptic.jacobi_prepare)
+# psi by its Fourier series in u (_prepare_fourier): the mean rate [rad/s], psi's periodic part at u_0
+# [rad], the number of terms (0: none, use Pi), pi / K, then the sine coefficients [rad]
+_RATE_MEAN, _P0, _TERMS, _PI_K, _FOURIER = range(36, 41)
+FOURIER_TERMS = 16  # at most this many coefficients are kept (more: Pi instead)
+_SAMPLES = 64  # samples of psi' over one period 2K for them (aliasing: coefficient 64 - k, negligible)
+_SLOTS = FOURIER_TERMS + 4  # the coefficients' columns: 4 more to test the tail while preparing
+_JACOBI = _FOURIER + _SLOTS  # (JACOBI_PREPARED_SIZE) the Jacobi functions' AGM (elliptic.jacobi_prepare)
 ANCHOR_CONSTANTS = _JACOBI + JACOBI_PREPARED_SIZE
 
 
@@ -170,6 +186,9 @@ def _prepare_working(i1: float, i2: float, i3: float, m1: float, m2: float, m3: 
     c[_G_I3] = g / i3
     c[_PERIOD] = 2.0 * kk
     c[_WHOLE] = math.nan
+    c[_TERMS] = 0.0
+    if mc > 0.0:
+        _prepare_fourier(c)
     if c[_QUADRATURE] == 1.0 and mc > 0.0:
         # psi' integrated over one whole period by the trapezoidal rule (free_rotation_exact._quadrature_psi)
         points = int(math.ceil(14.7 * kk / c[_DIST])) + 1
@@ -200,6 +219,60 @@ def _gauss_legendre_psi(c: np.ndarray, ua: float, span: float) -> float:
             _, _, dn = ellipj_kept(centre + 0.5 * length * _GL_X[n, i], mc, c[_JACOBI:ANCHOR_CONSTANTS])
             total += _GL_W[n, i] * (two_e + c3 * dn) / (g + a3 * dn)
     return 0.5 * length * total
+
+
+@numba.njit(**STEP_KERNEL)
+def _prepare_fourier(c: np.ndarray) -> None:
+    """psi's integrand in u, f(u) = (2E + G a3 dn u / I3) / (G + a3 dn u) (positive terms), is even and
+    2K-periodic, so f = f_0 + sum_k a_k cos(k pi u / K) and, with P(u) = sum_k b_k sin(k pi u / K),
+    b_k = a_k K / (k pi):  psi(u1) - psi(u0) = [f_0 (u1 - u0) + P(u1) - P(u0)] / lambda.
+    f is analytic in the strip |Im u| < y_N (sn^2 = -1/N there, the zero of G + a3 dn), so a_k falls
+    like exp(-k pi y_N / K): a few terms away from the separatrix (K small) and for moderate N. The a_k
+    are the discrete cosine sums of _SAMPLES values of f over one period (the trapezoidal rule, exact
+    up to the aliased a_{S-k}, a_{S+k}); the series is kept when the four coefficients after the last
+    kept one are below EPS lambda / 4 (truncation then moves psi by < EPS / 2 rad), else (near the
+    separatrix, N >> 1) the closed form with Pi is used. Jacobi functions' Fourier series and strips
+    of analyticity: DLMF 22.11; the pole distance: free_rotation_exact._gauss_legendre_psi's dist."""
+    two_e, c3, g, a3, mc, kk = c[_TWO_E], c[_C3], c[_G], c[_A3], c[_MC], 0.5 * c[_PERIOD]
+    kept = c[_JACOBI:ANCHOR_CONSTANTS]
+    # a_k (k = 1 .. _SLOTS) summed in place, then turned into the sine coefficients b_k = a_k K / (k pi).
+    # f(2K - u) = f(u): samples j and S - j are equal, so half a period of samples suffices. Each
+    # cos(2 pi j k / S) is taken directly (a recurrence in k would add rounding growing with k).
+    half = _SAMPLES // 2
+    for k in range(_SLOTS):
+        c[_FOURIER + k] = 0.0
+    mean = 0.0
+    for j in range(half + 1):
+        _, _, dn = ellipj_kept(j * c[_PERIOD] / _SAMPLES, mc, kept)
+        f = (two_e + c3 * dn) / (g + a3 * dn)
+        weight = 1.0 if j == 0 or j == half else 2.0
+        mean += weight * f
+        for k in range(_SLOTS):
+            c[_FOURIER + k] += weight * f * math.cos(2.0 * math.pi * ((j * (k + 1)) % _SAMPLES) / _SAMPLES)
+    for k in range(_SLOTS):
+        c[_FOURIER + k] *= 2.0 / _SAMPLES * kk / ((k + 1) * math.pi)
+    # truncation moves psi by at most 2 sum_(k > terms) |b_k| / lambda: keep that below EPS / 2 rad
+    tol = 2.0**-52 * c[_LAM] / 4.0
+    for terms in range(FOURIER_TERMS + 1):
+        tail = abs(c[_FOURIER + terms]) + abs(c[_FOURIER + terms + 1]) + abs(c[_FOURIER + terms + 2])
+        if tail + abs(c[_FOURIER + terms + 3]) <= tol:
+            c[_TERMS] = terms
+            c[_RATE_MEAN] = mean / _SAMPLES  # f_0 span / lambda = f_0 h
+            c[_PI_K] = math.pi / kk
+            c[_P0] = _fourier_sum(c, c[_U0])
+            return
+
+
+@numba.njit(cache=True, inline="always")
+def _fourier_sum(c: np.ndarray, u: float) -> float:
+    """P(u) = sum_k b_k sin(k pi u / K) (_prepare_fourier) by Clenshaw's recurrence, u reduced mod 2K."""
+    r = u - c[_PERIOD] * round(u / c[_PERIOD])
+    theta = r * c[_PI_K]
+    two_cos = 2.0 * math.cos(theta)
+    y1, y2 = 0.0, 0.0
+    for k in range(int(c[_TERMS]) - 1, -1, -1):
+        y1, y2 = c[_FOURIER + k] + two_cos * y1 - y2, y1
+    return y1 * math.sin(theta)
 
 
 @numba.njit(**STEP_KERNEL)
@@ -251,6 +324,8 @@ def anchor_evaluate(c: np.ndarray, h: float, q_out: np.ndarray) -> None:
         dpsi = math.nan
         if abs(span) <= 0.5 * c[_DIST] or c[_QUADRATURE] == 1.0:
             dpsi = _psi_by_quadrature(c, span) / c[_LAM]
+        if math.isnan(dpsi) and c[_TERMS] > 0.0:
+            dpsi = h * c[_RATE_MEAN] + (_fourier_sum(c, u1) - c[_P0]) / c[_LAM]
         if math.isnan(dpsi):
             nn, sq = c[_NN], c[_SQ]
             # am u1 = j pi + r1, |r1| <= pi/2: am is increasing with am((2j + 1) K) = (2j + 1) pi / 2, so
