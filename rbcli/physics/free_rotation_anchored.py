@@ -241,12 +241,19 @@ def _prepare_fourier(c: np.ndarray) -> None:
     half = _SAMPLES // 2
     for k in range(_SLOTS):
         c[_FOURIER + k] = 0.0
-    mean = 0.0
+    # the mean rate multiplies the whole elapsed time (2e5 rad at 2000 s for the fast spin): summed with
+    # Neumaier's compensation (Kahan-Babuska), 3e-17 relative there instead of 2e-16 plainly summed
+    mean, compensation = 0.0, 0.0
     for j in range(half + 1):
         _, _, dn = ellipj_kept(j * c[_PERIOD] / _SAMPLES, mc, kept)
         f = (two_e + c3 * dn) / (g + a3 * dn)
         weight = 1.0 if j == 0 or j == half else 2.0
-        mean += weight * f
+        total = mean + weight * f
+        if abs(mean) >= abs(weight * f):
+            compensation += (mean - total) + weight * f
+        else:
+            compensation += (weight * f - total) + mean
+        mean = total
         for k in range(_SLOTS):
             c[_FOURIER + k] += weight * f * math.cos(2.0 * math.pi * ((j * (k + 1)) % _SAMPLES) / _SAMPLES)
     for k in range(_SLOTS):
@@ -257,7 +264,7 @@ def _prepare_fourier(c: np.ndarray) -> None:
         tail = abs(c[_FOURIER + terms]) + abs(c[_FOURIER + terms + 1]) + abs(c[_FOURIER + terms + 2])
         if tail + abs(c[_FOURIER + terms + 3]) <= tol:
             c[_TERMS] = terms
-            c[_RATE_MEAN] = mean / _SAMPLES  # f_0 span / lambda = f_0 h
+            c[_RATE_MEAN] = (mean + compensation) / _SAMPLES  # f_0 span / lambda = f_0 h
             c[_PI_K] = math.pi / kk
             c[_P0] = _fourier_sum(c, c[_U0])
             return
