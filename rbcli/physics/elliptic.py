@@ -21,7 +21,7 @@ Sources:
   (`_elliprf_rj`: their x, y, z sequences are the same); R_C(1, 1 + e_m) by its Maclaurin series
   sum (-e)^k / (2k + 1) once |e_m| < 0.01 (R_J's later steps: e_m shrinks ~64x per step). The stopping
   test Q = (3r)^(-1/6) max|A_0 - x| with r = 1e-16 is Carlson's, the same as an "ERRTOL" of 0.0025
-  in his 1979 form (error ~ ERRTOL^6): a larger tolerance would cost accuracy, not save steps.
+  in his 1979 form (error ~ ERRTOL^6): a larger tolerance saves steps only by losing digits.
 - DLMF 19.25.5 / 19.25.14: F and Pi through R_F and R_J; DLMF 19.7.9: Pi(n) + Pi(m/n) = F + R_C term
   (used for n < -1); DLMF 19.2.10 / 19.6: quasi-periodicity in phi.
 - Bulirsch 1965, "Numerical calculation of elliptic integrals and elliptic functions" (Numer. Math. 7),
