@@ -12,7 +12,9 @@ numba's cache (or compiler), the steps and the output file. In a temporary folde
       unmeasured run of each first (numba's cache filled, the OS file cache warm), then `--repeats`
       rounds, the commands interleaved and their order alternated between rounds so that a change of
       machine load hits them alike; medians, and the ratio of the medians. Skipped rows for MuJoCo
-      when it is not installed (`pip install -e .[bench]`).
+      when it is not installed (`pip install -e .[bench]`). Two floors beside them: `import numpy,
+      numba`, and `one kernel`: that import plus one small cached rbcli kernel loaded from numba's
+      cache and called (what any run through the cache pays before it does anything).
   (b) first run: the same command with NUMBA_CACHE_DIR a new empty folder (a new machine, as far as
       numba is concerned: every kernel the scene needs is compiled), `--cold-repeats` times.
   (c) where the time goes: the same run in a driver that wraps the CLI's phases (import, parse,
@@ -74,6 +76,16 @@ for _ in range(steps):
 print(d.time, *d.qpos[:3])
 """
 
+# The floor of any run through numba's cache: the interpreter, numpy and numba, and one small cached rbcli
+# kernel (the divergence check) loaded and called on one body's state, then the same exit as `rbsim run`.
+ONE_KERNEL = """\
+import os
+import numpy as np
+from rbcli.physics.step import state_is_sane
+assert state_is_sane(np.zeros((1, 3)), np.ones((1, 4)), np.zeros((1, 3)), np.zeros((1, 3)))
+os._exit(0)
+"""
+
 # Runs the real CLI (`rbcli.cli.app.main`, which may end the process itself) with wall-clock marks at
 # the entry and exit of the functions it calls (rbcli.api.prepare, rbcli.runner.loop.warm_up,
 # rbcli.api.run_to_file); its first atexit handler, so the last to run, prints the marks as JSON on
@@ -115,8 +127,12 @@ def rbsim_command() -> list[str]:
 
 
 def environment(cache: str | None = None) -> dict[str, str]:
-    """This checkout first on the path (whatever is installed); NUMBA_CACHE_DIR = cache when given."""
+    """This checkout first on the path (whatever is installed); NUMBA_CACHE_DIR = cache when given.
+    Python writes and reuses its bytecode caches (.pyc), as on a user's machine (pip writes them for an
+    installed package): with PYTHONDONTWRITEBYTECODE set, as in some shells, every run would compile
+    rbcli's ~90 modules from source (~0.1-0.3 s) while the MuJoCo script's packages have theirs."""
     env = dict(os.environ)
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT), *filter(None, [env.get("PYTHONPATH")])])
     if cache is not None:
         env["NUMBA_CACHE_DIR"] = cache
@@ -193,7 +209,12 @@ def main() -> None:
         (work / "mujoco_one.py").write_text(MUJOCO_SCRIPT)
         run_args = ["one.yaml", "-o", "out.mcap", "-q"]
         env = environment()
-        commands = {"rbsim run": [*rbsim_command(), "run", *run_args], "python -c pass": [sys.executable, "-c", "pass"]}
+        commands = {
+            "rbsim run": [*rbsim_command(), "run", *run_args],
+            "python -c pass": [sys.executable, "-c", "pass"],
+            "import numba": [sys.executable, "-c", "import numpy, numba"],
+            "one kernel": [sys.executable, "-c", ONE_KERNEL],
+        }
         if have_mujoco:
             commands["MuJoCo script"] = [sys.executable, "mujoco_one.py", str(args.steps), str(DT)]
         else:
@@ -214,6 +235,8 @@ def main() -> None:
             ratio = statistics.median(samples["rbsim run"]) / statistics.median(samples["MuJoCo script"])
             verdict = "met" if ratio <= TARGET_RATIO else "missed"
             print(f"  ratio rbsim / MuJoCo (medians): {ratio:.2f}x (target <= {TARGET_RATIO:g}x: {verdict})")
+            floor = statistics.median(samples["one kernel"]) / statistics.median(samples["MuJoCo script"])
+            print(f"  ratio one kernel / MuJoCo (the floor of any run through numba's cache): {floor:.2f}x")
 
         print("\n(c) warm run, by phase (driver around the CLI, median of 3):")
         print_phases([phases(run_args, work, env) for _ in range(3)])

@@ -15,7 +15,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from rbcli.physics.integrators import INTEGRATORS, IntegratorInfo, get_integrator
+from rbcli.physics import integrators as _integrators
+from rbcli.physics.integrators import INTEGRATORS, IntegratorInfo, IntegratorRefusal, get_integrator
 from rbcli.record.frame import RunSummary, Sink
 from rbcli.record.memory_sink import SinkMemory, Trajectory
 from rbcli.runner.simulation import BodyState, Simulation, SimulationDiverged
@@ -42,6 +43,12 @@ def list_integrators() -> tuple[IntegratorInfo, ...]:
     """The integrators rbsim offers, in the registry's order: name, order, symplectic, what each conserves,
     force evaluations per step, adaptive (metadata only: no kernel is imported or compiled)."""
     return tuple(INTEGRATORS.values())
+
+
+def check_integrator(name: str, *, tolerance: bool = False) -> IntegratorRefusal | None:
+    """None when `name` can run (with `tolerance`: adaptively), else why not: the registry's one check,
+    which scene files, overrides and the CLI all use (metadata only: nothing compiled)."""
+    return _integrators.check_integrator(name, tolerance=tolerance)
 
 
 def integrator_info(name: str) -> IntegratorInfo:

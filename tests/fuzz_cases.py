@@ -195,7 +195,14 @@ def valid_scene(draw, *, forces: bool = True, contact: bool | None = None, integ
         sim["record"] = {
             "every": draw(st.integers(1, 3)),
             "streams": draw(
-                st.sampled_from([["bodies"], ["bodies", "invariants"], ["bodies", "invariants", "particles"]])
+                st.sampled_from(
+                    [
+                        ["bodies"],
+                        ["bodies", "invariants"],
+                        ["bodies", "invariants", "particles"],
+                        ["bodies", "contacts"],
+                    ]
+                )
             ),
         }
     scene: dict = {"name": draw(st.text(max_size=12)), "simulation": sim}

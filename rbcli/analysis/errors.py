@@ -163,8 +163,8 @@ def smoothness_notes(compiled: CompiledScene) -> list[str]:
     A damper's force c (e . v) e has the direction e = d / |d| of its spring: undefined at |d| = 0,
     where it is set to 0 (forces/spring.py), though its limit along a motion through there is not 0. A
     damped zero-rest-length spring whose ends coincide at the start (a chain laid out end to end) makes
-    every method's first step an O(dt^2) error: rk4, dopri5 and split4 all fitted 2 on
-    scenes/forces/spring_chain.yaml, and 4 / 5 / 4 from t = 0.1 s (tests/physics/test_damped_orders.py).
+    every method's first step an O(dt^2) error: rk4, dopri5, split4 and exact4 all fitted 2 on
+    scenes/forces/spring_chain.yaml, and 4 / 5 / 4 / 4 from t = 0.1 s (tests/physics/test_damped_orders.py).
     """
     spring = compiled.forces.spring
     damped = spring.damping != 0.0

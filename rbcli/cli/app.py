@@ -17,9 +17,9 @@ from typing import TextIO
 import typer
 
 from rbcli._version import __version__
+from rbcli.cli import coercion, messages
 from rbcli.cli import info as _info
 from rbcli.cli import integrators as _integrators
-from rbcli.cli import messages
 from rbcli.cli import recover as _recover
 from rbcli.cli import replay as _replay
 from rbcli.cli import run as _run
@@ -28,6 +28,8 @@ from rbcli.cli import study as _study
 from rbcli.cli import sweep as _sweep
 from rbcli.cli import validate as _validate
 from rbcli.cli.exit_codes import ExitCode, exit_code_lines
+
+coercion.install()  # plain parameters' values converted without pydantic (cli/coercion.py)
 
 PROG_NAME = "rbsim"  # also under `python -m rbcli`: usage lines, completion (_RBSIM_COMPLETE) say rbsim
 

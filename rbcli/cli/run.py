@@ -88,7 +88,7 @@ def run(
     ),
 ) -> None:
     """Integrate SCENE and record it; exits 1 on an invalid scene or output (writing nothing), 3 on divergence."""
-    from rbcli.api import integrator_info, list_integrators, prepare
+    from rbcli.api import check_integrator, integrator_info, prepare
     from rbcli.record.output_file import (
         OutputError,
         check_output,
@@ -115,9 +115,9 @@ def run(
         raise messages.fail(f"scene file not found: {scene}", expected="a path to a YAML scene file")
     # the closed sets first, each with a "did you mean": nothing is loaded for a mistyped name
     if integrator is not None:
-        names = [info.name for info in list_integrators()]
-        if integrator not in names:
-            raise messages.fail_unknown("--integrator", integrator, names, "integrator")
+        refusal = check_integrator(integrator)
+        if refusal is not None:
+            raise messages.fail(f"--integrator {integrator!r}: {refusal.reason}", expected=refusal.expected)
     if compression is not None and compression not in COMPRESSIONS:
         raise messages.fail_unknown("--compression", compression, COMPRESSIONS, "compression")
     if output is not None and not (output.is_dir() or str(output).endswith(os.sep)):

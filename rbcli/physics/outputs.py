@@ -13,6 +13,10 @@ import math
 
 import numba
 
+from rbcli.physics import kernel_cache
+
+kernel_cache.install()  # loads of the kernels skip numba's registry build (kernel_cache.py)
+
 # columns of `totals`
 TOTAL_KINETIC, TOTAL_MOMENTUM, TOTAL_ANGULAR_MOMENTUM, TOTAL_QUATERNION_DEFECT = 0, slice(1, 4), slice(4, 7), 7
 TOTALS_WIDTH = 8

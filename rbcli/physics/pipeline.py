@@ -52,12 +52,16 @@ from dataclasses import dataclass
 class Stage:
     """One stage of a step, as code inside the chunk loop.
 
-    Names the code may use: model, forces, data (KernelData), x, q, P, L (data's state arrays), dt,
-    index (the grid step being taken), t = index * dt, k (steps done in this chunk), frames, filled,
-    record_every; `integrator_step` is the integrator's update. Consecutive sub-step stages form one
-    loop run data.substeps times (contact sub-stepping, 1 otherwise), where ts and h are the sub-step's
-    start time and length. A stage that ends the chunk returns (k + 1, filled, status). A stage that
-    only some scenes have calls a dispatcher (forces/stages.py) that compiles to nothing without it.
+    Names the code may use: model, forces, data (KernelData), x, q, P, L, F, tau, scratch (data's
+    arrays), force_data (data.force), contact and contact_work (forces.contact and force_data.contact,
+    None without contact), dt, index (the grid step being taken), t = index * dt, k (steps done in this
+    chunk), frames, filled, record_every; `integrator_step` is the integrator's update. Use the names,
+    not `data.F` or `data.force`: the loop takes them out of their tuples once, before it starts (each
+    `data.force` inside the loop increfs and decrefs every array the tuple holds, every step).
+    Consecutive sub-step stages form one loop run data.substeps times (contact sub-stepping, 1
+    otherwise), where ts and h are the sub-step's start time and length. A stage that ends the chunk
+    returns (k + 1, filled, status). A stage that only some scenes have calls a dispatcher
+    (forces/stages.py) that compiles to nothing without it.
     """
 
     name: str
@@ -73,13 +77,13 @@ STEP_STAGES: tuple[Stage, ...] = (
         "impulses",
         "impulses: exact jumps of P and L at the start of the step that holds them",
         ("from rbcli.physics.forces.stages import impulse_stage",),
-        "impulse_stage(model, forces, data.force, t, t + dt, x, q, P, L)",
+        "impulse_stage(model, forces, force_data, t, t + dt, x, q, P, L)",
     ),
     Stage(
         "contact_begin",
         "contact_begin: the contact springs measure time from the start of this (sub-)step",
         ("from rbcli.physics.forces.stages import contact_begin_stage",),
-        "contact_begin_stage(forces.contact, data.force.contact, ts, h)",
+        "contact_begin_stage(contact, contact_work, ts, h)",
         substep=True,
     ),
     Stage(
@@ -93,7 +97,7 @@ STEP_STAGES: tuple[Stage, ...] = (
         "update",
         "update: the integrator's maths, its force evaluations through forces.wrench.accumulate_wrench",
         (),
-        "integrator_step(model, forces, data.force, ts, h, x, q, P, L, data.F, data.tau, data.scratch)",
+        "integrator_step(model, forces, force_data, ts, h, x, q, P, L, F, tau, scratch)",
         substep=True,
     ),
     Stage(
@@ -107,21 +111,21 @@ STEP_STAGES: tuple[Stage, ...] = (
         "contact_commit",
         "contact_commit: the (sub-)step is complete: its last evaluation's contacts become the history",
         ("from rbcli.physics.forces.stages import contact_commit_stage",),
-        "contact_commit_stage(model, forces.contact, data.force.contact, x, q, P, L)",
+        "contact_commit_stage(model, contact, contact_work, x, q, P, L)",
         substep=True,
     ),
     Stage(
         "materialise",
         "materialise: exact defers torque-free bodies under constant forces; write them when due",
         ("from rbcli.physics.integrators.exact import materialise",),
-        "materialise(model, forces, t, dt, x, q, P, L, data.scratch, {due})",
+        "materialise(model, forces, t, dt, x, q, P, L, scratch, {due})",
         integrators=("exact",),
     ),
     Stage(
         "contact_record",
         "contact_record: on recording steps, the step's contact count, deepest overlap and energy",
         ("from rbcli.physics.forces.stages import contact_record_stage",),
-        "contact_record_stage(data.force.contact, frames, filled, (index + 1) % record_every == 0)",
+        "contact_record_stage(contact_work, frames, filled, (index + 1) % record_every == 0)",
     ),
     Stage(
         "record",
@@ -153,7 +157,12 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
     again), STATUS_DIVERGED (the last step left a non-finite or blown-up state, not recorded),
     STATUS_NO_ROOM (called with full buffers: nothing was written).
     """
-    x, q, P, L = data.x, data.q, data.P, data.L
+    # taken out of their tuples once: inside the loop each would be increfed and decrefed every step
+    x, q, P, L, F, tau, scratch = data.x, data.q, data.P, data.L, data.F, data.tau, data.scratch
+    force_data, contact = data.force, forces.contact
+    contact_work = force_data.contact
+    substeps = data.substeps
+    h = dt / substeps
     for k in range(n_steps):
         index = step0 + k
         t = index * dt
@@ -202,7 +211,7 @@ def chunk_source(module: str, name: str, stages: tuple[Stage, ...] = STEP_STAGES
     for i, stage in enumerate(stages):
         if stage.substep and not in_substeps:
             # h = dt / 1 and ts = t + 0 * h are exactly dt and t: one sub-step is bitwise the plain step
-            body.append(_indent("h = dt / data.substeps\nfor sub in range(data.substeps):\n    ts = t + sub * h", 8))
+            body.append(_indent("for sub in range(substeps):\n    ts = t + sub * h", 8))
         in_substeps = stage.substep
         depth = 12 if stage.substep else 8
         body.append(_indent(f"# {stage.why}", depth))

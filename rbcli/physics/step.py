@@ -14,6 +14,10 @@ from typing import Any, NamedTuple
 import numba
 import numpy as np
 
+from rbcli.physics import kernel_cache
+
+kernel_cache.install()  # loads of the kernels skip numba's registry build (kernel_cache.py)
+
 # columns of FrameBuffers.contact (physics/contact/tables.py STAT_COUNT; step.py imports no contact code)
 CONTACT_STATS = 3
 

@@ -93,6 +93,8 @@ class FrameBlock:
     L: (K, N, 3) world angular momentum [kg m^2/s].
     invariants: name -> (K,) time series (energies [J], momentum components, norms).
     particle_position: (K, particle_count, 3) world [m], present only when the particles stream is on.
+    contact_point, contact_force: per frame, the (n_k, 3) contact points [m, world] and the (n_k,)
+    normal force magnitudes [N] there (physics/contact/points.py), present only with the contacts stream.
     """
 
     step: np.ndarray
@@ -105,6 +107,8 @@ class FrameBlock:
     L: np.ndarray
     invariants: dict[str, np.ndarray] = field(default_factory=dict)
     particle_position: np.ndarray | None = None
+    contact_point: list[np.ndarray] | None = None
+    contact_force: list[np.ndarray] | None = None
 
     def __len__(self) -> int:
         return int(self.t.shape[0])

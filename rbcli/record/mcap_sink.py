@@ -7,6 +7,8 @@ Topics; log_time = publish_time = simulated time [ns], so identical runs give by
     /bodies/<name>/particles   foxglove.PointCloud once at t = 0, in the body's frame (frame_id = name)
     /rbsim/invariants          rbsim.Invariants per recorded step (only when the run has invariants)
     /particles                 foxglove.PointCloud of all particles, world frame (only with that stream)
+    /contacts                  foxglove.PointCloud of the frame's contact points, world frame, fields
+                               x, y, z [m] and normal_force [N] (only with that stream)
     /rbsim/checkpoint          rbsim.Checkpoint: what the run carries between steps, at most every
                                10 s of wall time and when it stops (`rbsim run --resume`)
 
@@ -40,8 +42,6 @@ from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
 from foxglove_schemas_protobuf.PackedElementField_pb2 import PackedElementField
 from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
-from mcap.reader import make_reader
-from mcap_protobuf.decoder import DecoderFactory
 from mcap_protobuf.schema import build_file_descriptor_set
 
 from rbcli.record.frame import RECORDING_FORMAT_VERSION, Checkpoint, FrameBlock, RunHeader, RunSummary
@@ -54,6 +54,7 @@ TOPIC_STATE = "/rbsim/state"
 TOPIC_TF = "/tf"
 TOPIC_INVARIANTS = "/rbsim/invariants"
 TOPIC_PARTICLES = "/particles"
+TOPIC_CONTACTS = "/contacts"
 TOPIC_CHECKPOINT = "/rbsim/checkpoint"
 TOPIC_BODY_PARTICLES = "/bodies/particles"  # every body's cloud, when one channel per body would not fit
 WORLD_FRAME = "world"
@@ -73,9 +74,10 @@ STATE_FIELDS = (
 )
 
 
-# Channels besides the per-body clouds: /rbsim/state, /tf, /rbsim/invariants, /particles, /rbsim/checkpoint.
-FIXED_CHANNELS = 5
-BODY_CHANNELS_MAX = MAX_ID - FIXED_CHANNELS  # 65,530 bodies still get a channel each
+# Channels besides the per-body clouds: /rbsim/state, /tf, /rbsim/invariants, /particles, /contacts,
+# /rbsim/checkpoint.
+FIXED_CHANNELS = 6
+BODY_CHANNELS_MAX = MAX_ID - FIXED_CHANNELS  # 65,529 bodies still get a channel each
 
 
 def particle_topic(body_name: str) -> str:
@@ -88,7 +90,22 @@ def particle_channels_shared(body_count: int) -> bool:
     return body_count > BODY_CHANNELS_MAX
 
 
+def _decoder_factory() -> Any:  # noqa: ANN401 - mcap_protobuf's DecoderFactory
+    """The protobuf decoder of the readers (imported here: writing a run needs no reader, ~0.02 s)."""
+    from mcap_protobuf.decoder import DecoderFactory
+
+    return DecoderFactory()
+
+
+def _reader(f: IO[bytes]) -> Any:  # noqa: ANN401 - mcap's McapReader
+    """An MCAP reader of `f` that decodes protobuf messages."""
+    from mcap.reader import make_reader
+
+    return make_reader(f, decoder_factories=[_decoder_factory()])
+
+
 # --- project message descriptors, built at run time (their text is schemas/rbsim_*.proto) ----------
+
 
 _FDP = descriptor_pb2.FieldDescriptorProto
 
@@ -390,6 +407,16 @@ def _point_cloud(points: np.ndarray, frame_id: str, ns: int) -> PointCloud:
     return cloud
 
 
+def _contact_cloud(points: np.ndarray, force: np.ndarray, ns: int) -> PointCloud:
+    """A foxglove.PointCloud of contact points: float64 x, y, z [m] and normal_force [N], world frame."""
+    packed = np.empty((len(points), 4), "<f8")
+    packed[:, :3], packed[:, 3] = points, force
+    cloud = _point_cloud(np.zeros((0, 3)), WORLD_FRAME, ns)
+    cloud.point_stride, cloud.data = 32, packed.tobytes()
+    cloud.fields.add(name="normal_force", offset=24, type=PackedElementField.FLOAT64)
+    return cloud
+
+
 # --- the sink --------------------------------------------------------------------------------------
 
 
@@ -447,6 +474,7 @@ class SinkMcap:
             meta = {"invariant_names": json.dumps(list(self._invariant_names))}
             self._ch_inv = self._channel(TOPIC_INVARIANTS, fdp, meta)
         self._ch_particles: int | None = None
+        self._ch_contacts: int | None = None
         self._ch_checkpoint: int | None = None
         w.add_metadata(METADATA_RUN, run_metadata(header))
         w.add_attachment(0, 0, SCENE_ATTACHMENT, "application/yaml", header.scene_text.encode())
@@ -486,6 +514,9 @@ class SinkMcap:
         particles = block.particle_position
         if particles is not None and self._ch_particles is None:
             self._ch_particles = self._channel(TOPIC_PARTICLES, PointCloud)
+        contacts, forces = block.contact_point, block.contact_force
+        if contacts is not None and self._ch_contacts is None:
+            self._ch_contacts = self._channel(TOPIC_CONTACTS, PointCloud)
         for k in range(k_count):
             seq = steps[k] & 0xFFFFFFFF
             self._add(self._ch_state, ns[k], states[k], seq)
@@ -495,6 +526,9 @@ class SinkMcap:
             if particles is not None and self._ch_particles is not None:
                 cloud = _point_cloud(particles[k], WORLD_FRAME, ns[k]).SerializeToString()
                 self._add(self._ch_particles, ns[k], cloud, seq)
+            if contacts is not None and forces is not None and self._ch_contacts is not None:
+                cloud = _contact_cloud(contacts[k], forces[k], ns[k]).SerializeToString()
+                self._add(self._ch_contacts, ns[k], cloud, seq)
         self._writer.flush_chunk()  # no frame waits in the open chunk for the next block
         self.frames_written += k_count
 
@@ -549,7 +583,7 @@ def _invariant_names(summary: Any) -> tuple[str, ...]:
 def read_mcap_contents(path: str | Path) -> McapContents:
     """Metadata, scene attachment, message counts and the t = 0 particle clouds of an rbsim MCAP file."""
     with open(path, "rb") as f:
-        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        reader = _reader(f)
         try:
             header, summary = reader.get_header(), reader.get_summary()
         except Exception as exc:  # the mcap library raises several types for a damaged file
@@ -591,7 +625,7 @@ def _cloud_points(cloud: Any) -> np.ndarray:
 def iter_mcap_blocks(path: str | Path, block_frames: int = 256) -> Iterator[FrameBlock]:
     """FrameBlocks decoded from /rbsim/state and /rbsim/invariants with the file's own schemas."""
     with open(path, "rb") as f:
-        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        reader = _reader(f)
         inv_names = _invariant_names(reader.get_summary())
         inv_fields = invariant_field_names(inv_names)
         rows: list[Any] = []
@@ -626,13 +660,15 @@ def _block_from_messages(
     }
     for s in steps.tolist():
         inv_rows.pop(s, None)
-    return FrameBlock(step=steps, t=np.array([m.time for m in rows], dtype=np.float64), invariants=invariants, **arrays)
+    t = np.array([m.time for m in rows], dtype=np.float64)
+    a = arrays
+    return FrameBlock(steps, t, a["x"], a["q"], a["v"], a["omega"], a["P"], a["L"], invariants=invariants)
 
 
 def read_mcap_invariants(path: str | Path) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
     """(t [s], step, name -> series) from /rbsim/invariants alone: cheap, whatever the body count."""
     with open(path, "rb") as f:
-        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        reader = _reader(f)
         names = _invariant_names(reader.get_summary())
         fields = invariant_field_names(names)
         rows = [msg for _, _, _, msg in reader.iter_decoded_messages(topics=[TOPIC_INVARIANTS], log_time_order=False)]
@@ -768,7 +804,7 @@ def read_mcap_prefix(path: str | Path) -> McapPrefix:
     last_states: list[Message] = []  # the last two: the last complete frame is one of them
     inv_rows: list[Any] = []
     decoders: dict[int, Any] = {}
-    factory = DecoderFactory()
+    factory = _decoder_factory()
     for record in _prefix_records(path, cut):
         if isinstance(record, Message):
             topic = topics.get(record.channel_id, "")
@@ -948,7 +984,7 @@ def read_mcap_resume_point(path: str | Path) -> McapResumePoint:
     checkpoint = None
     if last is not None:
         channel = channels[last.channel_id]
-        decode = DecoderFactory().decoder_for(channel.message_encoding, schemas.get(channel.schema_id))
+        decode = _decoder_factory().decoder_for(channel.message_encoding, schemas.get(channel.schema_id))
         if decode is None:
             raise ValueError(f"no decoder for {TOPIC_CHECKPOINT} ({channel.message_encoding})")
         checkpoint = decode_checkpoint(decode(last.data))
@@ -963,7 +999,7 @@ def iter_mcap_frames_before(path: str | Path, step: int, block_frames: int = 256
     schemas: dict[int, Schema] = {}
     channels: dict[int, Channel] = {}
     decoders: dict[int, Any] = {}
-    factory = DecoderFactory()
+    factory = _decoder_factory()
     inv_names: tuple[str, ...] = ()
     rows: list[Any] = []
     inv_rows: dict[int, Any] = {}

@@ -7,6 +7,8 @@ Entities (timelines `time`, a duration [s], and `step`, a sequence):
     trajectories               static LineStrips3D of the centre-of-mass paths, written at close
     invariants/<name>          Scalars per recorded step
     particles                  Points3D of every particle in the world frame (only with that stream)
+    contacts                   Points3D of the frame's contact points, world frame, with a
+                               `normal_force` [N] per point (only with that stream)
     scene                      static TextDocument: the scene YAML
     run, summary               static TextDocuments (markdown) with the run parameters and the ending
 
@@ -170,7 +172,9 @@ def default_blueprint(invariant_names: Sequence[str]) -> rrb.Blueprint:
     for name in invariant_names:
         families.setdefault(invariant_family(name), []).append(f"invariants/{name}")
     plots = [rrb.TimeSeriesView(name=fam, origin="invariants", contents=paths) for fam, paths in families.items()]
-    view3d = rrb.Spatial3DView(name="bodies", origin="/", contents=["bodies/**", "trajectories", "particles"])
+    view3d = rrb.Spatial3DView(
+        name="bodies", origin="/", contents=["bodies/**", "trajectories", "particles", "contacts"]
+    )
     texts = rrb.Tabs(rrb.TextDocumentView(origin="scene", name="scene"), rrb.TextDocumentView(origin="run", name="run"))
     right = rrb.Vertical(*plots, texts) if plots else texts
     return rrb.Blueprint(rrb.Horizontal(view3d, right, column_shares=[3, 2]), collapse_panels=False)
@@ -331,8 +335,16 @@ class SinkRerun:
                 qf[..., 3] = block.q[..., 0].T
             pp = None if block.particle_position is None else np.asarray(block.particle_position, dtype=np.float32)
         inv = {name: np.asarray(block.invariants[name], dtype=np.float64) for name in self._header.invariant_names}
-        self._pending.append({"t": block.t, "step": block.step, "x": xf, "q": qf, "inv": inv, "particles": pp})
+        cp = cf = None
+        if block.contact_point is not None and block.contact_force is not None:
+            with np.errstate(over="ignore", invalid="ignore"):
+                cp = [np.asarray(p, dtype=np.float32).reshape(-1, 3) for p in block.contact_point]
+            cf = [np.asarray(f, dtype=np.float64) for f in block.contact_force]
+        pending = {"t": block.t, "step": block.step, "x": xf, "q": qf, "inv": inv, "particles": pp, "contacts": cp,
+                   "forces": cf}  # fmt: skip
+        self._pending.append(pending)
         self._pending_bytes += xf.nbytes + qf.nbytes + (pp.nbytes if pp is not None else 0)
+        self._pending_bytes += sum(p.nbytes for p in cp) if cp is not None else 0
         self._keep_path(block.x)
         if sum(len(p["t"]) for p in self._pending) >= self._flush_frames or self._pending_bytes >= self._flush_bytes:
             self._flush()
@@ -374,6 +386,17 @@ class SinkRerun:
             pp = np.concatenate([p["particles"] for p in pending], axis=0)
             points = rr.Points3D.columns(positions=pp.reshape(-1, 3)).partition(np.full(k_count, pp.shape[1]))
             self._rec.send_columns("particles", indexes=times, columns=points)
+        if all(p["contacts"] is not None for p in pending):
+            cp = [c for p in pending for c in p["contacts"]]
+            lengths = np.array([len(c) for c in cp], dtype=np.int64)
+            positions = np.concatenate(cp) if cp else np.zeros((0, 3), np.float32)
+            forces = np.concatenate([f for p in pending for f in p["forces"]])
+            columns = [
+                *rr.Points3D.columns(positions=positions).partition(lengths),
+                # typed explicitly: an empty float64 array (no contact in any frame) would be dropped as untyped
+                *rr.AnyValues.columns(normal_force=pa.array(forces, type=pa.float64())).partition(lengths),
+            ]
+            self._rec.send_columns("contacts", indexes=times, columns=columns)
         self.frames_written += k_count
 
     def _send_body_transforms(self, pending: list[dict[str, Any]], times: list[Any]) -> None:
@@ -514,7 +537,7 @@ def read_rrd_file(path: str | Path, *, bodies: bool = True) -> RrdContents:
     clouds: tuple[np.ndarray, ...] | None = None
     stream = RrdReader(path).stream()
     if not bodies:
-        stream = stream.drop(content=["/bodies/**", "/trajectories", "/particles"])
+        stream = stream.drop(content=["/bodies/**", "/trajectories", "/particles", "/contacts"])
     for chunk in stream:
         entity = chunk.entity_path
         batch = chunk.to_record_batch()

@@ -46,4 +46,31 @@ def make_block(
                 block.invariants[name] = block.invariants[name] + block.invariants["contact_energy"]
     if "particles" in settings.streams:
         block.particle_position, _ = particle_world(model, x, q, P, L)
+    if "contacts" in settings.streams and compiled.contact is not None:
+        block.contact_point, block.contact_force = frame_contacts(compiled, x, q, P, L)
     return block
+
+
+def frame_contacts(
+    compiled: CompiledScene, x: np.ndarray, q: np.ndarray, P: np.ndarray, L: np.ndarray
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """The contact points [m] and normal force magnitudes [N] of each of K raw states (K, N, ...),
+    internal principal frame (physics/contact/points.py): only recorded frames pay for them."""
+    from rbcli.physics.contact.points import contact_points
+    from rbcli.physics.contact.tables import make_contact_work
+
+    table = compiled.forces.contact
+    work = make_contact_work(table, compiled.model.body_count, history=False)
+    model = compiled.model.kernel()
+    capacity = max(16, table.sphere_radius.shape[0])
+    point, force = np.empty((capacity, 3)), np.empty(capacity)
+    points, forces = [], []
+    for k in range(q.shape[0]):
+        count = contact_points(model, table, work, x[k], q[k], P[k], L[k], point, force)
+        if count > capacity:  # more contacts than spheres (a dense pack): once more with room for all
+            capacity = 2 * count
+            point, force = np.empty((capacity, 3)), np.empty(capacity)
+            count = contact_points(model, table, work, x[k], q[k], P[k], L[k], point, force)
+        points.append(point[:count].copy())
+        forces.append(force[:count].copy())
+    return points, forces

@@ -141,10 +141,12 @@ def run_simulation(
     A resumed run (runner/resume.py) passes the frames its log already holds as `prefix` (written first),
     the whole run's step count as `header_steps` (the header's duration), and record_first False when
     the state it starts from is not on the recording grid (the uninterrupted run has no frame there)."""
-    from rbcli.physics.adaptive import STATUS_STEP_TOO_SMALL
     from rbcli.physics.step import STATUS_DIVERGED, STATUS_NO_ROOM
 
     compiled, settings, state = sim.compiled, sim.settings, sim.data.state
+    too_small = -1  # STATUS_STEP_TOO_SMALL, which only the adaptive chunk returns: imported only for it
+    if sim.adaptive:
+        from rbcli.physics.adaptive import STATUS_STEP_TOO_SMALL as too_small
     capacity = frame_capacity(sim.model.body_count)
     every = record_every
     start, total = state.step, state.step + steps
@@ -225,7 +227,7 @@ def run_simulation(
                         f"t = {at * settings.dt:.6g} s; likely cause: {likely_cause(sim.compiled, body)}"
                     )
                     break
-                if code == STATUS_STEP_TOO_SMALL:
+                if code == too_small:
                     status = "diverged"
                     message = (
                         f"tolerance {settings.tolerance:g} not reachable at step {state.step} "

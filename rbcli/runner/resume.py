@@ -89,18 +89,24 @@ def plan_resume(log: str | Path, *, compression: str | None = None) -> ResumePla
 
 
 def _copied_frames(plan: ResumePlan) -> Iterator[FrameBlock]:
-    """The log's frames before the checkpoint, as recorded (the particles stream, which the log does not
-    hold in a form read back here, recomputed from each frame's pose)."""
+    """The log's frames before the checkpoint, as recorded (the particles and contacts streams, which the
+    log does not hold in a form read back here, recomputed from each frame's state)."""
+    from rbcli.physics.frames import internal_orientation
     from rbcli.physics.rotation import quat_to_matrix
     from rbcli.record.mcap_sink import iter_mcap_frames_before
+    from rbcli.runner.blocks import frame_contacts
 
     model = plan.compiled.model
     particles = "particles" in plan.compiled.settings.streams
+    contacts = "contacts" in plan.compiled.settings.streams and plan.compiled.contact is not None
     body_of = np.repeat(np.arange(model.body_count), model.body_particle_count)
     for block in iter_mcap_frames_before(plan.log, plan.checkpoint.step):
         if particles:  # x + R(q_user) r_user: the recorded pose moves the user-frame cloud
             R = quat_to_matrix(block.q)[:, body_of]
             block.particle_position = block.x[:, body_of] + np.einsum("kpij,pj->kpi", R, model.particle_offset_user)
+        if contacts:
+            q = internal_orientation(model, block.q)
+            block.contact_point, block.contact_force = frame_contacts(plan.compiled, block.x, q, block.P, block.L)
         yield block
 
 

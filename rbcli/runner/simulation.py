@@ -141,7 +141,6 @@ class Simulation:
         """Advance n grid steps in compiled code, recording nothing; raises SimulationDiverged when the
         state at the end of the call is non-finite or exceeds 1e100 (checked once per call, not per step:
         `run` checks every recorded frame)."""
-        from rbcli.physics.adaptive import STATUS_STEP_TOO_SMALL
         from rbcli.physics.step import STATUS_OK
 
         if n < 0:
@@ -149,6 +148,8 @@ class Simulation:
         done, _, status = self.advance(n)
         self.data.state.step += int(done)
         if status != STATUS_OK:  # nothing is recorded, so a full buffer cannot be the reason
+            from rbcli.physics.adaptive import STATUS_STEP_TOO_SMALL
+
             why = (
                 "the adaptive step fell below 1e-12 t"
                 if status == STATUS_STEP_TOO_SMALL

@@ -228,15 +228,11 @@ def run_settings(
     if not whole:
         raise refuse("record_every", every, "must be a whole number of steps, at least 1 (and below 2^63)")
     name = integrator if integrator is not None else sim.integrator
-    from rbcli.physics.integrators import integrator_names
+    from rbcli.physics.integrators import check_integrator
 
-    known = integrator_names()
-    if name not in known:
-        from rbcli.scene.issues import did_you_mean
-
-        hint = did_you_mean(str(name), known)
-        guess = f" (did you mean {hint!r}?)" if hint else ""
-        raise refuse("integrator", name, f"unknown integrator{guess}; one of {', '.join(known)}")
+    refusal = check_integrator(name)
+    if refusal is not None:
+        raise refuse("integrator", name, f"{refusal.reason}; {refusal.expected}")
     if tolerance is not None or sim.tolerance is not None:
         number("tolerance", tolerance if tolerance is not None else sim.tolerance)
     settings = RunSettings(
@@ -258,13 +254,9 @@ def run_settings(
         if settings.tolerance is not None:
             substeps = 1  # adaptive steps are capped at the contacts' stable step instead (physics/adaptive.py)
         settings = replace(settings, substeps=int(substeps))
-    if settings.tolerance is not None:
-        from rbcli.physics.integrators import get_integrator
-
-        if not get_integrator(settings.integrator).adaptive:
-            raise ValueError(
-                f"a tolerance needs an adaptive integrator; {settings.integrator!r} is fixed-step (use dopri5)"
-            )
+    refusal = check_integrator(settings.integrator, tolerance=settings.tolerance is not None)
+    if refusal is not None:
+        raise ValueError(refusal.reason)
     return settings
 
 

@@ -20,8 +20,10 @@ import numpy as np
 from rbcli.physics.contact.parameters import (
     DEFAULT_FRICTION,
     DEFAULT_RESTITUTION,
+    PENETRATION_AT_REST,
     damping_ratio_for_restitution,
     default_body_stiffness,
+    plane_stiffness,
     stable_step,
     support_count,
 )
@@ -84,9 +86,9 @@ def lattice_surface(points: np.ndarray, spacing: float) -> np.ndarray:
     return np.flatnonzero(surface)
 
 
-def _spheres(body: BodySpec, model: Model, b: int, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(offsets in the principal frame (k, 3), radii (k,)) of body b's contact spheres."""
-    E = quat_to_matrix(model.body_frame_q[b])  # user-from-principal
+def _spheres(body: BodySpec, model: Model, b: int, centre: np.ndarray, E: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(offsets in the principal frame (k, 3), radii (k,)) of body b's contact spheres; E is its
+    user-from-principal rotation."""
     if body.contact_geometry == "sphere":
         return ((np.zeros(3) - centre) @ E)[None, :], np.array([body.contact_size])
     start, count = int(model.body_particle_start[b]), int(model.body_particle_count[b])
@@ -111,8 +113,12 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
     zeta = np.zeros(n)
     friction = np.zeros(n)
     support = np.ones(n)
+    plane_k = np.zeros(n)
     min_radius = np.full(n, np.inf)
     ratio_cache: dict[float, float] = {}
+    frames = quat_to_matrix(model.body_frame_q)  # user-from-principal, all bodies in one call
+    # (support, rest) per distinct sphere set: a pile of identical bodies counts its layers once
+    support_cache: dict[bytes, tuple[int, int]] = {}
 
     def damping_ratio(e: float) -> float:  # a bisection per distinct restitution, not per body
         if e not in ratio_cache:
@@ -127,12 +133,18 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
         friction[b] = material.friction
         if not body.collide:
             continue
-        off, rad = _spheres(body, model, b, centres_user[b])
+        off, rad = _spheres(body, model, b, centres_user[b], frames[b])
         sphere_body.append(np.full(len(rad), b))
         offsets.append(off)
         radii.append(rad)
         min_radius[b] = float(rad.min())
-        support[b] = support_count(off, rad, E=quat_to_matrix(model.body_frame_q[b]))
+        key = off.tobytes() + b"|" + rad.tobytes() + b"|" + frames[b].tobytes()
+        if key not in support_cache:
+            support_cache[key] = (
+                support_count(off, rad, E=frames[b]),
+                support_count(off, rad, E=frames[b], tolerance=PENETRATION_AT_REST * min_radius[b]),
+            )
+        support[b], rest = support_cache[key]
         if material.stiffness is not None:
             stiffness[b] = material.stiffness
         else:
@@ -148,8 +160,13 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
                 )
                 expected = "masses, sizes and gravity in SI units, or a material stiffness"
                 raise SceneError([SceneIssue(body.location, message, expected)])
+        plane_k[b] = stiffness[b]
+        if material.stiffness is None:  # carried at rest by fewer spheres than `support` (parameters.py)
+            plane_k[b] = plane_stiffness(stiffness[b], int(support[b]), rest)
     colliding = np.isfinite(min_radius)
-    stiffness[~colliding] = 1.0  # never used: such a body has no spheres; keeps the pair formula finite
+    stiffness[~colliding] = plane_k[~colliding] = (
+        1.0  # never used: such a body has no spheres; keeps the pair formula finite
+    )
     # static and kinematic bodies: infinite mass for contact, their wrench held at zero (they keep P and L)
     static = np.array([b.static or b.kinematic for b in spec.bodies], dtype=bool)
     inv_mass = np.where(static, 0.0, support / model.body_mass)
@@ -159,13 +176,14 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
     movable = colliding & ~static
     with np.errstate(all="ignore"):  # a huge stiffness over a tiny mass: dt_crit 0 (a warning of its own)
         dt_crit, worst = stable_step(model.body_mass, stiffness * support, np.where(colliding, zeta, 0.0), movable,
-                                     planes=bool(planes))  # fmt: skip
+                                     planes=bool(planes), plane_stiffness=plane_k * support)  # fmt: skip
     table = contact_table(
         sphere_body=np.concatenate(sphere_body) if sphere_body else [],
         sphere_offset=np.concatenate(offsets) if offsets else np.zeros((0, 3)),
         sphere_radius=np.concatenate(radii) if radii else [],
         body_inv_contact_mass=inv_mass,
         body_stiffness=stiffness,
+        body_plane_stiffness=plane_k,
         body_damping_ratio=zeta,
         body_friction=friction,
         static_body=np.flatnonzero(static),

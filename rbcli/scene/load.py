@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from rbcli.scene.bodies import MAX_GENERATED_BODIES, SAMPLING_KEYS, BodyResolver
-from rbcli.scene.issues import IssueCollector, did_you_mean, quoted_list
+from rbcli.scene.issues import IssueCollector
 from rbcli.scene.schema_errors import SchemaErrorFormatter
 from rbcli.scene.schema_path import scene_schema
 from rbcli.scene.spec import (
@@ -55,19 +55,6 @@ CONTACT_DEFAULT_INTEGRATOR = "split2"
 
 # a run longer than this many steps is more likely a unit slip (dt in ms?) than intended
 MANY_STEPS = 1_000_000_000
-
-
-def known_integrator_names() -> tuple[str, ...]:
-    """Names a scene's `simulation.integrator` may take (the integrator registry; metadata only, no numba)."""
-    from rbcli.physics.integrators import integrator_names
-
-    return integrator_names()
-
-
-def _adaptive_integrator_names() -> tuple[str, ...]:
-    from rbcli.physics.integrators import INTEGRATORS
-
-    return tuple(name for name, info in INTEGRATORS.items() if info.adaptive)
 
 
 @cache
@@ -344,19 +331,12 @@ def _simulation(sim: dict[str, Any], issues: IssueCollector) -> SimulationSpec |
     before = issues.error_count
     dt = float(sim["dt"])
     integrator = str(sim.get("integrator", "euler-matrix"))
-    names = known_integrator_names()
-    if integrator not in names:
-        hint = did_you_mean(integrator, names)
-        guess = f" — did you mean '{hint}'?" if hint else ""
-        issues.error((*path, "integrator"), f"unknown integrator '{integrator}'{guess}", f"one of {quoted_list(names)}")
-    if "tolerance" in sim and integrator in names and integrator not in _adaptive_integrator_names():
-        adaptive = quoted_list(_adaptive_integrator_names())
-        issues.error(
-            (*path, "tolerance"),
-            f"tolerance needs an adaptive integrator, and '{integrator}' is not one",
-            f"integrator: one of {adaptive} with a tolerance, or no tolerance (fixed dt)",
-            key=True,
-        )
+    from rbcli.physics.integrators import check_integrator
+
+    refusal = check_integrator(integrator, tolerance="tolerance" in sim)
+    if refusal is not None:
+        shown = refusal.naming(integrator) if refusal.key == "integrator" else refusal.reason
+        issues.error((*path, refusal.key), shown, refusal.expected, key=refusal.key == "tolerance")
     if "steps" in sim:
         duration = int(sim["steps"]) * dt
     else:

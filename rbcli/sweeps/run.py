@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from rbcli.scene.spec import SceneError
-from rbcli.sweeps.batches import batch_size, chunks
+from rbcli.sweeps.batches import Batcher
 from rbcli.sweeps.execute import SweepJob, run_batch, warm_up
 from rbcli.sweeps.spec import SweepSpec
 
@@ -50,7 +50,7 @@ class SweepRun:
     resumed: int  # finished before this run (skipped)
     ran: int
     failed: int  # rows of this run whose status is not "completed"
-    wall_s: float  # from the first variant started to the last row (cluster start-up, kernel warm-up excluded)
+    wall_s: float  # from the first variant started to the last row (cluster start-up, warm-up, shut-down excluded)
     cluster: ClusterInfo | None = None
     complete: bool = True
 
@@ -172,7 +172,7 @@ def run_sweep(
         if folder is not None:
             _merge(spec, folder)
         raise
-    wall = time.perf_counter() - started
+    wall = time.perf_counter() - started - (cluster.shutdown_s if cluster is not None else 0.0)
     results = (
         _merge(spec, folder) if folder is not None else tables.merge(spec, tables.rows_table(collected), complete=True)
     )
@@ -190,17 +190,13 @@ def run_sweep(
 
 
 def _run_serial(job: SweepJob, pending: list[tuple[int, tuple[Any, ...]]], keep: Callable, batch: int | None) -> None:
-    """Every pending variant in this process, in order; one part per batch (sized as Dask's would be)."""
-    if not pending:
-        return
-    rest = pending
-    if batch is None:
-        first = run_batch(job, rest[:1])
-        keep(first)
-        rest = rest[1:]
-        batch = batch_size(float(first[0].get("wall_s") or 0.0), len(rest), 1)
-    for group in chunks(rest, batch):
-        keep(run_batch(job, group))
+    """Every pending variant in this process, in order, through the same `run_batch` a Dask worker runs;
+    one part per batch, sized as on one Dask slot (batches.Batcher)."""
+    batcher = Batcher(pending, 1, fixed=batch)
+    while group := batcher.next_group():
+        rows = run_batch(job, group)
+        batcher.measured(rows)
+        keep(rows)
 
 
 def _job(spec: SweepSpec, log_dir: Path | None) -> SweepJob:

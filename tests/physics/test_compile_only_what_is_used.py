@@ -83,14 +83,23 @@ def run(forces):
     body = make_body("h", velocity=np.array([0.5, 0.0, 4.0]), angular_momentum=np.array([0.01, 0.02, 0.03]))
     scene = make_scene([body], integrator=sys.argv[1], gravity=np.array([0.0, 0.0, -9.81]))
     start = len(compiled)
-    Simulation(replace(scene, forces=tuple(forces))).step(3)
+    sim = Simulation(replace(scene, forces=tuple(forces)))
+    sim.step(3)
+    states.append([a.tobytes().hex() for a in (sim.data.state.x, sim.data.state.q, sim.data.state.P, sim.data.state.L)])
     return compiled[start:]
 
+states = []
 out = {"gravity": run([])}
 if "--forces" in sys.argv:
     spring = ForceSpring(end_a=BodyPoint(body="h", point=np.array([0.1, 0.0, 0.0])), anchor=np.zeros(3), stiffness=1.0)
     kick = ForceImpulse(at=BodyPoint(body="h"), time=0.001, vector=np.array([0.0, 1.0, 0.0]))
     out["spring_impulse"] = run([spring, kick])
+out["states"] = states
+# physics/kernel_cache.py: loading rbcli's kernels does not build numba's compiler tables (which import
+# numba.np.arraymath); compiling does
+out["arraymath"] = "numba.np.arraymath" in sys.modules
+from rbcli.physics import kernel_cache
+out["fast_loads"] = kernel_cache.active()
 print(json.dumps(out))
 """
 
@@ -121,9 +130,19 @@ def test_first_run_compiles_only_the_stages_the_scene_has_and_the_second_loads_t
     assert {CHUNK, _name(spring.accumulate_spring), _name(impulse.apply_impulses)} <= forces, sorted(forces)
     assert not forces & (UNUSED_BY_GRAVITY - {_name(spring.accumulate_spring), _name(impulse.apply_impulses)})
 
-    # numba's cache serves the loops that call the dispatchers: a second process compiles nothing
+    # numba's cache serves the loops that call the dispatchers: a second process compiles nothing...
     second = _compiled_in_fresh_process(cache, "--forces")
-    assert second == {"gravity": [], "spring_impulse": []}, second
+    assert (second["gravity"], second["spring_impulse"]) == ([], []), second
+    # ...loads them without numba's compiler tables (physics/kernel_cache.py), which compiling built...
+    # (on the numba versions it was verified on: kernel_cache.VERIFIED_NUMBA)
+    assert first["arraymath"] and second["arraymath"] != second["fast_loads"]
+    import numba
+
+    from rbcli.physics.kernel_cache import VERIFIED_NUMBA
+
+    assert second["fast_loads"] == (tuple(int(p) for p in numba.__version__.split(".")[:2]) in VERIFIED_NUMBA)
+    # ...and the loaded kernels give the compiled ones' bits
+    assert second["states"] == first["states"]
 
 
 def test_kernel_tables_are_none_for_unused_types_and_stable_per_scene():

@@ -15,7 +15,12 @@ import pytest
 import rbcli
 from rbcli.physics.contact.broad_phase import build_grid
 from rbcli.physics.contact.force import accumulate_contact, hold_static_bodies
-from rbcli.physics.contact.parameters import damping_ratio_for_restitution, restitution_for_damping_ratio
+from rbcli.physics.contact.parameters import (
+    PENETRATION_AT_REST,
+    damping_ratio_for_restitution,
+    restitution_for_damping_ratio,
+    stable_step,
+)
 from rbcli.physics.contact.reference import contact_wrench_numpy
 from rbcli.physics.contact.tables import (
     COUNT_CANDIDATES,
@@ -242,6 +247,33 @@ def test_resting_sphere_neither_creeps_nor_gains_energy():
         E = E_now
     assert np.linalg.norm(sim.state.x[0] - x0) < 1e-4
     assert sim.step_index == 5000  # 10 s
+
+
+def test_a_cloud_ball_resting_on_an_edge_sinks_the_rest_fraction_of_its_sphere_radius():
+    """The default stiffness's promise (parameters.py): a body resting on the spheres that carry it sinks
+    PENETRATION_AT_REST of their radius. A 13-sphere ball (a 3 cm centre sphere and 12 of 2 cm on an
+    icosahedron, the pile benchmark's) lying on an edge rests on 2 spheres, though 4 lie within half a
+    radius of the ground (`support`): its plane contacts are twice as stiff as its pair contacts, and
+    its stable step is the same as with plane stiffness = pair stiffness."""
+    phi = (1 + 5**0.5) / 2
+    v = np.array([(0, s1, s2 * phi) for s1 in (-1, 1) for s2 in (-1, 1)], dtype=float)
+    v = np.concatenate([v, v[:, [1, 2, 0]], v[:, [2, 0, 1]]])
+    points = np.concatenate([np.zeros((1, 3)), 0.03 * v / np.linalg.norm(v[0])])
+    radii = [0.03] + [0.02] * 12
+    z = float(0.02 - points[:, 2].min())  # the lowest two spheres (an edge along y) touch the ground
+    cloud = f"{{positions: {points.tolist()}, masses: {[0.04] * 13}, radius: {radii}}}"
+    sim = scene([f"  - {{name: ball, particles: {cloud}, position: [0, 0, {z!r}]}}"], dt=1e-3, steps=1000,
+                contact="  ground: 0\n")  # fmt: skip
+    table = sim.forces.contact
+    assert table.body_plane_stiffness[0] == pytest.approx(2 * table.body_stiffness[0], rel=1e-12)
+    sim.step(1000)
+    assert sim.data.force.contact.stats[STAT_CONTACTS] == 2
+    overlap = sim.data.force.contact.stats[STAT_MAX_PENETRATION]
+    assert overlap == pytest.approx(PENETRATION_AT_REST * 0.02, rel=1e-3)
+    k_body, m = 4 * table.body_stiffness, sim.model.body_mass
+    zeta = table.body_damping_ratio
+    same = stable_step(m, k_body, zeta, np.ones(1, bool), True, plane_stiffness=4 * table.body_plane_stiffness)
+    assert same == stable_step(m, k_body, zeta, np.ones(1, bool), True)
 
 
 def _slope_scene(angle_deg: float, mu: float, body: str) -> rbcli.Simulation:

@@ -123,7 +123,9 @@ def test_only_recorded_states_are_evaluated():
     per recorded frame (the chunk's last step is one of them), none in between, plus the run's first
     step (written before the loop's materialise stage has said that it follows); without recording,
     one at the chunk's end. With a drag on another body the forces are not constant: then every step is
-    evaluated (twice: the orientation at the force evaluation and at the step's end)."""
+    evaluated (twice: the orientation at the force evaluation and at the step's end), and the dragged
+    body, torque-free, is still turned by the closed form from its anchor (its momentum goes through the
+    dissipation flow, its orientation does not)."""
     sim = simulation([case_body(FLIP, False)], 1e-3, gravity=G)
     frames = empty_buffers(200, 1)
     done, filled, status = sim.advance(10_000, 100, frames, 0)
@@ -139,9 +141,13 @@ def test_only_recorded_states_are_evaluated():
     dragged = simulation(
         [case_body(FLIP, False), other], 1e-3, gravity=G, forces=[ForceDrag(bodies=("other",), linear=0.1)]
     )
+    other_anchor = anchor_of(dragged, body=1)
     dragged.step(1000)
     assert dragged.data.scratch[0, EVALUATIONS] == 2000
     assert angle_to_reference(dragged, (anchor[0], anchor[1], anchor[2]), 1000) <= 1e-12  # body 0: no drag
+    assert dragged.data.scratch[1, EVALUATIONS] == 2000
+    assert angle_to_reference(dragged, other_anchor, 1000, body=1) <= 1e-12
+    assert np.array_equal(dragged.data.state.L[1], other_anchor[2])
 
 
 def test_recorded_frames_match_the_reference_through_a_run():

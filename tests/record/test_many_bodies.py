@@ -34,7 +34,7 @@ from rbcli.record.rerun_sink import BODY_ENTITIES_MAX, SinkRerun, bodies_in_one_
 # Rerun stores centres and quaternions as float32: |error| <= 2^-24 |value|, and 1e-7 relative leaves
 # room for the xyzw -> wxyz reorder only (as in test_rerun_sink.py). Positions here reach 128 m.
 FLOAT32_RTOL = 1e-7
-BODIES = 65_536  # the first body count whose clouds do not fit one channel each
+BODIES = 65_536  # more bodies than fit one channel each (2^16)
 HANDLE = np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.2, 0.0], [0.0, 0.0, 0.3]])
 
 
@@ -61,7 +61,8 @@ def big_run(tmp_path_factory):
 
 
 def test_the_scene_is_past_both_limits():
-    assert particle_channels_shared(BODIES) and not particle_channels_shared(BODIES - 6)
+    assert particle_channels_shared(BODIES) and BODIES > BODY_CHANNELS_MAX
+    assert particle_channels_shared(BODY_CHANNELS_MAX + 1) and not particle_channels_shared(BODY_CHANNELS_MAX)
     assert bodies_in_one_entity(BODIES)
 
 
@@ -156,6 +157,9 @@ def _write(sink, header: RunHeader, frames: int = 2) -> FrameBlock:
     block.invariants = {name: rng.normal(size=frames) for name in header.invariant_names}
     if "particles" in header.streams:
         block.particle_position = rng.normal(size=(frames, 3, 3))
+    if "contacts" in header.streams:
+        block.contact_point = [rng.normal(size=(2, 3)) for _ in range(frames)]
+        block.contact_force = [rng.uniform(size=2) for _ in range(frames)]
     sink.open(header)
     sink.write(block)
     if hasattr(sink, "write_checkpoint"):  # as a run's last block has: the checkpoint channel too
@@ -165,9 +169,9 @@ def _write(sink, header: RunHeader, frames: int = 2) -> FrameBlock:
 
 
 def test_mcap_keeps_one_topic_per_body_up_to_the_channel_limit(tmp_path):
-    """BODY_CHANNELS_MAX bodies with every fixed channel (particles stream and invariants on) fill the
-    channel ids exactly, so the per-body layout is kept right up to the limit and read back."""
-    header = _header(BODY_CHANNELS_MAX, streams=("bodies", "invariants", "particles"))
+    """BODY_CHANNELS_MAX bodies with every fixed channel (particles and contacts streams and invariants
+    on) fill the channel ids exactly, so the per-body layout is kept right up to the limit and read back."""
+    header = _header(BODY_CHANNELS_MAX, streams=("bodies", "invariants", "particles", "contacts"))
     block = _write(SinkMcap(tmp_path / "edge.mcap"), header)
     run = read_mcap(tmp_path / "edge.mcap")
     assert len(run.message_counts) == MAX_ID  # every id used, none past it

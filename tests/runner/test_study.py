@@ -69,11 +69,16 @@ def test_fitted_slope_recovers_the_nominal_order(torque_free_study, name):
 
 def test_adaptive_method_fits_its_fixed_step_order_and_follows_its_tolerance():
     """dopri5 at fixed steps is order 5 (steps 0.1 2^-k: errors 1e-9 .. 1e-12 rad, above round-off);
-    with a tolerance (its own rows, no fitted order) a tighter tolerance takes more steps and errs less."""
+    with a tolerance (its own rows, no fitted order) a tighter tolerance takes more steps and errs less.
+    The fitted range is still pre-asymptotic: the slopes per halving are 5.30, 5.15, 5.03 (5.18, 5.08,
+    4.96 when dopri5 rebuilt m = R^T L at each step, which also rescaled |m| to |L|), so the fit over
+    0.1 .. 0.025 is 5.23 and the finest pair's slope is held to 5 more tightly."""
     result = study(tumbling_scene(), integrators=["dopri5"], dts=[0.1 * 2.0**-k for k in range(4)],
                    tolerances=[1e-4, 1e-8], min_time=0.0, mujoco=False)  # fmt: skip
     fit = result.fits["dopri5"].rotation
-    assert fit.order is not None and abs(fit.order - 5) < 0.2, fit
+    assert fit.order is not None and abs(fit.order - 5) < 0.3, fit
+    fixed = {r.dt: r.rotation_error_max for r in result.runs if r.tolerance is None}
+    assert abs(np.log2(fixed[0.05] / fixed[0.025]) - 5) < 0.2, fixed
     loose, tight = [r for r in result.runs if r.tolerance is not None]
     assert (loose.tolerance, tight.tolerance) == (1e-4, 1e-8)
     assert tight.steps > loose.steps and tight.rotation_error_max < loose.rotation_error_max

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import re
 import textwrap
 from pathlib import Path
 
 import pytest
 
+from rbcli.physics.integrators import get_integrator
 from rbcli.scene.load import analyse_scene_text, check_scene, load_scene, load_scene_text
 from rbcli.scene.spec import SceneError, SceneIssue
 
@@ -130,7 +132,28 @@ def test_enum_with_did_you_mean():
 def test_unknown_integrator_with_did_you_mean():
     issues = issues_of("simulation: {dt: 0.1, duration: 1, integrator: rk5}\nbodies:\n" + HANDLE)
     issue = the_issue(issues, "unknown integrator 'rk5'")
-    assert at(issue) == (1, 48) and "did you mean 'rk4'" in issue.message and "'split2'" in issue.expected
+    assert at(issue) == (1, 48) and "did you mean 'rk4'" in issue.message and "split2" in issue.expected
+
+
+@pytest.mark.parametrize("name, tolerance", [("rk5", False), ("Split2", False), ("rk4", True)])
+def test_integrator_refusals_come_from_one_check(name, tolerance):
+    """The scene loader, compile's overrides and the registry lookup say the registry's one refusal."""
+    from rbcli.api import check_integrator, prepare
+
+    refusal = check_integrator(name, tolerance=tolerance)
+    assert refusal is not None and refusal.key == ("tolerance" if tolerance else "integrator")
+    extra = ", tolerance: 1.0e-6" if tolerance else ""
+    issue = the_issue(issues_of(f"simulation: {{dt: 0.1, duration: 1, integrator: {name}{extra}}}\nbodies:\n" + HANDLE),
+                      refusal.reason.split(" (")[0].split(";")[0])  # fmt: skip
+    assert issue.expected == refusal.expected
+    scene = load_scene_text("simulation: {dt: 0.1, duration: 1}\nbodies:\n" + HANDLE)
+    with pytest.raises(ValueError, match=re.escape(refusal.reason)):
+        prepare(scene, integrator=name, tolerance=1e-6 if tolerance else None)
+    if not tolerance:
+        with pytest.raises(KeyError, match=re.escape(refusal.naming(name))):
+            get_integrator(name)
+    else:
+        assert check_integrator("dopri5", tolerance=True) is None
 
 
 def test_tolerance_needs_an_adaptive_integrator():

@@ -28,27 +28,31 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
     again), STATUS_DIVERGED (the last step left a non-finite or blown-up state, not recorded),
     STATUS_NO_ROOM (called with full buffers: nothing was written).
     """
-    x, q, P, L = data.x, data.q, data.P, data.L
+    # taken out of their tuples once: inside the loop each would be increfed and decrefed every step
+    x, q, P, L, F, tau, scratch = data.x, data.q, data.P, data.L, data.F, data.tau, data.scratch
+    force_data, contact = data.force, forces.contact
+    contact_work = force_data.contact
+    substeps = data.substeps
+    h = dt / substeps
     for k in range(n_steps):
         index = step0 + k
         t = index * dt
         # impulses: exact jumps of P and L at the start of the step that holds them
-        impulse_stage(model, forces, data.force, t, t + dt, x, q, P, L)
-        h = dt / data.substeps
-        for sub in range(data.substeps):
+        impulse_stage(model, forces, force_data, t, t + dt, x, q, P, L)
+        for sub in range(substeps):
             ts = t + sub * h
             # contact_begin: the contact springs measure time from the start of this (sub-)step
-            contact_begin_stage(forces.contact, data.force.contact, ts, h)
+            contact_begin_stage(contact, contact_work, ts, h)
             # kinematic_begin: kinematic bodies at their exact pose, moving at their mean velocity over the (sub-)step
             kinematic_begin_stage(model, forces, ts, h, x, q, P, L)
             # update: the integrator's maths, its force evaluations through forces.wrench.accumulate_wrench
-            integrator_step(model, forces, data.force, ts, h, x, q, P, L, data.F, data.tau, data.scratch)
+            integrator_step(model, forces, force_data, ts, h, x, q, P, L, F, tau, scratch)
             # kinematic_end: kinematic bodies at their exact state at the end of the (sub-)step (closed form)
             kinematic_end_stage(model, forces, ts + h, x, q, P, L)
             # contact_commit: the (sub-)step is complete: its last evaluation's contacts become the history
-            contact_commit_stage(model, forces.contact, data.force.contact, x, q, P, L)
+            contact_commit_stage(model, contact, contact_work, x, q, P, L)
         # contact_record: on recording steps, the step's contact count, deepest overlap and energy
-        contact_record_stage(data.force.contact, frames, filled, (index + 1) % record_every == 0)
+        contact_record_stage(contact_work, frames, filled, (index + 1) % record_every == 0)
         # record: on recording steps, the divergence check and the state copied into the next frame
         filled, status = record_if_due(index + 1, record_every, x, q, P, L, frames, filled)
         if status != STATUS_OK:

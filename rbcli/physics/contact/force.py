@@ -209,7 +209,7 @@ def _plane_contacts(contact, work, x, s, h, F, tau) -> None:  # noqa: ANN001
                 continue
             back = r - 0.5 * overlap  # contact point: halfway through the overlap
             c0, c1, c2 = pos[i, 0] - back * n0, pos[i, 1] - back * n1, pos[i, 2] - back * n2
-            k = contact.body_stiffness[b]
+            k = contact.body_plane_stiffness[b]
             zeta = min(contact.body_damping_ratio[b], contact.plane_damping_ratio[p])
             mu = contact.body_friction_root[b] * contact.plane_friction_root[p]
             _resolve(contact, work, x, s, h, i, PLANE_PARTNER_BASE - p, b, -1, n0, n1, n2, overlap,

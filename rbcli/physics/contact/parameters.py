@@ -9,6 +9,19 @@ on dt: a run at a larger dt does not silently soften its contacts; it warns or s
 Without gravity g = REFERENCE_GRAVITY sets the scale. The 1,000-sphere pile of the collisions issue
 (r = 5 cm, 0.52 kg) gets k = 4.1e4 N/m, the value measured there to settle cleanly at dt = 2 ms.
 
+Plane stiffness. `support` counts the spheres of the outermost layer within half the smallest radius:
+those that can carry the body at once (a 13-sphere ball's vertex and, 1 cm above it, the next ones).
+Resting on a plane, the body is carried only by the spheres level with its lowest one within its sink
+at rest (`support_count` with tolerance PENETRATION_AT_REST r: the face of a box, the edge of an
+icosahedral cloud), `rest` of them, so k_plane = k_body / rest makes it sink PENETRATION_AT_REST r
+as the rule says. It is capped at twice the pair value, k_plane = k_body / max(rest, support / 2),
+because a plane is a partner of infinite mass: a contact against it has m_eff = M where one between two
+equal bodies has M / 2, so k_body * support / rest <= 2 k_body keeps the plane's frequency
+(k_plane support / M) within the pair's (2 k_body / M) and the stable step unchanged. A box or a
+one-sphere ball (rest = support) keeps k_plane = k; it is not a blanket factor of 2, which made a brick
+resting flat at dt = 1 ms rock in a period-2 limit cycle: dt was then 0.9 of its estimated stable step,
+so the estimate is at least 10 % optimistic for its coupled rocking-sliding mode (1.5x was still stable).
+
 Damping from restitution. The linear spring-dashpot m d'' + c d' + k d = 0 with c = 2 zeta sqrt(k m)
 would give e = exp(-pi zeta / sqrt(1 - zeta^2)) if the contact lasted half a period; but the force is
 clamped at zero (a dashpot does not pull), so the contact ends earlier, when k d + c d' = 0, and the
@@ -108,16 +121,20 @@ def default_body_stiffness(mass: np.ndarray, radius: np.ndarray, gravity: float)
     return np.asarray(mass, dtype=float) * g / (PENETRATION_AT_REST * np.asarray(radius, dtype=float))
 
 
-def support_count(offsets: np.ndarray, radii: np.ndarray, E: np.ndarray | None = None) -> int:
+def support_count(
+    offsets: np.ndarray, radii: np.ndarray, E: np.ndarray | None = None, tolerance: float | None = None
+) -> int:
     """How many contact spheres can carry the body against a plane at once: the most spheres in one
-    outermost layer (within half the smallest radius of the extreme) over the 6 directions of the
-    principal axes and, given E (user-from-principal rotation), the 6 of the user's axes (a sampled
-    shape's lattice axes). 1 for a one-sphere body; 32 for the 0.2 x 0.1 face of a box at spacing 0.025."""
+    outermost layer (within `tolerance` [m] of the extreme; default half the smallest radius) over the 6
+    directions of the principal axes and, given E (user-from-principal rotation), the 6 of the user's
+    axes (a sampled shape's lattice axes). 1 for a one-sphere body; 32 for the 0.2 x 0.1 face of a box at
+    spacing 0.025. With tolerance PENETRATION_AT_REST r: the spheres that carry it at rest (docstring)."""
     offsets = np.asarray(offsets, dtype=float)
     if len(offsets) <= 1:
         return 1
     axes = [np.eye(3)] + ([np.asarray(E)] if E is not None else [])  # rows: directions in the principal frame
-    tolerance = 0.5 * float(np.min(radii))
+    if tolerance is None:
+        tolerance = 0.5 * float(np.min(radii))
     best = 1
     for basis in axes:
         for direction in (*basis, *(-basis)):
@@ -126,18 +143,27 @@ def support_count(offsets: np.ndarray, radii: np.ndarray, E: np.ndarray | None =
     return best
 
 
+def plane_stiffness(stiffness: float, support: int, rest: int) -> float:
+    """k_plane [N/m] of a contact sphere whose pair stiffness is `stiffness`: k support / max(rest,
+    support / 2), at most 2 k (module docstring)."""
+    return stiffness * support / max(rest, 0.5 * support)
+
+
 def stable_step(
     mass: np.ndarray,
     body_stiffness: np.ndarray,
     damping_ratio: np.ndarray,
     movable: np.ndarray,
     planes: bool,
+    plane_stiffness: np.ndarray | None = None,
 ) -> tuple[float, int]:
     """(dt_crit [s], the body that sets it) over the contacts a scene can form: each body against a
-    plane (m_eff = M), against an identical body (M / 2) and against the lightest movable body, with the
-    body-level stiffness k_body (all supporting spheres in contact at once) and the largest zeta."""
+    plane (m_eff = M, stiffness plane_stiffness: k_plane support, default body_stiffness), against an
+    identical body (M / 2) and against the lightest movable body, with the body-level stiffness k_body
+    (all supporting spheres in contact at once) and the largest zeta."""
     mass = np.asarray(mass, dtype=float)
     k = np.asarray(body_stiffness, dtype=float)
+    k_plane = k if plane_stiffness is None else np.asarray(plane_stiffness, dtype=float)
     movable = np.asarray(movable, dtype=bool)
     if not movable.any():
         return math.inf, -1
@@ -145,7 +171,7 @@ def stable_step(
     inv_m = np.where(movable, 1.0 / mass, 0.0)
     omega2 = np.zeros_like(mass)
     if planes:
-        omega2 = np.maximum(omega2, k * inv_m)
+        omega2 = np.maximum(omega2, k_plane * inv_m)
     lightest = int(np.argmax(inv_m))
     k_light = k[lightest]
     pair_k = 2.0 * k * k_light / (k + k_light)

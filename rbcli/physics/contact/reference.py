@@ -63,7 +63,7 @@ def contact_wrench_numpy(model, contact: ContactTable, x, q, P, L) -> tuple[np.n
                 count += 1
                 zeta = min(contact.body_damping_ratio[a], contact.plane_damping_ratio[p])
                 mu = np.sqrt(contact.body_friction[a] * contact.plane_friction[p])
-                apply(a, -1, n, overlap, pos[i] - (r[i] - 0.5 * overlap) * n, contact.body_stiffness[a], zeta, mu)
+                apply(a, -1, n, overlap, pos[i] - (r[i] - 0.5 * overlap) * n, contact.body_plane_stiffness[a], zeta, mu)
     for i in range(len(r)):
         for j in range(i + 1, len(r)):
             a, b = body[i], body[j]

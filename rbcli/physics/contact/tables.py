@@ -55,6 +55,7 @@ class ContactTable(NamedTuple):
     # (with the whole mass per sphere, n contacts would damp like sqrt(n) zeta: overdamped, unstable)
     body_inv_contact_mass: np.ndarray
     body_stiffness: np.ndarray  # k [N/m] (body_count,) per contact sphere
+    body_plane_stiffness: np.ndarray  # k [N/m] (body_count,) per contact sphere against a plane
     body_damping_ratio: np.ndarray  # zeta [1] (body_count,)
     body_friction: np.ndarray  # mu [1] (body_count,)
     static_body: np.ndarray  # int64 (static_count,): bodies that never move (F = tau = 0, P = L = 0)
@@ -122,6 +123,7 @@ def contact_table(
     sphere_radius=(),  # noqa: ANN001
     body_inv_contact_mass=(),  # noqa: ANN001
     body_stiffness=(),  # noqa: ANN001
+    body_plane_stiffness=None,  # noqa: ANN001
     body_damping_ratio=(),  # noqa: ANN001
     body_friction=(),  # noqa: ANN001
     static_body=(),  # noqa: ANN001
@@ -143,6 +145,7 @@ def contact_table(
         sphere_radius=radius,
         body_inv_contact_mass=_ro(body_inv_contact_mass, np.float64),
         body_stiffness=_ro(body_stiffness, np.float64),
+        body_plane_stiffness=_ro(body_stiffness if body_plane_stiffness is None else body_plane_stiffness, np.float64),
         body_damping_ratio=_ro(body_damping_ratio, np.float64),
         body_friction=_ro(body_friction, np.float64),
         static_body=_ro(static_body, np.int64),
@@ -159,11 +162,12 @@ def contact_table(
     )
 
 
-def make_contact_work(contact: ContactTable, body_count: int) -> ContactWork:
-    """Zeroed work arrays for `contact` (0-sized without contact spheres: nothing is allocated)."""
+def make_contact_work(contact: ContactTable, body_count: int, *, history: bool = True) -> ContactWork:
+    """Zeroed work arrays for `contact` (0-sized without contact spheres: nothing is allocated).
+    history=False: no history or trial slots (a scratch for the search alone: contact/points.py)."""
     s = contact.sphere_radius.shape[0]
     b = body_count if s else 0
-    k = HISTORY_SLOTS if s else 0
+    k = HISTORY_SLOTS if s and history else 0
     return ContactWork(
         clock=np.zeros(3),
         body_velocity=np.zeros((b, 3)),

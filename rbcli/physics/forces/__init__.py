@@ -201,7 +201,13 @@ def _check_contact(body_count: int, contact: ContactTable) -> None:
     static bodies name bodies in range (the kernels index with them unchecked)."""
     if not contact.sphere_body.size:
         return
-    for name in ("body_inv_contact_mass", "body_stiffness", "body_damping_ratio", "body_friction"):
+    for name in (
+        "body_inv_contact_mass",
+        "body_stiffness",
+        "body_plane_stiffness",
+        "body_damping_ratio",
+        "body_friction",
+    ):
         if getattr(contact, name).shape != (body_count,):
             raise ValueError(f"contact {name} has shape {getattr(contact, name).shape}, expected ({body_count},)")
     for name in ("sphere_body", "static_body"):

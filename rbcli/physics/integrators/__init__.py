@@ -166,15 +166,60 @@ INTEGRATORS: dict[str, IntegratorInfo] = {
 DEFAULT_INTEGRATOR = "euler-matrix"
 
 
+@dataclass(frozen=True)
+class IntegratorRefusal:
+    """Why a requested integrator (and tolerance) cannot run. `check_integrator` is the one place that
+    decides; the scene loader, compile's overrides, the CLI and `get_integrator` only phrase it for
+    their reader (a located scene issue, `--integrator 'rk5': ...`, a KeyError).
+
+    key: the setting at fault, "integrator" or "tolerance".
+    reason: what is wrong, without the value: "unknown integrator (did you mean 'rk4'?)".
+    expected: what would be accepted: "one of euler-matrix, ...".
+    hint: the closest known name when the value looks like a typo, else None.
+    """
+
+    key: str
+    reason: str
+    expected: str
+    hint: str | None = None
+
+    def naming(self, value: object) -> str:
+        """The reason with the value named: "unknown integrator 'rk5' (did you mean 'rk4'?)"."""
+        what, _, rest = self.reason.partition(" (")
+        return f"{what} {value!r}" + (f" ({rest}" if rest else "")
+
+
+def closest_integrator(name: object) -> str | None:
+    """The known name a mistyped one most likely meant (difflib's ratio >= 0.6, the rule of the scene
+    keys' "did you mean")."""
+    close = difflib.get_close_matches(str(name), list(INTEGRATORS), n=1, cutoff=0.6)
+    return close[0] if close else None
+
+
+def check_integrator(name: object, *, tolerance: bool = False) -> IntegratorRefusal | None:
+    """None when `name` is a known integrator that can run as asked (with a tolerance: an adaptive
+    one), else the refusal. Checks names only: nothing is imported or compiled."""
+    if not isinstance(name, str) or name not in INTEGRATORS:
+        hint = closest_integrator(name)
+        guess = f" (did you mean {hint!r}?)" if hint else ""
+        return IntegratorRefusal("integrator", f"unknown integrator{guess}", "one of " + ", ".join(INTEGRATORS), hint)
+    if tolerance and not INTEGRATORS[name].adaptive:
+        adaptive = ", ".join(n for n, info in INTEGRATORS.items() if info.adaptive)
+        return IntegratorRefusal(
+            "tolerance",
+            f"a tolerance needs an adaptive integrator ({adaptive}); {name!r} is fixed-step",
+            f"integrator: one of {adaptive} with a tolerance, or no tolerance (fixed dt)",
+        )
+    return None
+
+
 def get_integrator(name: str) -> IntegratorInfo:
-    """Look an integrator up by name; KeyError lists the known ones, with the closest as a likely typo
-    (difflib's ratio >= 0.6, the rule of the scene keys' "did you mean")."""
-    try:
-        return INTEGRATORS[name]
-    except KeyError:
-        close = difflib.get_close_matches(str(name), list(INTEGRATORS), n=1, cutoff=0.6)
-        guess = f" (did you mean {close[0]!r}?)" if close else ""
-        raise KeyError(f"unknown integrator {name!r}{guess}; known: {', '.join(INTEGRATORS)}") from None
+    """Look an integrator up by name; the KeyError says `check_integrator`'s refusal, with the known
+    names."""
+    refusal = check_integrator(name)
+    if refusal is not None:
+        raise KeyError(f"{refusal.naming(name)}; known: {', '.join(INTEGRATORS)}")
+    return INTEGRATORS[name]
 
 
 def integrator_names() -> tuple[str, ...]:

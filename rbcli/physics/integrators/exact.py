@@ -8,6 +8,15 @@ free rigid body motion and its use in splitting methods", SIAM J. Sci. Comput. 3
   D(h/2) K(h) D(h/2),  D(s): x += s P/M and q <- exact free flow over s (L fixed in the world),
                        K(s): P += s F, L += s tau, one wrench evaluation at t + h/2.
 
+With dampers or drag the kick is K_c(h/2) Dis(h) K_c(h/2), as in split2: F_c without the
+velocity-dependent terms, Dis their own exact (symmetric) flow at the midpoint's x and q
+(forces/damping.py). A kick with them inside is not symmetric, and the step fell to first order on
+every damped scene (spring chain from t = 0.1 s: exact 1.15, exact4 1.00; now 2.00 and 4.00,
+tests/physics/test_damped_orders.py). A body whose momentum the flow changes (a damper's end,
+translational drag) has no constant-force flight, so its centre takes the leapfrog's second half from
+the midpoint instead of the translation anchor below; its rotation keeps its anchor when it has no
+torque (a damper at the centre of mass, linear drag alone: the flow leaves its L alone).
+
 Exact at any horizon: from its ANCHOR. A body without torque keeps L, so its orientation at time t is
 one call of the free flow from the orientation q_a it had at the anchor time t_a, q(t) = flow(q_a, L,
 t - t_a), not a chain of per-step calls each restarting from its own rounded result (that chain grew
@@ -17,7 +26,8 @@ has not changed (bitwise) since its translation anchor is in free flight there: 
 force, without its per-step rounding. The anchors (scratch columns below, in the run's Data) are
 taken at the start of a run, after `Simulation.set_state` / `reset` (which clear the scratch), and
 whenever the state differs from what this integrator last wrote (an impulse, any outside write); a
-translation anchor also when F changes (a spring: then each step is the leapfrog step). Bodies with
+translation anchor also when F changes (a spring: then each step is the leapfrog step), and none for a
+damped body. Bodies with
 a torque chain the flow through the kicks as before (second order through the forces).
 
 Evaluated only when needed: when the scene's only force is uniform gravity (no other force type, no
@@ -39,6 +49,7 @@ from numba.core import types
 from numba.extending import overload
 
 from rbcli.physics.elliptic import JACOBI_WORK_SIZE
+from rbcli.physics.forces.damping import dissipation_flow, dissipation_flow_numpy, dissipation_present
 from rbcli.physics.forces.wrench import accumulate_wrench, wrench_numpy
 from rbcli.physics.free_rotation_anchored import ANCHOR_CONSTANTS, anchor_evaluate, anchor_prepare
 from rbcli.physics.free_rotation_exact import _free_rotation_exact_work, free_rotation_exact_batch
@@ -62,7 +73,8 @@ LAST_P = 34  # (3)
 LAST_L = 37  # (3)
 EVALUATIONS = 40  # closed-form evaluations of this body's motion since the scratch was cleared
 DEFERRED = 41  # row 0: 1.0 once a chunk loop's materialise stage has run (the step may then defer)
-ROT_CONSTANTS = 42  # (ANCHOR_CONSTANTS) the flow's constants at the rotation anchor (free_rotation_anchored)
+DAMPED = 42  # 1.0 when a damper or translational drag acts on the body's momentum (set every damped step)
+ROT_CONSTANTS = 43  # (ANCHOR_CONSTANTS) the flow's constants at the rotation anchor (free_rotation_anchored)
 SCRATCH_WIDTH = ROT_CONSTANTS + ANCHOR_CONSTANTS
 # The anchored flow needs no work array (its Jacobi AGM is kept in the constants). A body with a torque
 # chains the one-shot flow, whose Jacobi functions need JACOBI_WORK_SIZE floats of work: its own row's
@@ -153,14 +165,20 @@ def _anchored_flow(model, row, b, elapsed, q_out) -> None:  # noqa: ANN001
 
 
 @numba.njit(cache=True, inline="always")
+def _rotation_from_anchor(model, row, b, elapsed, q, L) -> None:  # noqa: ANN001
+    """A torque-free body's orientation at its rotation anchor's time plus elapsed [s], and its L."""
+    if row[ROT_ANCHORED] == 1.0:
+        _anchored_flow(model, row, b, elapsed, q[b])
+        for k in range(3):
+            L[b, k] = row[ROT_L + k]
+
+
+@numba.njit(cache=True, inline="always")
 def _write_from_anchor(model, b, elapsed_rot, elapsed_tr, x, q, P, L, scratch) -> None:  # noqa: ANN001
     """Body b's state at its anchors' times plus the elapsed times [s]: the closed forms, then recorded
     as last written."""
     row = scratch[b]
-    if row[ROT_ANCHORED] == 1.0:
-        _anchored_flow(model, row, b, elapsed_rot, q[b])
-        for k in range(3):
-            L[b, k] = row[ROT_L + k]
+    _rotation_from_anchor(model, row, b, elapsed_rot, q, L)
     s = elapsed_tr
     inverse_mass = 1.0 / model.body_mass[b]
     for k in range(3):
@@ -207,20 +225,70 @@ def _step(model, forces, force_data, t, h, x, q, P, L, F, tau, scratch) -> None:
         else:
             work = row[ROT_CONSTANTS : ROT_CONSTANTS + JACOBI_WORK_SIZE]  # free: no rotation anchor
             _free_rotation_exact_work(model.body_inertia[b], q[b], L[b], 0.5 * h, row[Q_MID : Q_MID + 4], work)
-    accumulate_wrench(model, forces, force_data, t + 0.5 * h, x, scratch, P, L, F, tau)
+    # with dampers or drag the kick K(h) is K_c(h/2) D(h) K_c(h/2), as in split2 (forces/damping.py)
+    dissipative = dissipation_present(forces.spring, forces.drag)
+    accumulate_wrench(model, forces, force_data, t + 0.5 * h, x, scratch, P, L, F, tau, not dissipative)
+    kick = h
+    if dissipative:
+        kick = 0.5 * h
+        _mark_damped(forces.spring, forces.drag, scratch)
+        _half_kick(kick, P, L, F, tau, scratch)
+        dissipation_flow(model, forces.spring, forces.drag, h, x, scratch, P, L)  # at x and q of the midpoint
     for b in range(n):
         row = scratch[b]
         if row[ROT_ANCHORED] != 1.0:  # a torque: kick L, then the second half-flow from the midpoint
             for k in range(3):
-                L[b, k] += h * tau[b, k]
+                L[b, k] += kick * tau[b, k]
             work = row[ROT_CONSTANTS : ROT_CONSTANTS + JACOBI_WORK_SIZE]
             _free_rotation_exact_work(model.body_inertia[b], row[Q_MID : Q_MID + 4], L[b], 0.5 * h, q[b], work)
+        if dissipative and row[DAMPED] == 1.0:
+            # the dissipation changed P: no constant-force flight to anchor, the leapfrog's second half
+            drift = 0.5 * h / model.body_mass[b]
+            for k in range(3):
+                P[b, k] += kick * F[b, k]
+                x[b, k] += drift * P[b, k]
+            row[TR_ANCHORED] = 0.0
+            _rotation_from_anchor(model, row, b, (t - row[ROT_T]) + h, q, L)
+            _remember(b, x, q, P, L, scratch)
+            continue
         if not _same(scratch, b, TR_F, F, 3):
             # a new force: the translation restarts from the step's start, F constant over the step
             row[TR_T] = t
             for k in range(3):
                 row[TR_X + k], row[TR_P + k], row[TR_F + k] = row[X_START + k], P[b, k], F[b, k]
         _write_from_anchor(model, b, (t - row[ROT_T]) + h, (t - row[TR_T]) + h, x, q, P, L, scratch)
+
+
+@numba.njit(cache=True)
+def _mark_damped(spring, drag, scratch) -> None:  # noqa: ANN001
+    """scratch[:, DAMPED] = 1.0 for the bodies a damper or translational drag acts on (their P changes
+    in the dissipation flow), 0.0 for the others. Tables may be None (kernel form)."""
+    for b in range(scratch.shape[0]):
+        scratch[b, DAMPED] = 0.0
+    if spring is not None:
+        for row in range(spring.damping.shape[0]):
+            if spring.damping[row] != 0.0:
+                scratch[spring.body_a[row], DAMPED] = 1.0
+                if spring.body_b[row] >= 0:
+                    scratch[spring.body_b[row], DAMPED] = 1.0
+    if drag is not None:
+        for row in range(drag.body.shape[0]):
+            if drag.linear[row] != 0.0 or drag.quadratic[row] != 0.0:
+                scratch[drag.body[row], DAMPED] = 1.0
+
+
+@numba.njit(cache=True)
+def _half_kick(kick, P, L, F, tau, scratch) -> None:  # noqa: ANN001
+    """K_c(kick) before the dissipation flow: P of the damped bodies (the others' P is left to the
+    translation anchor, which the flow does not touch), L of the bodies with a torque."""
+    for b in range(P.shape[0]):
+        row = scratch[b]
+        if row[DAMPED] == 1.0:
+            for k in range(3):
+                P[b, k] += kick * F[b, k]
+        if row[ROT_ANCHORED] != 1.0:
+            for k in range(3):
+                L[b, k] += kick * tau[b, k]
 
 
 @numba.njit(**STEP_KERNEL)
@@ -248,10 +316,13 @@ def compose(model, forces, force_data, t, h, weights, x, q, P, L, F, tau, q_mid)
     and the step ends with q = exact(q0, h): every orientation is ONE call away from the step's
     start, so round-off does not pile up through s + 1 chained calls (it halves the flip-case error).
     Which of the two is a scene-wide choice (has_torque; both cost s + 1 flows); the kick adds tau only
-    for the bodies torque_body flags (tau = 0 for the others).
+    for the bodies torque_body flags (tau = 0 for the others). With dampers or drag each kick is
+    K_c(h/2) Dis(h) K_c(h/2) (module docstring); Dis changes L only for torque bodies, so the
+    torque-free path's fixed L still holds.
     """
     count = weights.shape[0]
     torque = forces.has_torque
+    dissipative = dissipation_present(forces.spring, forces.drag)
     work = q_mid[0, 4:]  # a view: the step allocates nothing
     elapsed = 0.5 * weights[0] * h
     _drift_centre(model, elapsed, x, P)
@@ -261,10 +332,15 @@ def compose(model, forces, force_data, t, h, weights, x, q, P, L, F, tau, q_mid)
         if not torque:
             free_rotation_exact_batch(model.body_inertia, q, L, elapsed, q_mid, work)
         q_now = q if torque else q_mid  # (one wrench call site: the compiled wrench is inlined once)
-        accumulate_wrench(model, forces, force_data, t + elapsed, x, q_now, P, L, F, tau)
+        accumulate_wrench(model, forces, force_data, t + elapsed, x, q_now, P, L, F, tau, not dissipative)
         h_prev = weights[i] * h
         h_next = weights[i + 1] * h if i + 1 < count else 0.0
-        _kick(model, torque, forces.torque_body, h_prev, P, L, F, tau)
+        if dissipative:  # K_c(h/2) D(h) K_c(h/2) (forces/damping.py)
+            _kick(model, torque, forces.torque_body, 0.5 * h_prev, P, L, F, tau)
+            dissipation_flow(model, forces.spring, forces.drag, h_prev, x, q_now, P, L)
+            _kick(model, torque, forces.torque_body, 0.5 * h_prev, P, L, F, tau)
+        else:
+            _kick(model, torque, forces.torque_body, h_prev, P, L, F, tau)
         _drift_centre(model, 0.5 * (h_prev + h_next), x, P)
         if torque:
             free_rotation_exact_batch(model.body_inertia, q, L, 0.5 * (h_prev + h_next), q, work)
@@ -299,16 +375,30 @@ def step_numpy(model, forces, t, dt, x, q, P, L) -> None:  # noqa: ANN001
 
 
 def compose_numpy(model, forces, t, h, weights, x, q, P, L) -> None:  # noqa: ANN001
-    """Numpy reference of `compose`, stages unmerged: D(s/2) K(s) D(s/2) each."""
+    """Numpy reference of `compose`, stages unmerged: D(s/2) K(s) D(s/2) each (K(s) = K_c(s/2) D(s) K_c(s/2)
+    with dampers or drag)."""
     elapsed = 0.0
     for weight in weights:
         s = weight * h
         x += 0.5 * s * P / model.body_mass[:, None]
         free_rotation_exact_batch(model.body_inertia, q, L, 0.5 * s, q, np.empty(JACOBI_WORK_SIZE))
-        F, tau = wrench_numpy(model, forces, t + elapsed + 0.5 * s, x, q, P, L)
-        P += s * F
+        dissipative = bool(np.any(forces.spring.damping != 0.0) or _drag_present(forces.drag))
+        F, tau = wrench_numpy(model, forces, t + elapsed + 0.5 * s, x, q, P, L, dissipative=not dissipative)
+        kick = 0.5 * s if dissipative else s  # K_c(s/2) D(s) K_c(s/2) with dampers or drag
+        P += kick * F
         if forces.has_torque:
-            L += s * tau
+            L += kick * tau
+        if dissipative:
+            dissipation_flow_numpy(model, forces.spring, forces.drag, s, x, q, P, L)
+            P += kick * F
+            if forces.has_torque:
+                L += kick * tau
         x += 0.5 * s * P / model.body_mass[:, None]
         free_rotation_exact_batch(model.body_inertia, q, L, 0.5 * s, q, np.empty(JACOBI_WORK_SIZE))
         elapsed += s
+
+
+def _drag_present(drag) -> bool:  # noqa: ANN001
+    """Whether some drag row has a nonzero coefficient (numpy twin of part of `dissipation_present`)."""
+    coefficients = np.concatenate([drag.linear, drag.quadratic, drag.angular_linear, drag.angular_quadratic])
+    return bool(np.any(coefficients != 0.0))

@@ -1,0 +1,117 @@
+"""typer's conversion of command-line values, without pydantic for the plain parameters.
+
+typer 0.29 converts every command-line value through a pydantic TypeAdapter built per parameter
+(`typer._coercion.build_runtime_param`): importing pydantic and building the adapters cost ~0.05-0.1 s
+of every command, a tenth of a short `rbsim run` (docs/performance.md, "Start-up"). For a parameter
+typed str, int, float, bool or Path (or Optional of one) without typer's extras (a parser, bounds,
+choices), `install()` converts here a value that is already of its type, or a string that is plainly
+one: `int` of `-?[0-9]+`, `float` of a decimal number such as 1e-3, Path of a non-empty string (which
+then passes typer's own path checks, `coerce_cli_path`). pydantic's lax mode converts those strings to
+the same values. Anything else (`inf`, `1_000`, `abc`, an enum, a list) goes through typer's own
+conversion, which gives its result or its error message, as before. With a typer whose internals differ,
+nothing is changed. tests/cli/test_coercion.py holds the cases.
+"""
+
+from __future__ import annotations
+
+import re
+import types
+from pathlib import Path
+from typing import Any, Union, get_args, get_origin
+
+_INT = re.compile(r"-?[0-9]+")
+_FLOAT = re.compile(r"-?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?")
+
+_installed = False
+_active = False
+
+
+def active() -> bool:
+    """Whether plain parameters are converted here (False with a typer whose internals differ)."""
+    return _active
+
+
+def plain_type(annotation: Any, parameter_info: Any) -> type | None:  # noqa: ANN401 - typer's types
+    """The parameter's type when it is one this module converts (see the module docstring), else None."""
+    if get_origin(annotation) in (Union, types.UnionType):
+        members = [a for a in get_args(annotation) if a is not type(None)]
+        if len(members) != 1:
+            return None
+        annotation = members[0]
+    if annotation not in (str, int, float, bool, Path):
+        return None
+    info = parameter_info
+    if getattr(info, "parser", None) is not None or getattr(info, "click_type", None) is not None:
+        return None
+    if annotation in (int, float) and (info.min is not None or info.max is not None or info.clamp):
+        return None
+    if annotation is Path and info.path_type not in (None, Path):
+        return None
+    return annotation
+
+
+def convert(kind: type, value: Any) -> tuple[bool, Any]:  # noqa: ANN401 - a command-line value
+    """(True, the converted value) when `value` is plainly of type `kind` (see the module docstring)."""
+    if kind is bool:
+        return (True, value) if isinstance(value, bool) else (False, None)
+    if type(value) is kind:
+        return True, value
+    if not isinstance(value, str):
+        return False, None
+    if kind is str:
+        return True, value
+    if kind is int and _INT.fullmatch(value):
+        return True, int(value)
+    if kind is float and _FLOAT.fullmatch(value):
+        return True, float(value)
+    if kind is Path and value:
+        return True, Path(value)
+    return False, None
+
+
+def install() -> None:
+    """Convert plain parameters' values without pydantic (idempotent; see the module docstring)."""
+    global _installed, _active
+    if _installed:
+        return
+    _installed = True
+    try:
+        from typer._coercion import RuntimeParam, build_runtime_param
+        from typer._param_types import coerce_cli_path, routes_to_path
+        from typer.core import _TyperParameter
+    except ImportError:  # pragma: no cover - another typer: its own conversion throughout
+        return
+    ordinary = _TyperParameter.get_runtime_param
+    if "get_runtime_param" not in vars(_TyperParameter):  # pragma: no cover
+        return
+
+    class PlainRuntimeParam(RuntimeParam):  # a frozen dataclass: fields set through __init__ below
+        def __init__(self, parameter: Any, kind: type) -> None:  # noqa: ANN401
+            super().__init__(parameter_info=parameter.type_descriptor.parameter_info, annotation=kind)
+            object.__setattr__(self, "kind", kind)
+            object.__setattr__(self, "parameter", parameter)
+
+        def _coerce_value(self, value: Any, param: Any, ctx: Any) -> Any:  # noqa: ANN401
+            done, result = convert(self.kind, value)  # type: ignore[attr-defined]
+            if not done:  # typer's own conversion: its value, or its error message
+                typer_own = build_runtime_param(self.parameter.type_descriptor)  # type: ignore[attr-defined]
+                return typer_own._coerce_value(value, param=param, ctx=ctx)
+            if self.kind is Path:  # type: ignore[attr-defined]
+                return coerce_cli_path(result, self.parameter_info, path_type=Path, param=param, ctx=ctx)
+            return result
+
+    def get_runtime_param(self: Any) -> Any:  # noqa: ANN401
+        if self._runtime_param is None:
+            descriptor = self.type_descriptor
+            kind = plain_type(descriptor.annotation, descriptor.parameter_info)
+            if descriptor.file_annotation is not None:  # typer opens files for these
+                kind = None
+            if kind is str and routes_to_path(str, descriptor.parameter_info):  # a str with path checks
+                kind = None
+            if kind is None or getattr(self, "multiple", False) or getattr(self, "nargs", 1) != 1:
+                return ordinary(self)
+            self._runtime_param = PlainRuntimeParam(self, kind)
+        return self._runtime_param
+
+    _TyperParameter.get_runtime_param = get_runtime_param  # type: ignore[method-assign]
+    _active = True

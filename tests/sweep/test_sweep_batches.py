@@ -1,0 +1,66 @@
+"""How a sweep's variants are grouped into tasks (rbcli/sweeps/batches.py): every variant exactly once and
+in order, tasks of at most TASK_SECONDS of measured work, shrinking towards TAIL_SECONDS at the end so the
+slots finish together, and sized from every measured row rather than the first."""
+
+from __future__ import annotations
+
+import pytest
+
+from rbcli.sweeps.batches import TAIL_SECONDS, TASK_SECONDS, Batcher, batch_size
+
+
+def hand_out(n: int, slots: int, seconds: float, fixed: int | None = None) -> list[list[int]]:
+    """Every group a Batcher hands out when each variant measures `seconds`, fed back as it would be on
+    a cluster: a group's rows are measured before the next group is sized."""
+    batcher = Batcher(list(range(n)), slots, fixed=fixed)
+    groups = []
+    while group := batcher.next_group():
+        groups.append(group)
+        batcher.measured([{"wall_s": seconds}] * len(group))
+    assert batcher.sizes == [len(g) for g in groups]
+    return groups
+
+
+@pytest.mark.parametrize(
+    ("n", "slots", "seconds"),
+    [(192, 2, 0.066), (192, 1, 0.066), (64, 2, 0.75), (16, 2, 0.066), (1000, 2, 0.002), (5, 4, 0.01)],
+)
+def test_every_variant_once_in_order_with_tasks_of_bounded_work(n, slots, seconds):
+    groups = hand_out(n, slots, seconds)
+    assert [v for g in groups for v in g] == list(range(n))
+    work = [len(g) * seconds for g in groups]
+    # the probes are single variants; after them no task exceeds TASK_SECONDS unless one variant does
+    assert all(w <= max(TASK_SECONDS, seconds) + 1e-12 for w in work)
+    # the tail: the sizes never grow again once they start to shrink, and only the very last task (what
+    # is left) or a task of a single variant is below the floor
+    sizes = [len(g) for g in groups[slots:]]
+    shrinking = sizes[sizes.index(max(sizes)) :]
+    assert all(b <= a for a, b in zip(shrinking, shrinking[1:], strict=False))
+    assert all(len(g) == 1 or len(g) * seconds >= TAIL_SECONDS - 1e-12 for g in groups[:-1])
+
+
+def test_short_variants_are_batched_and_the_last_tasks_are_short():
+    # 192 variants of 66 ms on 2 slots (the flip benchmark): about 1 s tasks, then down to ~0.2 s
+    groups = hand_out(192, 2, 0.066)
+    sizes = [len(g) for g in groups]
+    assert max(sizes) == int(TASK_SECONDS / 0.066)
+    assert sizes[-1] * 0.066 <= 2 * TAIL_SECONDS
+    # enough tasks to even out the load: at least 4 per slot
+    assert len(groups) >= 4 * 2
+
+
+def test_long_variants_run_one_per_task():
+    assert {len(g) for g in hand_out(64, 2, 0.75)} == {1}
+
+
+def test_the_estimate_is_the_mean_of_every_row_not_the_first():
+    batcher = Batcher(list(range(100)), 1)
+    assert batcher.next_group() == [0]  # a probe
+    batcher.measured([{"wall_s": 1.0}])  # a first variant slowed by another process
+    batcher.measured([{"wall_s": 0.01}] * 9)  # then nine at their usual time: mean 0.109 s
+    size = len(batcher.next_group())
+    assert size == batch_size(1.09 / 10, 99, 1) == int(TASK_SECONDS / 0.109)
+
+
+def test_a_fixed_batch_is_kept():
+    assert [len(g) for g in hand_out(10, 2, 0.5, fixed=3)] == [3, 3, 3, 1]
