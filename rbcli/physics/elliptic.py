@@ -17,7 +17,11 @@ Sources:
 - Carlson 1995, "Numerical computation of real or complex elliptic integrals", Numer. Algorithms 10:
   duplication algorithms for R_F, R_C (Cauchy principal value for y < 0) and R_J (the form with
   d_m, e_m and R_C(1, 1 + e_m), as in DLMF 19.36(i)); R_J's principal value for p < 0 by the
-  transformation of DLMF 19.20.14.
+  transformation of DLMF 19.20.14. R_F and R_J of the same x, y, z share one duplication loop
+  (`_elliprf_rj`: their x, y, z sequences are the same); R_C(1, 1 + e_m) by its Maclaurin series
+  sum (-e)^k / (2k + 1) once |e_m| < 0.01 (R_J's later steps: e_m shrinks ~64x per step). The stopping
+  test Q = (3r)^(-1/6) max|A_0 - x| with r = 1e-16 is Carlson's, the same as an "ERRTOL" of 0.0025
+  in his 1979 form (error ~ ERRTOL^6): a larger tolerance saves steps only by losing digits.
 - DLMF 19.25.5 / 19.25.14: F and Pi through R_F and R_J; DLMF 19.7.9: Pi(n) + Pi(m/n) = F + R_C term
   (used for n < -1); DLMF 19.2.10 / 19.6: quasi-periodicity in phi.
 - Bulirsch 1965, "Numerical calculation of elliptic integrals and elliptic functions" (Numer. Math. 7),
@@ -121,6 +125,12 @@ def _rc_one_plus(e: float, one_plus_e: float) -> float:
     as e -> 0. As e -> -1, atanh(r) needs 1 - r = (1 + e) / (1 + r), so the caller passes 1 + e
     computed without cancellation.
     """
+    if abs(e) < 0.01:
+        # the Maclaurin series sum (-e)^k / (2k + 1) of both closed forms: truncated after e^7, the
+        # error is below e^8 / 17 < 6e-18 relative; R_J's later duplication steps (e_m shrinks ~64x
+        # per step) all land here, so they need no atan / atanh
+        tail = 1.0 / 11.0 - e * (1.0 / 13.0 - e * (1.0 / 15.0))
+        return 1.0 - e * (1.0 / 3.0 - e * (0.2 - e * (1.0 / 7.0 - e * (1.0 / 9.0 - e * tail))))
     if e > 0.0:
         r = math.sqrt(e)
         return math.atan(r) / r
@@ -133,18 +143,27 @@ def _rc_one_plus(e: float, one_plus_e: float) -> float:
 
 
 @numba.njit(cache=True)
-def _elliprj_positive(x: float, y: float, z: float, p: float) -> float:
-    """R_J for p > 0 (Carlson 1995 eqs. 2.36-2.39, d_m / e_m form as in DLMF 19.36.ii)."""
+def _elliprf_rj(x: float, y: float, z: float, p: float) -> tuple[float, float]:
+    """(R_F(x, y, z), R_J(x, y, z, p)) for p > 0 in one duplication loop (Carlson 1995 eqs. 2.2-2.4 and
+    2.36-2.39, d_m / e_m form as in DLMF 19.36.ii).
+
+    x, y, z follow the same duplication x_{m+1} = (x_m + lambda_m) / 4 in both algorithms, so the
+    square roots and lambda_m are shared (R_F alone costs as much again); the loop runs until both
+    stopping tests of Carlson 1995 hold (more steps only make R_F more accurate).
+    """
     a0 = (x + y + z + 2.0 * p) / 5.0
+    af0 = (x + y + z) / 3.0
     delta = (p - x) * (p - y) * (p - z)
     q = _RJ_Q * max(abs(a0 - x), abs(a0 - y), abs(a0 - z), abs(a0 - p))
+    qf = _RF_Q * max(abs(af0 - x), abs(af0 - y), abs(af0 - z))
     x0, y0, z0 = x, y, z
     a = a0
+    af = af0
     f = 1.0  # 4^-m
     f3 = 1.0  # 4^-3m
     total = 0.0
     for _ in range(_MAX_ITER):
-        if f * q < abs(a):
+        if f * q < abs(a) and f * qf < abs(af):
             break
         sx, sy, sz, sp = math.sqrt(x), math.sqrt(y), math.sqrt(z), math.sqrt(p)
         lam = sx * sy + sx * sz + sy * sz
@@ -155,12 +174,21 @@ def _elliprj_positive(x: float, y: float, z: float, p: float) -> float:
         one_plus_e = 2.0 * sp * (p + lam) / d
         total += f * _rc_one_plus(e, one_plus_e) / d
         a = 0.25 * (a + lam)
+        af = 0.25 * (af + lam)
         x = 0.25 * (x + lam)
         y = 0.25 * (y + lam)
         z = 0.25 * (z + lam)
         p = 0.25 * (p + lam)
         f *= 0.25
         f3 *= 1.0 / 64.0
+    # R_F's degree-5 series (Carlson 1995 eq. 2.3)
+    xf = (af0 - x0) * f / af
+    yf = (af0 - y0) * f / af
+    zf = -(xf + yf)
+    e2f = xf * yf - zf * zf
+    e3f = xf * yf * zf
+    rf = (1.0 - 0.1 * e2f + e3f / 14.0 + e2f * e2f / 24.0 - 3.0 * e2f * e3f / 44.0) / math.sqrt(af)
+    # R_J's (eq. 2.39)
     xx = (a0 - x0) * f / a
     yy = (a0 - y0) * f / a
     zz = (a0 - z0) * f / a
@@ -180,7 +208,13 @@ def _elliprj_positive(x: float, y: float, z: float, p: float) -> float:
         - 9.0 * e2 * e3 / 52.0
         + 3.0 * e5 / 26.0
     )
-    return f * poly / (a * math.sqrt(a)) + 6.0 * total
+    return rf, f * poly / (a * math.sqrt(a)) + 6.0 * total
+
+
+@numba.njit(cache=True)
+def _elliprj_positive(x: float, y: float, z: float, p: float) -> float:
+    """R_J for p > 0 (`_elliprf_rj`, whose R_F comes nearly free)."""
+    return _elliprf_rj(x, y, z, p)[1]
 
 
 @numba.njit(cache=True)
@@ -326,9 +360,24 @@ def ellipj_prepared(u: float, mc: float, prepared: np.ndarray, work: np.ndarray)
     """(sn, cn, dn)(u | m) with the AGM that `jacobi_prepare(mc)` kept: the ascending half of Bulirsch's
     ``sncndn`` only, bitwise equal to `ellipj_mc_work(u, mc, work)` (work is used only where nothing
     was kept)."""
+    if int(prepared[0]) < 0:
+        return ellipj_mc_work(u, mc, work)
+    return ellipj_kept(u, mc, prepared)
+
+
+@numba.njit(cache=True)
+def ellipj_kept(u: float, mc: float, prepared: np.ndarray) -> tuple[float, float, float]:
+    """`ellipj_prepared` without a work array: the closed forms where jacobi_prepare kept no levels
+    (mc = 0 or 1; nan or out of range: nan), nan where it could not keep them all (levels -1: not for a
+    float64 mc, whose AGM stops within 12 levels at _AGM_TOL; tested)."""
     levels = int(prepared[0])
     if levels <= 0 or math.isnan(u):
-        return ellipj_mc_work(u, mc, work)
+        if levels < 0 or math.isnan(u) or not (0.0 <= mc <= 1.0):
+            return math.nan, math.nan, math.nan
+        if mc == 0.0:
+            sech = 1.0 / math.cosh(u)
+            return math.tanh(u), sech, sech
+        return math.sin(u), math.cos(u), 1.0  # mc == 1 (jacobi_prepare keeps levels for 0 < mc < 1)
     c = prepared[1]
     v = u * c
     sn = math.sin(v)
@@ -417,10 +466,13 @@ def ellippi_sc(n: float, s: float, c: float, mc: float) -> float:
         if m_over_n != 0.0 and s != 0.0:
             value -= m_over_n / 3.0 * s * s2 * elliprj(c2, d, 1.0, 1.0 - m_over_n * s2)
         return value
-    value = s * elliprf(c2, d, 1.0)
-    if n != 0.0 and s != 0.0:
-        value += n / 3.0 * s * s2 * elliprj(c2, d, 1.0, 1.0 - n * s2)
-    return value
+    if n == 0.0 or s == 0.0:
+        return s * elliprf(c2, d, 1.0)
+    p = 1.0 - n * s2
+    if p > 0.0 and c2 >= 0.0 and (c2 != 0.0 or d != 0.0) and not math.isnan(p + d):
+        rf, rj = _elliprf_rj(c2, d, 1.0, p)  # one duplication loop for both
+        return s * rf + n / 3.0 * s * s2 * rj
+    return s * elliprf(c2, d, 1.0) + n / 3.0 * s * s2 * elliprj(c2, d, 1.0, p)
 
 
 @numba.njit(cache=True)

@@ -218,7 +218,12 @@ def test_prepared_jacobi_functions_are_bitwise_the_full_ones():
     # the very bits of ellipj_mc_work, for mc from 1e-300 to 1 and the closed-form ends 0 and 1
     rng = np.random.default_rng(8)
     work, prepared = np.empty(E.JACOBI_WORK_SIZE), np.empty(E.JACOBI_PREPARED_SIZE)
-    for mc in [0.0, 1.0, 1e-300, 1e-17, *(10.0 ** rng.uniform(-16, 0, 40))]:
+    for mc in [0.0, 1.0, 5e-324, 1e-300, 1e-17, *(10.0 ** rng.uniform(-16, 0, 40))]:
         E.jacobi_prepare(mc, prepared)
+        assert prepared[0] >= 0  # every level kept, even for the smallest double: ellipj_kept needs no work
         for u in [0.0, *rng.uniform(-3000.0, 3000.0, 20)]:
-            assert E.ellipj_prepared(u, mc, prepared, work) == E.ellipj_mc_work(u, mc, work), (mc, u)
+            full = E.ellipj_mc_work(u, mc, work)
+            assert E.ellipj_prepared(u, mc, prepared, work) == full, (mc, u)
+            assert E.ellipj_kept(u, mc, prepared) == full, (mc, u)
+    E.jacobi_prepare(math.nan, prepared)
+    assert all(math.isnan(v) for v in E.ellipj_kept(0.5, math.nan, prepared))

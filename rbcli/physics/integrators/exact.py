@@ -75,8 +75,12 @@ EVALUATIONS = 40  # closed-form evaluations of this body's motion since the scra
 DEFERRED = 41  # row 0: 1.0 once a chunk loop's materialise stage has run (the step may then defer)
 DAMPED = 42  # 1.0 when a damper or translational drag acts on the body's momentum (set every damped step)
 ROT_CONSTANTS = 43  # (ANCHOR_CONSTANTS) the flow's constants at the rotation anchor (free_rotation_anchored)
-WORK = ROT_CONSTANTS + ANCHOR_CONSTANTS  # row 0: the Jacobi functions' work
-SCRATCH_WIDTH = WORK + JACOBI_WORK_SIZE
+SCRATCH_WIDTH = ROT_CONSTANTS + ANCHOR_CONSTANTS
+# The anchored flow needs no work array (its Jacobi AGM is kept in the constants). A body with a torque
+# chains the one-shot flow, whose Jacobi functions need JACOBI_WORK_SIZE floats of work: its own row's
+# ROT_CONSTANTS columns, unused while it has no rotation anchor. (A shared work area in row 0 made every
+# row 48 columns wider, and the evaluation, which streams through the rows, a third slower: measured.)
+assert ANCHOR_CONSTANTS >= JACOBI_WORK_SIZE
 
 WEIGHTS = np.array([1.0])
 
@@ -130,7 +134,7 @@ def _same(scratch, b, column, values, count) -> bool:  # noqa: ANN001
 
 
 @numba.njit(cache=True, inline="always")
-def _keep_anchors(model, forces, b, t, x, q, P, L, scratch, torque_free, constant, work) -> None:  # noqa: ANN001
+def _keep_anchors(model, forces, b, t, x, q, P, L, scratch, torque_free, constant) -> None:  # noqa: ANN001
     """Take body b's anchors from its state at time t where the state is not what was last written."""
     row = scratch[b]
     written = _same(scratch, b, LAST_X, x, 3) and _same(scratch, b, LAST_P, P, 3)
@@ -148,33 +152,33 @@ def _keep_anchors(model, forces, b, t, x, q, P, L, scratch, torque_free, constan
             row[ROT_Q + k] = q[b, k]
         for k in range(3):
             row[ROT_L + k] = L[b, k]
-        anchor_prepare(model.body_inertia[b], q[b], L[b], row[ROT_CONSTANTS:WORK], work)
+        anchor_prepare(model.body_inertia[b], q[b], L[b], row[ROT_CONSTANTS:SCRATCH_WIDTH])
     elif not torque_free:
         row[ROT_ANCHORED] = 0.0
 
 
 @numba.njit(cache=True, inline="always")
-def _anchored_flow(model, row, b, elapsed, q_out, work) -> None:  # noqa: ANN001
+def _anchored_flow(model, row, b, elapsed, q_out) -> None:  # noqa: ANN001
     """q_out = the free flow from body b's rotation anchor (row: its scratch row) over elapsed [s]."""
-    anchor_evaluate(row[ROT_CONSTANTS:WORK], elapsed, q_out, work)
+    anchor_evaluate(row[ROT_CONSTANTS:SCRATCH_WIDTH], elapsed, q_out)
     row[EVALUATIONS] += 1.0
 
 
 @numba.njit(cache=True, inline="always")
-def _rotation_from_anchor(model, row, b, elapsed, q, L, work) -> None:  # noqa: ANN001
+def _rotation_from_anchor(model, row, b, elapsed, q, L) -> None:  # noqa: ANN001
     """A torque-free body's orientation at its rotation anchor's time plus elapsed [s], and its L."""
     if row[ROT_ANCHORED] == 1.0:
-        _anchored_flow(model, row, b, elapsed, q[b], work)
+        _anchored_flow(model, row, b, elapsed, q[b])
         for k in range(3):
             L[b, k] = row[ROT_L + k]
 
 
 @numba.njit(cache=True, inline="always")
-def _write_from_anchor(model, b, elapsed_rot, elapsed_tr, x, q, P, L, scratch, work) -> None:  # noqa: ANN001
+def _write_from_anchor(model, b, elapsed_rot, elapsed_tr, x, q, P, L, scratch) -> None:  # noqa: ANN001
     """Body b's state at its anchors' times plus the elapsed times [s]: the closed forms, then recorded
     as last written."""
     row = scratch[b]
-    _rotation_from_anchor(model, row, b, elapsed_rot, q, L, work)
+    _rotation_from_anchor(model, row, b, elapsed_rot, q, L)
     s = elapsed_tr
     inverse_mass = 1.0 / model.body_mass[b]
     for k in range(3):
@@ -198,17 +202,16 @@ def _step(model, forces, force_data, t, h, x, q, P, L, F, tau, scratch) -> None:
     n = x.shape[0]
     if n == 0:
         return
-    work = scratch[0, WORK:]
     constant = forces_are_constant(forces)
     torque = forces.has_torque
     for b in range(n):
-        _keep_anchors(model, forces, b, t, x, q, P, L, scratch, not (torque and forces.torque_body[b]), constant, work)
+        _keep_anchors(model, forces, b, t, x, q, P, L, scratch, not (torque and forces.torque_body[b]), constant)
     if constant:
         if scratch[0, DEFERRED] == 1.0:
             return  # materialise writes the state when it is due
         for b in range(n):
             row = scratch[b]
-            _write_from_anchor(model, b, (t - row[ROT_T]) + h, (t - row[TR_T]) + h, x, q, P, L, scratch, work)
+            _write_from_anchor(model, b, (t - row[ROT_T]) + h, (t - row[TR_T]) + h, x, q, P, L, scratch)
         return
     # the force evaluation at the midpoint: x + (h/2) P/M, the flow at t + h/2
     for b in range(n):
@@ -218,8 +221,9 @@ def _step(model, forces, force_data, t, h, x, q, P, L, F, tau, scratch) -> None:
             row[X_START + k] = x[b, k]
             x[b, k] += drift * P[b, k]
         if row[ROT_ANCHORED] == 1.0:
-            _anchored_flow(model, row, b, (t - row[ROT_T]) + 0.5 * h, row[Q_MID : Q_MID + 4], work)
+            _anchored_flow(model, row, b, (t - row[ROT_T]) + 0.5 * h, row[Q_MID : Q_MID + 4])
         else:
+            work = row[ROT_CONSTANTS : ROT_CONSTANTS + JACOBI_WORK_SIZE]  # free: no rotation anchor
             _free_rotation_exact_work(model.body_inertia[b], q[b], L[b], 0.5 * h, row[Q_MID : Q_MID + 4], work)
     # with dampers or drag the kick K(h) is K_c(h/2) D(h) K_c(h/2), as in split2 (forces/damping.py)
     dissipative = dissipation_present(forces.spring, forces.drag)
@@ -235,6 +239,7 @@ def _step(model, forces, force_data, t, h, x, q, P, L, F, tau, scratch) -> None:
         if row[ROT_ANCHORED] != 1.0:  # a torque: kick L, then the second half-flow from the midpoint
             for k in range(3):
                 L[b, k] += kick * tau[b, k]
+            work = row[ROT_CONSTANTS : ROT_CONSTANTS + JACOBI_WORK_SIZE]
             _free_rotation_exact_work(model.body_inertia[b], row[Q_MID : Q_MID + 4], L[b], 0.5 * h, q[b], work)
         if dissipative and row[DAMPED] == 1.0:
             # the dissipation changed P: no constant-force flight to anchor, the leapfrog's second half
@@ -243,7 +248,7 @@ def _step(model, forces, force_data, t, h, x, q, P, L, F, tau, scratch) -> None:
                 P[b, k] += kick * F[b, k]
                 x[b, k] += drift * P[b, k]
             row[TR_ANCHORED] = 0.0
-            _rotation_from_anchor(model, row, b, (t - row[ROT_T]) + h, q, L, work)
+            _rotation_from_anchor(model, row, b, (t - row[ROT_T]) + h, q, L)
             _remember(b, x, q, P, L, scratch)
             continue
         if not _same(scratch, b, TR_F, F, 3):
@@ -251,7 +256,7 @@ def _step(model, forces, force_data, t, h, x, q, P, L, F, tau, scratch) -> None:
             row[TR_T] = t
             for k in range(3):
                 row[TR_X + k], row[TR_P + k], row[TR_F + k] = row[X_START + k], P[b, k], F[b, k]
-        _write_from_anchor(model, b, (t - row[ROT_T]) + h, (t - row[TR_T]) + h, x, q, P, L, scratch, work)
+        _write_from_anchor(model, b, (t - row[ROT_T]) + h, (t - row[TR_T]) + h, x, q, P, L, scratch)
 
 
 @numba.njit(cache=True)
@@ -297,10 +302,9 @@ def materialise(model, forces, t, h, x, q, P, L, scratch, due) -> None:  # noqa:
         scratch[0, DEFERRED] = 1.0  # this step was written already; the next ones need not be
         return
     if due:
-        work = scratch[0, WORK:]
         for b in range(x.shape[0]):
             row = scratch[b]
-            _write_from_anchor(model, b, (t - row[ROT_T]) + h, (t - row[TR_T]) + h, x, q, P, L, scratch, work)
+            _write_from_anchor(model, b, (t - row[ROT_T]) + h, (t - row[TR_T]) + h, x, q, P, L, scratch)
 
 
 @numba.njit(cache=True)
