@@ -134,17 +134,32 @@ def build_model(
     centres = np.empty((count, 3))
     inertias = np.empty((count, 3, 3))
     offsets_user, masses, radii = [], [], []
+    # bodies from one template (a grid, a pile) share their clouds: their mass properties are computed
+    # once per distinct cloud, with the same bits as computing each
+    known: dict[bytes, tuple[float, np.ndarray, np.ndarray]] = {}
     for b in range(count):  # once per body at compile time, not in a step; the 3x3 work is batched below
         pos = np.asarray(particle_positions[b], dtype=np.float64).reshape(-1, 3)
         mass = np.broadcast_to(np.asarray(particle_masses[b], dtype=np.float64), (pos.shape[0],))
         rad = None if particle_radii is None or particle_radii[b] is None else particle_radii[b]
         rad = None if rad is None else np.broadcast_to(np.asarray(rad, dtype=np.float64), (pos.shape[0],)).copy()
-        body_mass[b], centres[b], inertias[b] = mass_properties(pos, mass, rad)
+        key = (
+            pos.tobytes()
+            + b"|"
+            + np.ascontiguousarray(mass).tobytes()
+            + b"|"
+            + (b"-" if rad is None else rad.tobytes())
+        )
+        if key not in known:
+            known[key] = mass_properties(pos, mass, rad)
+        body_mass[b], centres[b], inertias[b] = known[key]
         offsets_user.append(pos - centres[b])
         masses.append(np.array(mass))
         radii.append(np.zeros(pos.shape[0]) if rad is None else rad)
     body_inertia, axes = principal_axes(inertias)
-    for b in range(count):
+    smallest, largest = (body_inertia.min(axis=1), body_inertia.max(axis=1)) if count else (np.zeros(0), np.zeros(0))
+    degenerate = smallest <= INERTIA_DEGENERACY_RATIO * np.maximum(largest, np.finfo(float).tiny)
+    for refused in np.flatnonzero(degenerate | (smallest < 1.0 / np.finfo(float).max)):  # only bodies refused
+        b = int(refused)
         if inertia_is_degenerate(body_inertia[b]):
             raise ValueError(
                 f"body {names[b]!r}: its inertia I0 is singular (principal moments {body_inertia[b].tolist()}); "

@@ -144,7 +144,10 @@ def _check_initial_state(spec: SceneSpec, state: State) -> None:
         ("momentum", "kg m/s", state.P),
         ("angular momentum", "kg m^2/s", state.L),
     )
-    for b, body in enumerate(spec.bodies):  # once per body at set-up
+    with np.errstate(invalid="ignore"):
+        bad = ~np.all([np.all(np.abs(values) <= STATE_LIMIT, axis=1) for _, _, values in quantities], axis=0)
+    for b in np.flatnonzero(bad):  # only the bodies refused, each located
+        body = spec.bodies[b]
         for name, unit, values in quantities:
             value = values[b]
             if not np.all(np.abs(value) <= STATE_LIMIT):  # also catches nan
