@@ -1,4 +1,5 @@
-"""Rotations: unit quaternions (w, x, y, z) and 3x3 matrices, world-from-body.
+"""Rotations: unit quaternions (w, x, y, z) and 3x3 matrices, world-from-body; the one home of the
+conversions (matrix, axis-angle, Euler angles, uniformly random rotations) that scenes parse into.
 
 Vectorised numpy functions over leading axes (I/O, analysis, tests); their compiled one-body twins
 for the step kernels live in `rotation_kernels.py` (so importing this module never imports numba).
@@ -106,3 +107,33 @@ def skew(w: np.ndarray) -> np.ndarray:
     z = np.zeros(w.shape[:-1])
     wx, wy, wz = w[..., 0], w[..., 1], w[..., 2]
     return np.stack([np.stack([z, -wz, wy], -1), np.stack([wz, z, -wx], -1), np.stack([-wy, wx, z], -1)], axis=-2)
+
+
+def quat_from_axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rotation by `angle` [rad] about `axis` (normalised here), right-hand rule."""
+    axis = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    return np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * axis])
+
+
+_AXES = {"x": np.array([1.0, 0, 0]), "y": np.array([0, 1.0, 0]), "z": np.array([0, 0, 1.0])}
+
+
+def quat_from_euler(angles: np.ndarray, convention: str) -> np.ndarray:
+    """Euler angles [rad] as scipy's `Rotation.from_euler(convention, angles)`.
+
+    Intrinsic (uppercase) 'XYZ' = Rx(a) Ry(b) Rz(c); extrinsic (lowercase) 'xyz' = Rz(c) Ry(b) Rx(a):
+    each rotation about the fixed world axis is applied after the previous one.
+    """
+    parts = [quat_from_axis_angle(_AXES[c.lower()], a) for c, a in zip(convention, angles, strict=True)]
+    q = np.array([1.0, 0, 0, 0])
+    for p in parts:
+        q = quat_multiply(q, p) if convention.isupper() else quat_multiply(p, q)
+    return q / np.linalg.norm(q)
+
+
+def random_unit_quaternions(rng: np.random.Generator, count: int) -> np.ndarray:
+    """Uniformly distributed rotations: normalised 4D Gaussian samples (Haar measure on SO(3)), (count, 4)."""
+    q = rng.standard_normal((count, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    q[q[:, 0] < 0] *= -1
+    return q

@@ -14,10 +14,10 @@ from typing import Any, overload
 
 import numpy as np
 
-from rbcli.physics.rotation import quat_to_matrix
+from rbcli.physics.rotation import quat_to_matrix, random_unit_quaternions
 from rbcli.scene import mesh as mesh_io
 from rbcli.scene.issues import IssueCollector
-from rbcli.scene.orientation import random_unit_quaternions, resolve_orientation
+from rbcli.scene.orientation import resolve_orientation
 from rbcli.scene.shapes import (
     SamplingError,
     inertia_degeneracy,

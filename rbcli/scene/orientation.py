@@ -2,7 +2,8 @@
 
 Forms: `{wxyz: [...]}`, `{xyzw: [...]}`, `{matrix: 3x3}`, `{axis_angle: {axis, angle, degrees?}}`,
 `{euler: {angles, convention, degrees?}}` with scipy's convention names (lowercase extrinsic, uppercase
-intrinsic). The conversions themselves live in physics/rotation.py (one home); this module only parses forms.
+intrinsic). The conversions themselves (axis-angle, Euler, matrix, random rotations) live in
+physics/rotation.py (one home); this module only parses forms.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from rbcli.physics.rotation import matrix_to_quat, quat_multiply
+from rbcli.physics.rotation import matrix_to_quat, quat_from_axis_angle, quat_from_euler
 
 # Report(subpath, message, expected, severity): how resolution tells the loader about a problem.
 Report = Callable[[tuple[str | int, ...], str, str, str], None]
@@ -21,36 +22,6 @@ Report = Callable[[tuple[str | int, ...], str, str, str], None]
 MATRIX_TOLERANCE = 1e-3
 # below this a deviation is rounding, not worth a warning
 QUIET_TOLERANCE = 1e-9
-
-
-def quat_from_axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rotation by `angle` [rad] about `axis` (normalised here), right-hand rule."""
-    axis = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
-    return np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * axis])
-
-
-_AXES = {"x": np.array([1.0, 0, 0]), "y": np.array([0, 1.0, 0]), "z": np.array([0, 0, 1.0])}
-
-
-def quat_from_euler(angles: np.ndarray, convention: str) -> np.ndarray:
-    """Euler angles [rad] as scipy's `Rotation.from_euler(convention, angles)`.
-
-    Intrinsic (uppercase) 'XYZ' = Rx(a) Ry(b) Rz(c); extrinsic (lowercase) 'xyz' = Rz(c) Ry(b) Rx(a):
-    each rotation about the fixed world axis is applied after the previous one.
-    """
-    parts = [quat_from_axis_angle(_AXES[c.lower()], a) for c, a in zip(convention, angles, strict=True)]
-    q = np.array([1.0, 0, 0, 0])
-    for p in parts:
-        q = quat_multiply(q, p) if convention.isupper() else quat_multiply(p, q)
-    return q / np.linalg.norm(q)
-
-
-def random_unit_quaternions(rng: np.random.Generator, count: int) -> np.ndarray:
-    """Uniformly distributed rotations: normalised 4D Gaussian samples (Haar measure on SO(3)), (count, 4)."""
-    q = rng.standard_normal((count, 4))
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    q[q[:, 0] < 0] *= -1
-    return q
 
 
 def resolve_orientation(spec: Mapping[str, Any] | None, report: Report) -> np.ndarray | None:
