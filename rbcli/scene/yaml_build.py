@@ -152,22 +152,11 @@ class EventBuilder:
         document_start = event
         while True:
             event = get()
-            kind = type(event)
-            if kind is ScalarEvent:
-                self._scalar(event)
-            elif kind is SequenceStartEvent:
-                self._start(event, False)
-                self._scalars(get)
-            elif kind is MappingStartEvent:
-                self._start(event, True)
-            elif kind is SequenceEndEvent or kind is MappingEndEvent:
-                self._end()
-            elif kind is AliasEvent:
-                self._alias(event)
-            elif kind is DocumentEndEvent:
-                break
-            else:  # pragma: no cover - libyaml's grammar allows nothing else inside a document
-                raise ComposerError(None, None, f"unexpected {kind.__name__}", event.start_mark)
+            if not self._event(event, get):
+                if type(event) is DocumentEndEvent:
+                    break
+                unexpected = type(event).__name__  # pragma: no cover - libyaml allows nothing else in a document
+                raise ComposerError(None, None, f"unexpected {unexpected}", event.start_mark)  # pragma: no cover
         event = get()
         if isinstance(event, DocumentStartEvent):
             raise ComposerError(
@@ -225,6 +214,12 @@ class EventBuilder:
         frame.size += count
         if count:
             frame.height = max(frame.height, 2)
+        if not self._event(event, get):  # pragma: no cover - a list ends before its document does
+            raise ComposerError(None, None, f"unexpected {type(event).__name__}", event.start_mark)
+
+    def _event(self, event: Any, get: Any) -> bool:
+        """Build one event of a document's content (a list just opened takes its plain scalars in bulk,
+        `_scalars`); False for an event that is not content (the document's end)."""
         kind = type(event)
         if kind is ScalarEvent:
             self._scalar(event)
@@ -237,8 +232,9 @@ class EventBuilder:
             self._end()
         elif kind is AliasEvent:
             self._alias(event)
-        else:  # pragma: no cover - a list ends before its document does
-            raise ComposerError(None, None, f"unexpected {kind.__name__}", event.start_mark)
+        else:
+            return False
+        return True
 
     def _scalar(self, event: Any) -> None:
         mark = event.start_mark
