@@ -17,9 +17,12 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from rbcli.physics import kernel_cache
 from rbcli.physics.forces.body_point import rotate
 from rbcli.physics.forces.tables import TERM_IMPULSE, ImpulseTable
 from rbcli.physics.rotation import quat_to_matrix
+
+kernel_cache.install()  # before this module's kernels first run: their cache is keyed on the physics sources
 
 # Fraction of the step within which an impulse time below t_prev still counts as t_prev (round-off).
 IMPULSE_TIME_SLACK = 1e-9
