@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from rbcli.physics.integrators import INTEGRATORS
-from rbcli.physics.pipeline import STEP_STAGES, Stage, chunk_source
+from rbcli.physics.pipeline import ADAPTIVE, BOTH, FIXED, STEP_STAGES, Stage, adaptive_source, chunk_source
 
 CHUNKS = Path(__file__).resolve().parents[2] / "rbcli" / "physics" / "chunks"
 
@@ -23,10 +23,17 @@ def _short(name: str) -> str:
     return INTEGRATORS[name].module.rsplit(".", 1)[1]
 
 
+ADAPTIVE_NAMES = [name for name, info in INTEGRATORS.items() if info.adaptive]
+
+
 def regenerate() -> None:
     for name in INTEGRATORS:
         path = CHUNKS / f"{_short(name)}.py"
         path.write_text(chunk_source(_short(name), name))
+        print("wrote", path)
+    for name in ADAPTIVE_NAMES:
+        path = CHUNKS / f"{_short(name)}_adaptive.py"
+        path.write_text(adaptive_source(_short(name), name))
         print("wrote", path)
 
 
@@ -37,6 +44,13 @@ def test_committed_chunk_loops_are_generated_from_the_stage_list(name):
     assert INTEGRATORS[name].chunk().run_chunk is not None
 
 
+@pytest.mark.parametrize("name", ADAPTIVE_NAMES)
+def test_committed_adaptive_loops_are_generated_from_the_stage_list(name):
+    path = CHUNKS / f"{_short(name)}_adaptive.py"
+    assert path.read_text() == adaptive_source(_short(name), name), f"{path} is stale: run this file with --regenerate"
+    assert INTEGRATORS[name].adaptive_chunk().run_chunk is not None
+
+
 def test_stage_list_is_impulses_contact_update_record():
     names = ["impulses", "contact_begin", "kinematic_begin", "update", "kinematic_end", "contact_commit",
              "materialise", "contact_record", "record"]  # fmt: skip
@@ -45,6 +59,12 @@ def test_stage_list_is_impulses_contact_update_record():
     assert [stage.name for stage in STEP_STAGES if stage.integrators] == ["materialise"]
     assert "materialise(" in chunk_source("exact", "exact") and "materialise(" not in chunk_source("split2", "split2")
     assert [stage.name for stage in STEP_STAGES if stage.substep] == names[1:6]
+    # which loops have which stage: one field per stage; only materialise (exact's) is fixed-step only
+    assert {stage.name: stage.loops for stage in STEP_STAGES} == {**dict.fromkeys(names, BOTH), "materialise": (FIXED,)}
+    adaptive = adaptive_source("dopri5", "dopri5")
+    in_adaptive = [stage.name for stage in STEP_STAGES if ADAPTIVE in stage.loops and stage.name != "update"]
+    assert all(f"# {name}: " in adaptive for name in in_adaptive), in_adaptive
+    assert "materialise" not in adaptive and "integrator_step" not in adaptive
 
 
 # A trivial stage, as a user of the pipeline would add one: a constant push on every body, applied as an
@@ -59,9 +79,9 @@ PUSH_STAGE = Stage(
 )
 
 
-def _load_generated(tmp_path: Path, name: str, stages: tuple[Stage, ...]):  # noqa: ANN202
+def _load_generated(tmp_path: Path, name: str, stages: tuple[Stage, ...], source=chunk_source):  # noqa: ANN001, ANN202
     path = tmp_path / f"chunk_{_short(name)}.py"
-    path.write_text(chunk_source(_short(name), name, stages))
+    path.write_text(source(_short(name), name, stages))
     spec = importlib.util.spec_from_file_location(f"_test_chunk_{_short(name)}", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
@@ -94,6 +114,37 @@ def test_a_stage_added_to_the_list_runs_in_the_generated_loop(tmp_path, name):
     assert np.array_equal(data.state.P[:, 0], P0[:, 0] + steps * PUSH)
     assert np.array_equal(data.state.P[:, 1:], P0[:, 1:])
     assert np.array_equal(frames.P[0][:, 0], P0[:, 0] + 5 * PUSH)  # the stage ran before the record stage
+
+
+def test_a_step_start_stage_added_to_the_list_runs_at_every_grid_step_of_the_adaptive_loop(tmp_path):
+    """The same push as a step-start stage (before the impulses), with no `lands_at`: the adaptive loop
+    must land on every grid index and run it there, as the fixed-step loop does, so after n grid steps
+    P_x is P0 + n pushes exactly (no forces: dopri5 leaves P as it is, exactly) and the frame at grid
+    step 5 holds five pushes; the unchanged loop (the committed one) leaves P alone."""
+    from conftest import make_scene, random_bodies
+
+    from rbcli.api import prepare
+    from rbcli.physics.data import make_data
+    from rbcli.physics.step import empty_buffers
+
+    pushed = _load_generated(tmp_path, "dopri5", (PUSH_STAGE, *STEP_STAGES), adaptive_source)
+    assert "land = min(land, index + 1)" in adaptive_source("dopri5", "dopri5", (PUSH_STAGE, *STEP_STAGES))
+    compiled = prepare(make_scene(random_bodies(3, seed=2), integrator="dopri5"))
+    steps, every = 12, 5
+    P_end = []
+    for run_chunk in (pushed.run_chunk, INTEGRATORS["dopri5"].adaptive_chunk().run_chunk):
+        data = make_data(compiled.initial_state, compiled.forces, 0, adaptive=True, tolerance=1e-6, duration=0.012)
+        P0 = data.state.P.copy()
+        frames = empty_buffers(4, 3)
+        done, filled, status = run_chunk(
+            compiled.model.kernel(), compiled.forces.kernel(), data.kernel(), 1e-3, 0, steps, every, frames, 0
+        )
+        assert (done, filled, status) == (steps, 2, 0)
+        P_end.append(data.state.P.copy())
+        if run_chunk is pushed.run_chunk:
+            assert np.array_equal(frames.P[0][:, 0], P0[:, 0] + every * PUSH)
+    assert np.array_equal(P_end[0][:, 0], P0[:, 0] + steps * PUSH) and np.array_equal(P_end[0][:, 1:], P0[:, 1:])
+    assert np.array_equal(P_end[1], P0)
 
 
 if __name__ == "__main__":

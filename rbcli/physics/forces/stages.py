@@ -21,7 +21,8 @@ Force stages (called by forces/wrench.accumulate_wrench, each adding its rows to
 ForceData.term_evaluations counter): field, point force, torque, spring, drag, contact (with the
 static bodies held). Pipeline stages (called by the generated chunk loops, physics/pipeline.py):
 impulses, contact_begin, kinematic_begin, kinematic_end, contact_commit, contact_record; and for adaptive
-stepping the contacts' step limit. Gravity has no table (a flag and a vector) and is not here.
+stepping the contacts' step limit and the next step that holds an impulse. Gravity has no table (a flag
+and a vector) and is not here.
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from rbcli.physics.contact.force import accumulate_contact, begin_contact_step, 
 from rbcli.physics.contact.kinematic import kinematic_begin, kinematic_end
 from rbcli.physics.forces.drag import accumulate_drag
 from rbcli.physics.forces.field import accumulate_field
-from rbcli.physics.forces.impulse import apply_impulses
+from rbcli.physics.forces.impulse import NO_IMPULSE_STEP, apply_impulses, next_impulse_step
 from rbcli.physics.forces.point_force import accumulate_point_force
 from rbcli.physics.forces.spring import accumulate_spring
 from rbcli.physics.forces.tables import (
@@ -194,6 +195,24 @@ def _impulse_stage(model, forces, force_data, t_prev, t_next, x, q, P, L):  # no
     def run(model, forces, force_data, t_prev, t_next, x, q, P, L):  # noqa: ANN001, ANN202
         if forces.impulse.body.shape[0]:
             apply_impulses(model, forces, force_data, t_prev, t_next, x, q, P, L)
+
+    return run
+
+
+def next_impulse_step_stage(forces, dt, index) -> int:  # noqa: ANN001
+    """The next grid step after `index` that holds an impulse (forces/impulse.py; where the adaptive loop
+    lands to apply it), NO_IMPULSE_STEP when the scene has none."""
+    _kernel_only()
+    return 0
+
+
+@overload(next_impulse_step_stage, jit_options=_OPTIONS)
+def _next_impulse_step_stage(forces, dt, index):  # noqa: ANN001, ANN202
+    if _absent(_member(forces, "impulse")):
+        return lambda forces, dt, index: NO_IMPULSE_STEP
+
+    def run(forces, dt, index):  # noqa: ANN001, ANN202
+        return next_impulse_step(forces, dt, index)
 
     return run
 
