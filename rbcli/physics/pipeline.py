@@ -1,4 +1,5 @@
-"""What a step is: the one list of stages, and the chunk loop generated from it for each integrator.
+"""What a step is: the one list of stages, and the chunk loops generated from it: one per integrator, and
+the error-controlled loop of adaptive runs.
 
 A step from grid index n (t = n dt) to n + 1 runs, in this order (STEP_STAGES):
 
@@ -7,11 +8,13 @@ A step from grid index n (t = n dt) to n + 1 runs, in this order (STEP_STAGES):
       contact_begin   the contact springs' clock: the (sub-)step being taken            (contact/force.py)
       kinematic_begin kinematic bodies at their exact pose, at their mean velocity   (contact/kinematic.py)
       update          the integrator's maths (integrators/<name>.py `step`); every force evaluation it
-                      needs is the force pass `forces/wrench.accumulate_wrench`, itself a list of force
-                      stages (gravity, fields, point forces, torques, springs, drag, contact), each
-                      present only when the scene has rows for it
+                      needs is the force pass `forces/wrench.accumulate_wrench`, generated from its own
+                      list of force stages (forces/stage_list.py FORCE_STAGES: gravity, fields, point
+                      forces, torques, springs, drag, contact), each present only when the scene has it
+    materialise     exact's loop only: the torque-free bodies it defers, written when due
       kinematic_end   kinematic bodies at their exact state at the end of the (sub-)step
       contact_commit  the last evaluation's contacts and tangential springs become the history
+    contact_record  on recording steps: the step's contact statistics into the next frame
     record          on recording steps: the divergence check, then the state copied into the next frame
 
 Each optional stage is present only when the scene needs it, decided when numba compiles the loop, not
@@ -37,10 +40,13 @@ committed files differ from the template, and regenerates them with
     python tests/physics/test_pipeline.py --regenerate
 
 Adding a stage: one entry in STEP_STAGES (this file), the stage's own module (with a dispatcher in
-forces/stages.py when only some scenes have it), and the regeneration.
-Adaptive runs (a tolerance instead of dt) step between output times under error control: their loop is
-`physics/adaptive.py` (dopri5 only), which runs the same update and record stages;
-`runner/simulation.py` applies impulses between its chunks.
+forces/stages.py when only some scenes have it), and the regeneration. The entry says which loops have
+it (`loops`: FIXED, ADAPTIVE or BOTH, the default; `integrators`: the integrator modules, default all)
+and, for the adaptive loop, what Stage's docstring lists (`lands_at`, `restarts`, `prepares_evaluation`).
+Adaptive runs (a tolerance instead of dt) step between output times under error control: their loop
+`physics/chunks/<module>_adaptive.py` (dopri5 only; `adaptive_source`) is generated from the same list,
+takes the same arguments, and runs every stage where its structure puts it (Stage's docstring); the
+method is physics/adaptive.py. Impulses are its stage too: it lands on the grid steps that hold them.
 """
 
 from __future__ import annotations
@@ -390,7 +396,7 @@ def adaptive_source(module: str, name: str, stages: tuple[Stage, ...] = STEP_STA
     stages = loop_stages(module, ADAPTIVE, stages)
     sub = [i for i, stage in enumerate(stages) if stage.substep]
     update = [i for i, stage in enumerate(stages) if stage.name == UPDATE]
-    if len(update) != 1 or sub != list(range(sub[0], sub[-1] + 1)) or not sub[0] <= update[0] <= sub[-1]:
+    if len(update) != 1 or not sub or sub != list(range(sub[0], sub[-1] + 1)) or not sub[0] <= update[0] <= sub[-1]:
         raise ValueError("the adaptive loop needs one run of sub-step stages with the update stage among them")
     start, before = stages[: sub[0]], stages[sub[0] : update[0]]
     after, step_end = stages[update[0] + 1 : sub[-1] + 1], stages[sub[-1] + 1 :]

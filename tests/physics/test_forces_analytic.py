@@ -142,6 +142,31 @@ def test_impulse_step_indices_follow_apply_impulses_rule():
     assert NO_IMPULSE_STEP in found and found[0] == 0  # after the last impulse; the one at t = 0
 
 
+def test_adaptive_loop_lands_on_impulse_steps_and_applies_them_there():
+    """The adaptive loop applies impulses itself (its step-start stage, landing on each step that holds
+    one): a free body (no forces, so dopri5 leaves P as it is, exactly) keeps P0 until grid step 30 and
+    has P0 + J after the step-30 impulse, P0 + 2J after step 33's, exactly; and one call over 50 steps
+    gives the bits of calls split at 30 and 33, where the runner used to split its chunks to apply
+    them from Python (a landing and a restart there is the same computation)."""
+    from rbcli.runner.simulation import Simulation
+
+    J = np.array([0.0, 2.0, 0.0])
+    body = make_body("h", velocity=np.array([1.0, 0.0, 0.5]), angular_momentum=np.array([0.01, 0.0, 0.02]))
+    specs = [
+        ForceImpulse(at=BodyPoint(body="h", point=np.array([0.1, 0.0, 0.0])), time=T, vector=J) for T in (0.3, 0.33)
+    ]
+    scene = with_forces(make_scene([body], dt=0.01, duration=0.5, integrator="dopri5"), *specs)
+    whole, split = Simulation(scene, tolerance=1e-8), Simulation(scene, tolerance=1e-8)
+    P0 = whole.data.state.P.copy()
+    whole.step(50)
+    for n, P in ((30, P0), (3, P0 + J), (17, P0 + J + J)):  # the state at steps 30, 33, 50
+        split.step(n)
+        assert np.array_equal(split.data.state.P, P)
+    for name in "xqPL":
+        assert np.array_equal(getattr(whole.data.state, name), getattr(split.data.state, name)), name
+    assert whole.data.adaptive_counters.tolist() == split.data.adaptive_counters.tolist()
+
+
 def test_chunk_loop_applies_impulses_whatever_the_chunking():
     """The impulse stage of the compiled chunk loop (physics/pipeline.py): chunks of 7 steps that start,
     end and run across the impulse steps give, to the last bit, the reference that applies impulses

@@ -13,10 +13,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from rbcli.physics.forces.stage_list import FORCE_STAGES, ForceStage, wrench_source
 from rbcli.physics.integrators import INTEGRATORS
 from rbcli.physics.pipeline import ADAPTIVE, BOTH, FIXED, STEP_STAGES, Stage, adaptive_source, chunk_source
 
 CHUNKS = Path(__file__).resolve().parents[2] / "rbcli" / "physics" / "chunks"
+WRENCH_PASS = CHUNKS.parent / "forces" / "wrench_pass.py"
 
 
 def _short(name: str) -> str:
@@ -35,6 +37,8 @@ def regenerate() -> None:
         path = CHUNKS / f"{_short(name)}_adaptive.py"
         path.write_text(adaptive_source(_short(name), name))
         print("wrote", path)
+    WRENCH_PASS.write_text(wrench_source())
+    print("wrote", WRENCH_PASS)
 
 
 @pytest.mark.parametrize("name", list(INTEGRATORS))
@@ -145,6 +149,55 @@ def test_a_step_start_stage_added_to_the_list_runs_at_every_grid_step_of_the_ada
             assert np.array_equal(frames.P[0][:, 0], P0[:, 0] + every * PUSH)
     assert np.array_equal(P_end[0][:, 0], P0[:, 0] + steps * PUSH) and np.array_equal(P_end[0][:, 1:], P0[:, 1:])
     assert np.array_equal(P_end[1], P0)
+
+
+def test_committed_force_pass_is_generated_from_the_force_stage_list():
+    assert WRENCH_PASS.read_text() == wrench_source(), f"{WRENCH_PASS} is stale: run this file with --regenerate"
+    names = ["gravity", "field", "point_force", "torque", "spring", "drag", "contact"]
+    assert [stage.name for stage in FORCE_STAGES] == names
+    assert [stage.name for stage in FORCE_STAGES if stage.dissipative] == ["drag"]
+    assert [stage.name for stage in FORCE_STAGES if not stage.tables] == ["gravity"]  # a flag, no table
+
+
+# A force stage as a new force type would add one: a constant world force on every body that has a field
+# row, dispatched on the field table (so it compiles away where fields do), added after the list's own.
+KICK = 1.5  # [N], world y
+KICK_STAGE = ForceStage(
+    "kick",
+    "kick: a constant force on the bodies of the field rows (test stage)",
+    (),
+    f"for row in range(forces.field.body.shape[0]):\n    F[forces.field.body[row], 1] += {KICK!r}",
+    tables=("forces.field",),
+)
+
+
+def test_a_force_stage_added_to_the_list_runs_in_the_generated_pass(tmp_path):
+    """Gravity only: F = M g exactly. With the kick stage: the same plus KICK in y on the body that has
+    the field row, exactly (no other stage touches F_y here), and the stage compiled away when the
+    field table is None (KernelForceTables of a scene without fields): F = M g again. The force table
+    is built by hand: a zero field on body 1 (it adds exactly 0.0), whose row names the kicked body."""
+    from conftest import make_scene, random_bodies
+
+    from rbcli.api import prepare
+    from rbcli.physics.forces import NO_SCHEDULE, make_force_data
+    from rbcli.physics.forces.tables import field_table
+
+    path = tmp_path / "kicked_pass.py"
+    path.write_text(wrench_source((*FORCE_STAGES, KICK_STAGE)))
+    spec = importlib.util.spec_from_file_location("_test_kicked_pass", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    compiled = prepare(make_scene(random_bodies(3, seed=4), gravity=np.array([0.0, 0.0, -9.81])))
+    model, s = compiled.model.kernel(), compiled.initial_state
+    field = field_table(body=[1], per_mass=[False], value=[[0.0, 0.0, 0.0]], gradient=[np.zeros((3, 3))],
+                        schedule=[NO_SCHEDULE])  # fmt: skip
+    with_field = compiled.forces._replace(field=field)
+    expected = compiled.model.body_mass[:, None] * np.array([0.0, 0.0, -9.81])
+    for forces, kick in ((with_field, KICK), (compiled.forces.kernel(), 0.0)):
+        F, tau = np.zeros((3, 3)), np.zeros((3, 3))
+        module.accumulate_wrench(model, forces, make_force_data(forces), 0.0, s.x, s.q, s.P, s.L, F, tau)
+        assert np.array_equal(F[:, 0::2], expected[:, 0::2])
+        assert np.array_equal(F[:, 1], np.array([0.0, kick, 0.0]))
 
 
 if __name__ == "__main__":
