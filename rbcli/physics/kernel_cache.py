@@ -112,7 +112,10 @@ def _install_guard(Cache: Any) -> None:  # noqa: ANN401, N803 - numba's Cache cl
     """Key the cache indexes of functions that may call rbcli's kernels on the physics sources too."""
     global _guarded
     load, save = getattr(Cache, "_load_overload", None), getattr(Cache, "_save_overload", None)
-    if load is None or save is None or getattr(load, "_rbcli", False):  # pragma: no cover - other numba
+    if getattr(load, "_rbcli", False):  # pragma: no cover - installed by another copy of rbcli in this process
+        _guarded = True
+        return
+    if load is None or save is None:  # pragma: no cover - a numba without these internals
         _disable_rbcli_caching(Cache)
         return
 
