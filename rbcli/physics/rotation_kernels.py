@@ -5,6 +5,10 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from rbcli.physics import kernel_cache
+
+kernel_cache.install()  # before this module's kernels first run: their cache is keyed on the physics sources
+
 
 @numba.njit(cache=True, inline="always")
 def quat_to_matrix_nb(q: np.ndarray, R: np.ndarray) -> None:

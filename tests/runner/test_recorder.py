@@ -90,10 +90,10 @@ def test_a_sink_failing_mid_run_stops_it_and_every_sink_keeps_what_was_written(m
 
 def test_every_chunk_kernel_releases_the_gil():
     """The recording thread only overlaps the integration if the compiled chunk drops the GIL."""
-    from rbcli.physics.adaptive import run_adaptive_chunk
-
     kernels = {name: info.chunk().run_chunk for name, info in INTEGRATORS.items()}
-    kernels["adaptive"] = run_adaptive_chunk
+    kernels.update(
+        {f"{name} adaptive": info.adaptive_chunk().run_chunk for name, info in INTEGRATORS.items() if info.adaptive}
+    )
     assert {name: k.targetoptions.get("nogil") for name, k in kernels.items()} == dict.fromkeys(kernels, True)
 
 

@@ -24,6 +24,10 @@ import math
 import numba
 import numpy as np
 
+from rbcli.physics import kernel_cache
+
+kernel_cache.install()  # before this module's kernels first run: their cache is keyed on the physics sources
+
 # the 13 neighbour cells (dx, dy, dz) of the half shell: the lexicographically positive offsets
 HALF_SHELL = np.array(
     [(dx, dy, dz) for dz in (-1, 0, 1) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if (dz, dy, dx) > (0, 0, 0)],

@@ -11,12 +11,15 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from rbcli.physics import kernel_cache
 from rbcli.physics.forces.tables import (
     NO_SCHEDULE,
     SCHEDULE_CONSTANT,
     SCHEDULE_SINE,
     schedule_values_numpy,
 )
+
+kernel_cache.install()  # before this module's kernels first run: their cache is keyed on the physics sources
 
 __all__ = ["schedule_integral", "schedule_value", "schedule_values_numpy"]
 

@@ -132,6 +132,11 @@ class ImpulseTable(NamedTuple):
     body_frame: np.ndarray  # bool (row_count,)
 
 
+# the fields of ForceTables that kernels take as they are (switches, gravity, the shared schedules);
+# every other field is a force type's table, None in KernelForceTables when it has no rows
+_KERNEL_AS_IS = ("gravity", "has_gravity", "has_torque", "torque_body", "schedule")
+
+
 class ForceTables(NamedTuple):
     """Every force term of a scene as arrays (numba-friendly).
 
@@ -168,14 +173,14 @@ class ForceTables(NamedTuple):
         """The tables as compiled kernels take them: None for each table without rows (see
         KernelForceTables)."""
 
-        def rows(table):  # noqa: ANN001, ANN202
-            return table if table_rows(table) else None
+        def kernel_field(name: str, value: Any) -> Any:  # noqa: ANN401 - a table or a switch
+            if name in _KERNEL_AS_IS:
+                return value
+            if name == "contact":
+                return value if contact_present(value) else None
+            return value if table_rows(value) else None  # every force type's table
 
-        return KernelForceTables(
-            self.gravity, self.has_gravity, self.has_torque, self.torque_body, self.schedule,
-            rows(self.field), rows(self.point_force), rows(self.torque), rows(self.spring), rows(self.drag),
-            rows(self.impulse), self.contact if contact_present(self.contact) else None, rows(self.kinematic),
-        )  # fmt: skip
+        return KernelForceTables(*(kernel_field(name, getattr(self, name)) for name in self._fields))
 
 
 class KernelForceTables(NamedTuple):

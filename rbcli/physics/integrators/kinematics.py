@@ -22,7 +22,10 @@ import math
 import numba
 import numpy as np
 
+from rbcli.physics import kernel_cache
 from rbcli.physics.rotation import quat_multiply, quat_rotate, quat_rotate_inverse
+
+kernel_cache.install()  # before this module's kernels first run: their cache is keyed on the physics sources
 
 
 @numba.njit(cache=True)
