@@ -12,7 +12,7 @@ Columns, in order:
 - `rotation_error_max`, `rotation_error_final` [rad], `position_error_max`, `position_error_final` [m]
   against the exact solution (null where the scene has none);
 - `x_final`, `q_final` (w, x, y, z), `v_final`, `omega_final`, `L_final`: the final state of every body
-  in the user's frames (body_count lists of 3 or 4);
+  in the user's frames (body_count lists of 3 or 4): the run's last recorded frame, bitwise its log's;
 - `wall_s` [s]: the variant's wall time (load, run, metrics), the one column that differs between runs;
 - `log`: the variant's recording, when logs are on.
 
