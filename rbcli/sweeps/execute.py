@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from rbcli.sweeps.paths import ScenePath
+from rbcli.sweeps.paths import ScenePath, variant_text
 
 # Row statuses: a run's own ("completed", "diverged"), a variant the scene loader rejects, and any other
 # exception while building or running it.
@@ -91,8 +91,6 @@ def warm_up(job: SweepJob, values: tuple[Any, ...]) -> float:
     """Load (or compile) every kernel a variant needs in this process (the steps', the recorder's, the
     exact solution's) by running it for two steps without a log; returns the seconds it took (reported
     apart from the sweep, as the cluster's start-up is)."""
-    from rbcli.sweeps.load import variant_text
-
     started = time.perf_counter()
     with contextlib.suppress(Exception):  # the variant's own row will say what is wrong with it
         text = variant_text(job.scene_data, tuple(zip(job.paths, values, strict=True)))
@@ -103,7 +101,6 @@ def warm_up(job: SweepJob, values: tuple[Any, ...]) -> float:
 def run_variant(job: SweepJob, index: int, values: tuple[Any, ...]) -> dict[str, Any]:
     """Build, load and run one variant; its row (see `table.RESULT_SCHEMA` for the columns)."""
     from rbcli.scene.spec import SceneError
-    from rbcli.sweeps.load import variant_text
 
     started = time.perf_counter()
     row: dict[str, Any] = {"variant": index, "status": STATUS_ERROR, "message": ""}

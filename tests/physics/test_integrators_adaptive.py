@@ -16,7 +16,7 @@ from rbcli.physics.forces import WORLD, build_force_tables, make_force_data, spr
 from rbcli.physics.frames import user_orientation
 from rbcli.physics.step import STATUS_FULL, STATUS_OK, empty_buffers
 from rbcli.record.memory_sink import SinkMemory
-from rbcli.runner.loop import run
+from rbcli.runner.simulation import run
 
 FLIP = ((1.0, 2.0, 3.0), (0.01, 5.0, 0.0))
 GENERIC = ((1.0, 2.0, 3.0), (1.0, 1.0, 2.0))
