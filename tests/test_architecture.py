@@ -26,7 +26,7 @@ ALLOWED_IMPORTS: dict[str, frozenset[str]] = {
     "analysis": frozenset({"physics", "scene", "record"}),
     "runner": frozenset({"_version", "physics", "scene", "record", "analysis"}),  # never api: api is above it
     "api": frozenset({"physics", "scene", "record", "runner"}),
-    "sweeps": frozenset({"scene", "record", "analysis", "runner"}),  # many runs of the public objects; not physics
+    "sweeps": frozenset({"_version", "scene", "record", "analysis", "runner"}),  # many runs of the public objects
     "cli": frozenset({"_version", "api", "runner", "scene", "record", "sweeps"}),  # not physics: it is in api
     "__init__": frozenset({"_version", "api", "record", "sweeps"}),
     "__main__": frozenset({"cli"}),

@@ -25,11 +25,19 @@ import numpy as np
 from rbcli.sweeps.paths import ScenePath, variant_text
 
 # Row statuses: a run's own ("completed", "diverged"), a variant the scene loader rejects, and any other
-# exception while building or running it.
+# exception while building or running it; on a cluster, a variant that took its worker down on every try
+# (out of memory, a crash: its own fault after a bounded number of tries, dask_runner.py) and one whose
+# task the cluster lost too often for its own reasons (cancelled, data lost with a worker): no result yet,
+# so resuming runs it again.
 STATUS_COMPLETED = "completed"
 STATUS_DIVERGED = "diverged"
 STATUS_INVALID = "invalid"
 STATUS_ERROR = "error"
+STATUS_CRASHED = "crashed"
+STATUS_LOST = "lost"
+# The message of a row that an older rbsim recorded as "error" when the cluster lost its task: resuming
+# treats it as lost, not as the variant's own failure.
+LEGACY_LOST_MESSAGE = "the task failed on the cluster: "
 # The row of a variant: (column, type) in table order; "vectors" is a list per body of 3 or 4 floats.
 RESULT_COLUMNS = (
     ("variant", "int64"),
@@ -80,6 +88,21 @@ class SweepJob:
     paths: tuple[ScenePath, ...]
     frames: int | None = 101
     log_dir: str | None = None
+
+
+def lost_to_the_cluster(status: str | None, message: str | None) -> bool:
+    """Whether a row is a failure of the cluster rather than the variant's own (resuming retries it)."""
+    return status == STATUS_LOST or (status == STATUS_ERROR and (message or "").startswith(LEGACY_LOST_MESSAGE))
+
+
+def runtime_versions() -> tuple[str, str]:
+    """(rbsim, numba) versions of this process: a worker must match the client's, since a row is bitwise
+    the same only from the same code compiled by the same numba."""
+    import numba
+
+    from rbcli._version import __version__
+
+    return __version__, str(numba.__version__)
 
 
 def run_batch(job: SweepJob, variants: list[tuple[int, tuple[Any, ...]]]) -> list[dict[str, Any]]:
