@@ -15,6 +15,7 @@ import contextlib
 import functools
 import os
 import re
+import socket
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -22,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from rbcli.sweeps.meshes import MeshFile, local_scene_dir
 from rbcli.sweeps.paths import ScenePath, variant_text
 
 # Row statuses: a run's own ("completed", "diverged"), a variant the scene loader rejects, and any other
@@ -75,10 +77,12 @@ class SweepJob:
     """What every variant of a sweep needs, sent to each worker once.
 
     scene_data: the base scene's parsed YAML, scene_text its text; scene_file and scene_dir: where it came
-    from (messages, the recorded scene path; mesh files resolve against scene_dir, which must exist on every
-    worker).
+    from (messages, the recorded scene path; mesh files resolve against scene_dir).
     paths: each axis's scene path. frames: recorded frames per variant (None: the scene's cadence).
     log_dir: where each variant writes variant-<n>.mcap (None: no logs), as seen by the workers.
+    mesh_files: the bytes of every mesh file a variant may load (meshes.py), so a worker that does not
+    see scene_dir loads the same bytes from a folder of its own. client_host: the machine the sweep runs
+    on; a log written on another machine is named `host:path` in its row.
     """
 
     scene_data: dict[str, Any]
@@ -88,6 +92,8 @@ class SweepJob:
     paths: tuple[ScenePath, ...]
     frames: int | None = 101
     log_dir: str | None = None
+    mesh_files: tuple[MeshFile, ...] = ()
+    client_host: str = ""
 
 
 def lost_to_the_cluster(status: str | None, message: str | None) -> bool:
@@ -107,7 +113,14 @@ def runtime_versions() -> tuple[str, str]:
 
 def run_batch(job: SweepJob, variants: list[tuple[int, tuple[Any, ...]]]) -> list[dict[str, Any]]:
     """The rows of a batch of (variant number, axis values), in order. The Dask task."""
+    job = _on_this_machine(job)
     return [run_variant(job, index, values) for index, values in variants]
+
+
+def _on_this_machine(job: SweepJob) -> SweepJob:
+    """The job with scene_dir where this process finds its mesh files (meshes.local_scene_dir)."""
+    scene_dir = local_scene_dir(job.scene_dir, job.mesh_files)
+    return job if scene_dir == job.scene_dir else replace(job, scene_dir=scene_dir)
 
 
 def warm_up(job: SweepJob, values: tuple[Any, ...]) -> float:
@@ -117,7 +130,7 @@ def warm_up(job: SweepJob, values: tuple[Any, ...]) -> float:
     started = time.perf_counter()
     with contextlib.suppress(Exception):  # the variant's own row will say what is wrong with it
         text = variant_text(job.scene_data, tuple(zip(job.paths, values, strict=True)))
-        _run(replace(job, log_dir=None), -1, text, steps=2)
+        _run(replace(_on_this_machine(job), log_dir=None), -1, text, steps=2)
     return time.perf_counter() - started
 
 
@@ -138,6 +151,8 @@ def run_variant(job: SweepJob, index: int, values: tuple[Any, ...]) -> dict[str,
         row.update(status=STATUS_ERROR, message=f"{type(exc).__name__}: {exc}")
     if row["message"] and job.scene_file in row["message"]:
         row["message"] = _relocated(row["message"], job, text)
+    if row.get("log") and job.client_host and socket.gethostname() != job.client_host:
+        row["log"] = f"{socket.gethostname()}:{row['log']}"  # on this worker's disk, not the client's
     row["wall_s"] = time.perf_counter() - started
     return row
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import socket
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -154,7 +155,7 @@ def run_sweep(
         done = {v for v in tables.finished_variants(folder, retry_failed=retry_failed) if 0 <= v < total}
     pending = [(i, spec.variant_values(i)) for i in range(total) if i not in done]
     logs = spec.logs if logs is None else logs
-    job = _job(spec, folder / "logs" if logs and folder is not None else None)
+    job = sweep_job(spec, folder / "logs" if logs and folder is not None else None)
     batch = batch or spec.batch
     collected: list[dict[str, Any]] = []
     counts = {"ran": 0, "failed": 0}
@@ -227,18 +228,25 @@ def _run_serial(job: SweepJob, pending: list[tuple[int, tuple[Any, ...]]], keep:
         keep(rows)
 
 
-def _job(spec: SweepSpec, log_dir: Path | None) -> SweepJob:
+def sweep_job(spec: SweepSpec, log_dir: Path | None = None) -> SweepJob:
+    """What every variant needs (execute.SweepJob), with the bytes of the mesh files the variants may
+    load (meshes.py): the job a worker anywhere can run."""
     from rbcli.scene.yaml_located import parse_located_yaml
+    from rbcli.sweeps.meshes import mesh_names, read_mesh_files
 
-    scene_path = Path(spec.scene_path)
+    scene_dir = str(Path(spec.scene_path).resolve().parent)
+    scene_data = parse_located_yaml(spec.scene_text, spec.scene_path).value
+    meshes = mesh_names(scene_data, ((axis.path, axis.values) for axis in spec.axes))
     return SweepJob(
-        scene_data=parse_located_yaml(spec.scene_text, spec.scene_path).value,
+        scene_data=scene_data,
         scene_text=spec.scene_text,
         scene_file=spec.scene_path,
-        scene_dir=str(scene_path.resolve().parent),
+        scene_dir=scene_dir,
         paths=tuple(axis.path for axis in spec.axes),
         frames=spec.frames,
         log_dir=None if log_dir is None else str(log_dir.resolve()),
+        mesh_files=read_mesh_files(meshes, scene_dir),
+        client_host=socket.gethostname(),
     )
 
 

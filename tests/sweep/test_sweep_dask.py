@@ -21,8 +21,10 @@ from sweep_cases import rows_without_wall_time, spring_sweep_fixture  # noqa: F4
 from typer.testing import CliRunner
 
 from rbcli.cli.app import app
+from rbcli.sweeps import table as tables
+from rbcli.sweeps.dask_runner import run_on_dask
 from rbcli.sweeps.load import load_sweep
-from rbcli.sweeps.run import run_sweep
+from rbcli.sweeps.run import run_sweep, sweep_job
 
 ROOT = Path(__file__).resolve().parents[2]
 runner = CliRunner()
@@ -218,3 +220,37 @@ def test_a_worker_of_another_rbsim_version_is_refused_in_one_line(spring_sweep, 
     assert f"worker {worker} runs rbsim 9.9.9 with numba {numba.__version__}" in errors[0]
     assert f"this rbsim is {rbcli._version.__version__} with numba {numba.__version__}" in errors[0]
     assert not (tmp_path / "out" / "parts").exists()  # nothing ran
+
+
+MESH_SCENE = """\
+name: crate
+simulation: {dt: 0.001, steps: 500, integrator: split2}
+bodies:
+  - name: crate
+    mesh: {file: meshes/cube.obj, scale: 0.5}
+    spacing: 0.1
+    density: 500
+    angular_velocity: [0.5, 0.2, 3.0]
+"""
+
+
+def test_a_mesh_scene_runs_on_workers_that_cannot_see_the_mesh(tmp_path, client):
+    """The job carries the mesh file's bytes: with the scene's mesh folder gone from the machine the
+    workers run on (as on a cluster without a shared file system), every variant still loads the same
+    mesh and its row is bitwise the serial run's (made while the folder was there). Before, every row
+    was "invalid": the workers looked for the mesh at the client's absolute path."""
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "cube.obj").write_bytes((ROOT / "scenes" / "meshes" / "cube.obj").read_bytes())
+    (tmp_path / "crate.yaml").write_text(MESH_SCENE)
+    sweep = tmp_path / "crate.sweep.yaml"
+    sweep.write_text("scene: crate.yaml\naxes:\n  - path: bodies[0].angular_velocity[2]\n    values: [3.0, -2.0]\n")
+    spec = load_sweep(sweep)
+    serial = run_sweep(spec, scheduler="serial", use_folder=False)
+    assert set(serial.table.column("status").to_pylist()) == {"completed"}
+    job = sweep_job(spec)
+    (tmp_path / "meshes").rename(tmp_path / "elsewhere")  # the workers' machine has no such folder
+    rows: list[dict] = []
+    pending = [(i, spec.variant_values(i)) for i in range(spec.variant_count)]
+    run_on_dask(job, pending, rows.extend, scheduler=client, batch=1)
+    table = tables.merge(spec, tables.rows_table(rows), complete=True)
+    assert rows_without_wall_time(table) == rows_without_wall_time(serial.table)
