@@ -103,10 +103,8 @@ def sweep(
         ) from None
     except KeyboardInterrupt:
         progress.stop()
-        messages.status(
-            f"interrupted: {progress.finished} of {progress.total} variants finished and kept; "
-            "run the same command again to resume"
-        )
+        done = f"{progress.finished} of {progress.total} variants finished and kept" if progress.started else ""
+        messages.status(f"interrupted: {done or 'before any variant ran'}; run the same command again to resume")
         raise typer.Exit(signal_exit(received[0]) if received else ExitCode.SIGINT) from None
     progress.stop()
     from rbcli.sweeps.report import failures, status_counts
@@ -139,9 +137,10 @@ class _Progress:
         self.total = 0
         self.finished = 0
         self.failed = 0
+        self.started = False  # the workers are ready, the variants running
 
     def start(self, total: int, done: int, cluster: Any) -> None:
-        self.total, self.finished = total, done
+        self.total, self.finished, self.started = total, done, True
         if cluster is not None:
             dashboard = f"; dashboard: {cluster.dashboard}" if cluster.dashboard else ""
             messages.status(

@@ -131,12 +131,14 @@ def run_on_dask(
     own_client = not isinstance(scheduler, Client)
     futures: list[Any] = []
     info: ClusterInfo | None = None
+    interrupts = contextlib.ExitStack()
     try:
         if not own_client:
             client = scheduler
         elif scheduler:
             client = Client(scheduler, timeout="30s")
         else:
+            interrupts.enter_context(_workers_ignore_interrupts())  # until the cluster is closed
             cluster, client = _start_local_cluster(workers or default_workers(), host or LOCAL_HOST)
         if cluster is None:
             client.wait_for_workers(1, timeout=60)
@@ -169,6 +171,7 @@ def run_on_dask(
                 client.close()
             if cluster is not None:
                 cluster.close()
+            interrupts.close()
         if info is not None:  # the shut-down is reported apart, as the start-up is
             info.shutdown_s = time.perf_counter() - closing
 
@@ -221,6 +224,38 @@ def _signals_deferred() -> Iterator[None]:
             signal.signal(number, handler)
         if arrived:
             signal.raise_signal(arrived[0])
+
+
+@contextlib.contextmanager
+def _workers_ignore_interrupts() -> Iterator[None]:
+    """Worker processes spawned meanwhile (at the start, or when a nanny restarts one) ignore SIGINT.
+
+    A terminal's Ctrl-C goes to the whole process group: the workers of the local cluster got it too and
+    printed KeyboardInterrupt tracebacks (interrupted in their imports, or in a task), while this process,
+    which owns them, stops the sweep and closes them anyway. A handler cannot be inherited, but an ignored
+    signal is, across exec: multiprocessing starts the workers through a two-line shell script that
+    ignores SIGINT and executes the same Python (`multiprocessing.set_executable`, restored after)."""
+    import multiprocessing.spawn as spawn
+    import shlex
+    import shutil
+    import tempfile
+
+    shell = shutil.which("sh")
+    if os.name != "posix" or shell is None:  # pragma: no cover - the workers keep Python's own handler
+        yield
+        return
+    python = spawn.get_executable()
+    folder = tempfile.mkdtemp(prefix="rbsim-workers-")
+    wrapper = os.path.join(folder, "python")
+    with open(wrapper, "w", encoding="utf-8") as handle:
+        handle.write(f"#!{shell}\ntrap '' INT\nexec {shlex.quote(os.fsdecode(python))} \"$@\"\n")
+    os.chmod(wrapper, 0o755)
+    spawn.set_executable(wrapper)
+    try:
+        yield
+    finally:
+        spawn.set_executable(python)
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def _check_versions(client: Any, addresses: list[str]) -> None:

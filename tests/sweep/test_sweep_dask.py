@@ -6,6 +6,7 @@ imports Dask."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -254,3 +255,35 @@ def test_a_mesh_scene_runs_on_workers_that_cannot_see_the_mesh(tmp_path, client)
     run_on_dask(job, pending, rows.extend, scheduler=client, batch=1)
     table = tables.merge(spec, tables.rows_table(rows), complete=True)
     assert rows_without_wall_time(table) == rows_without_wall_time(serial.table)
+
+
+def _listening_addresses() -> set[str]:
+    """The addresses this process and its children listen on (TCP)."""
+    import psutil
+
+    me = psutil.Process()
+    found = set()
+    for process in (me, *me.children(recursive=True)):
+        with contextlib.suppress(psutil.Error):
+            found |= {c.laddr.ip for c in process.net_connections(kind="tcp") if c.status == psutil.CONN_LISTEN}
+    return found
+
+
+def test_the_local_cluster_listens_on_loopback_and_takes_in_workers_that_join(tmp_path):
+    """The sweep's own LocalCluster: every endpoint (scheduler, its HTTP server, nannies, workers) on
+    127.0.0.1, where Dask's dashboard default listened on every interface. A worker added while the
+    sweep runs is counted in: the slots the batches are sized for become 2, and the rows stay the
+    serial run's."""
+    sweep = _flip_sweep(tmp_path, samples=16, seed=6, dt=2e-4)
+    spec = load_sweep(sweep)
+    seen: dict[str, set[str]] = {}
+
+    def ready(total: int, done: int, cluster) -> None:  # noqa: ANN001 - ClusterInfo
+        seen["listening"] = _listening_addresses()
+        distributed.Client.current().cluster.scale(2)  # a second worker joins the running sweep
+
+    on_dask = run_sweep(spec, workers=1, use_folder=False, on_start=ready)
+    assert seen["listening"] and seen["listening"] <= {"127.0.0.1"}, seen
+    assert on_dask.cluster.workers == 2 and on_dask.cluster.slots == 2 and on_dask.cluster.joined == 1
+    serial = run_sweep(spec, scheduler="serial", use_folder=False)
+    assert rows_without_wall_time(on_dask.table) == rows_without_wall_time(serial.table)
