@@ -6,7 +6,6 @@ imports Dask."""
 
 from __future__ import annotations
 
-import contextlib
 import os
 import signal
 import subprocess
@@ -31,30 +30,27 @@ ROOT = Path(__file__).resolve().parents[2]
 runner = CliRunner()
 
 
-# The test cluster's workers: 600 MiB each, checked every 50 ms (a worker past 95 % of it is killed by its
+# The memory test's workers: 600 MiB each, checked every 50 ms (a worker past 95 % of it is killed by its
 # nanny and restarted), and a task given up after killing its workers twice (allowed-failures 1), so
 # the memory-exhausting variant below costs two short tries instead of Dask's four.
 WORKER_MEMORY = 600 * 2**20
-CLUSTER_CONFIG = {
+MEMORY_CONFIG = {
     "distributed.worker.memory.monitor-interval": "50ms",
     "distributed.worker.memory.terminate": 0.95,
     "distributed.scheduler.allowed-failures": 1,
 }
 
 
+def _cluster(**options) -> distributed.LocalCluster:  # noqa: ANN003 - LocalCluster's
+    """Two single-threaded worker processes, as `rbsim sweep` starts on a 2-core machine, on 127.0.0.1."""
+    return distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address="127.0.0.1:0", **options
+    )
+
+
 @pytest.fixture(scope="module")
 def client():
-    """A LocalCluster of two single-threaded worker processes, as `rbsim sweep` starts on a 2-core machine,
-    on 127.0.0.1 only."""
-    with dask.config.set(CLUSTER_CONFIG):
-        cluster = distributed.LocalCluster(
-            n_workers=2,
-            threads_per_worker=1,
-            processes=True,
-            host="127.0.0.1",
-            dashboard_address="127.0.0.1:0",
-            memory_limit=WORKER_MEMORY,
-        )
+    cluster = _cluster()
     with distributed.Client(cluster) as c:
         yield c
     cluster.close()
@@ -170,7 +166,7 @@ bodies:
 """
 
 
-def test_a_variant_that_exhausts_its_workers_memory_is_recorded_crashed_and_the_rest_complete(tmp_path, client):
+def test_a_variant_that_exhausts_its_workers_memory_is_recorded_crashed_and_the_rest_complete(tmp_path):
     """64 bodies recorded every step (`record.frames: scene`) keep ~10 kB a frame in memory: 200 steps
     are 2 MB, 150,000 steps would be 1.5 GB, past the workers' 600 MiB, so the nanny kills that variant's
     worker each time it runs it. After allowed-failures + 1 = 2 tries it is a "crashed" row saying so;
@@ -182,8 +178,13 @@ def test_a_variant_that_exhausts_its_workers_memory_is_recorded_crashed_and_the_
         "  - path: simulation.steps\n    values: [100, 150000, 200, 250]\n"
     )
     out = tmp_path / "out"
-    address = client.cluster.scheduler_address
-    result = runner.invoke(app, ["sweep", str(sweep), "--scheduler", address, "--batch", "1", "-o", str(out)])
+    with dask.config.set(MEMORY_CONFIG):
+        cluster = _cluster(memory_limit=WORKER_MEMORY)  # its own: no later test waits for its restarts
+    try:
+        command = ["sweep", str(sweep), "--scheduler", cluster.scheduler_address, "--batch", "1", "-o", str(out)]
+        result = runner.invoke(app, command)
+    finally:
+        cluster.close()
     assert result.exit_code == 4, result.output  # not every variant has a result
     assert "1 of 4 variants have no result of their own" in result.output
     rows = {row["variant"]: row for row in pq.read_table(out / "results.parquet").to_pylist()}
@@ -193,7 +194,6 @@ def test_a_variant_that_exhausts_its_workers_memory_is_recorded_crashed_and_the_
     assert "KilledWorker" in rows[1]["message"]
     for variant, steps in ((0, 100), (2, 200), (3, 250)):
         assert rows[variant]["status"] == "completed" and rows[variant]["steps"] == steps
-    client.wait_for_workers(2, timeout=60)
     again = run_sweep(load_sweep(sweep), scheduler="serial", output=out)
     assert again.ran == 0 and again.crashed == 1 and not again.all_finished  # the crash is its own result
 
@@ -255,35 +255,3 @@ def test_a_mesh_scene_runs_on_workers_that_cannot_see_the_mesh(tmp_path, client)
     run_on_dask(job, pending, rows.extend, scheduler=client, batch=1)
     table = tables.merge(spec, tables.rows_table(rows), complete=True)
     assert rows_without_wall_time(table) == rows_without_wall_time(serial.table)
-
-
-def _listening_addresses() -> set[str]:
-    """The addresses this process and its children listen on (TCP)."""
-    import psutil
-
-    me = psutil.Process()
-    found = set()
-    for process in (me, *me.children(recursive=True)):
-        with contextlib.suppress(psutil.Error):
-            found |= {c.laddr.ip for c in process.net_connections(kind="tcp") if c.status == psutil.CONN_LISTEN}
-    return found
-
-
-def test_the_local_cluster_listens_on_loopback_and_takes_in_workers_that_join(tmp_path):
-    """The sweep's own LocalCluster: every endpoint (scheduler, its HTTP server, nannies, workers) on
-    127.0.0.1, where Dask's dashboard default listened on every interface. A worker added while the
-    sweep runs is counted in: the slots the batches are sized for become 2, and the rows stay the
-    serial run's."""
-    sweep = _flip_sweep(tmp_path, samples=16, seed=6, dt=2e-4)
-    spec = load_sweep(sweep)
-    seen: dict[str, set[str]] = {}
-
-    def ready(total: int, done: int, cluster) -> None:  # noqa: ANN001 - ClusterInfo
-        seen["listening"] = _listening_addresses()
-        distributed.Client.current().cluster.scale(2)  # a second worker joins the running sweep
-
-    on_dask = run_sweep(spec, workers=1, use_folder=False, on_start=ready)
-    assert seen["listening"] and seen["listening"] <= {"127.0.0.1"}, seen
-    assert on_dask.cluster.workers == 2 and on_dask.cluster.slots == 2 and on_dask.cluster.joined == 1
-    serial = run_sweep(spec, scheduler="serial", use_folder=False)
-    assert rows_without_wall_time(on_dask.table) == rows_without_wall_time(serial.table)

@@ -1,11 +1,14 @@
-"""A stop at the worst moment: Ctrl-C (SIGINT to the whole process group, as a terminal sends it) while
+"""The local cluster `rbsim sweep` starts itself (no other Client in this module, so `Client.current()`
+is the sweep's). A stop at the worst moment: Ctrl-C (SIGINT to the whole process group, as a terminal sends it) while
 `rbsim sweep`'s local cluster is starting and its worker processes are still importing. It ends with
 one line, exit status 130, no traceback from rbsim, Dask or the workers, and no process left behind.
 (Before: the workers printed KeyboardInterrupt tracebacks from their imports and Dask's atexit close
-another.)"""
+another.) Every endpoint on 127.0.0.1; a worker that joins is counted in; the docs' Python example runs
+as a script."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -13,7 +16,12 @@ import sys
 import time
 from pathlib import Path
 
+import distributed
 import psutil
+from sweep_cases import rows_without_wall_time
+
+from rbcli.sweeps.load import load_sweep
+from rbcli.sweeps.run import run_sweep
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -68,3 +76,42 @@ def test_the_python_example_of_the_docs_runs_as_a_script(tmp_path):
     out = subprocess.run([sys.executable, str(script)], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-3000:]
     assert out.stdout.strip() == "8 variants: {'completed'}", out.stdout
+
+
+def _listening_addresses() -> set[str]:
+    """The addresses this process and its children listen on (TCP)."""
+    me = psutil.Process()
+    found = set()
+    for process in (me, *me.children(recursive=True)):
+        with contextlib.suppress(psutil.Error):
+            found |= {c.laddr.ip for c in process.net_connections(kind="tcp") if c.status == psutil.CONN_LISTEN}
+    return found
+
+
+def test_the_local_cluster_listens_on_loopback_and_takes_in_workers_that_join(tmp_path):
+    """The sweep's own LocalCluster: every endpoint (scheduler, its HTTP server, nannies, workers) on
+    127.0.0.1, where Dask's dashboard default listened on every interface. A worker added while the
+    sweep runs is counted in: the slots the batches are sized for become 2, and the rows stay the
+    serial run's."""
+    scene = (ROOT / "scenes" / "verification" / "intermediate_axis.yaml").resolve()
+    sweep = tmp_path / "flip.sweep.yaml"
+    # 16 variants of 100,000 split2 steps
+    sweep.write_text(
+        f"scene: {scene}\nsamples: 16\nseed: 6\naxes:\n  - path: bodies[0].angular_momentum\n"
+        "    random: {distribution: normal, mean: [0.01, 10.0, 0.0], std: [0.01, 0.0, 0.01]}\n"
+        "  - path: simulation.dt\n    values: [0.0002]\n"
+    )
+    spec = load_sweep(sweep)
+    seen: dict[str, set[str]] = {}
+
+    def ready(total: int, done: int, cluster) -> None:  # noqa: ANN001 - ClusterInfo
+        seen["listening"] = _listening_addresses()
+        client = distributed.Client.current()  # the sweep's own: this module makes no other
+        client.cluster.scale(2)  # a second worker joins, after the sweep counted its slots
+        client.wait_for_workers(2, timeout=60)
+
+    on_dask = run_sweep(spec, workers=1, use_folder=False, on_start=ready)
+    assert seen["listening"] and seen["listening"] <= {"127.0.0.1"}, seen
+    assert on_dask.cluster.workers == 2 and on_dask.cluster.slots == 2 and on_dask.cluster.joined == 1
+    serial = run_sweep(spec, scheduler="serial", use_folder=False)
+    assert rows_without_wall_time(on_dask.table) == rows_without_wall_time(serial.table)
