@@ -14,6 +14,7 @@ the variant: the same row (wall time aside) whether it ran alone, in a batch, on
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import shutil
@@ -150,12 +151,12 @@ def run_sweep(
     folder = _folder(spec, output) if use_folder else None
     total = spec.variant_count
     done: set[int] = set()
-    if folder is not None:
-        _claim(folder, spec, fresh)
-        done = {v for v in tables.finished_variants(folder, retry_failed=retry_failed) if 0 <= v < total}
-    pending = [(i, spec.variant_values(i)) for i in range(total) if i not in done]
     logs = spec.logs if logs is None else logs
     job = sweep_job(spec, folder / "logs" if logs and folder is not None else None)
+    if folder is not None:
+        _claim(folder, spec, fresh, _fingerprint(spec, job))
+        done = {v for v in tables.finished_variants(folder, retry_failed=retry_failed) if 0 <= v < total}
+    pending = [(i, spec.variant_values(i)) for i in range(total) if i not in done]
     batch = batch or spec.batch
     collected: list[dict[str, Any]] = []
     counts = {"ran": 0, "failed": 0}
@@ -260,7 +261,16 @@ def _folder(spec: SweepSpec, output: str | Path | None) -> Path:
     return DEFAULT_OUTPUT_DIR / safe_file_stem(spec.name)
 
 
-def _claim(folder: Path, spec: SweepSpec, fresh: bool) -> None:
+def _fingerprint(spec: SweepSpec, job: SweepJob) -> str:
+    """The sweep's fingerprint, and the mesh files' hashes when it has any: a folder whose rows came from
+    other mesh bytes belongs to another sweep (the same as the spec's for a sweep without meshes)."""
+    if not job.mesh_files:
+        return spec.fingerprint
+    meshes = "".join(f"\n{name} {digest}" for name, digest, _ in job.mesh_files)
+    return hashlib.sha256((spec.fingerprint + meshes).encode()).hexdigest()
+
+
+def _claim(folder: Path, spec: SweepSpec, fresh: bool, fingerprint: str) -> None:
     """Make `folder` this sweep's: refuse another sweep's results unless `fresh` (which removes them)."""
     from rbcli.sweeps.table import MANIFEST_FILE, PARTS_DIR, RESULTS_FILE
 
@@ -275,9 +285,10 @@ def _claim(folder: Path, spec: SweepSpec, fresh: bool) -> None:
             owner = json.loads(manifest.read_text(encoding="utf-8")).get("fingerprint")
         except (OSError, ValueError):
             owner = None
-        if owner != spec.fingerprint:
+        if owner != fingerprint:
             raise SweepOutputError(
-                f"{folder} holds the results of another sweep (its sweep file or base scene has changed since); "
+                f"{folder} holds the results of another sweep (its sweep file, base scene or mesh files have "
+                "changed since); "
                 "use --fresh to discard them, or another --output folder"
             )
     elif (folder / PARTS_DIR).is_dir() and any((folder / PARTS_DIR).iterdir()):
@@ -285,7 +296,7 @@ def _claim(folder: Path, spec: SweepSpec, fresh: bool) -> None:
     try:
         folder.mkdir(parents=True, exist_ok=True)
         temporary = manifest.with_name(f".{MANIFEST_FILE}.{os.getpid()}.tmp")
-        record = {"fingerprint": spec.fingerprint, "name": spec.name, "variants": spec.variant_count}
+        record = {"fingerprint": fingerprint, "name": spec.name, "variants": spec.variant_count}
         temporary.write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
         os.replace(temporary, manifest)
     except OSError as exc:

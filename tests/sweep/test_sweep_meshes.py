@@ -15,7 +15,7 @@ from sweep_cases import spring_sweep_fixture  # noqa: F401 - a fixture
 from rbcli.sweeps.execute import run_batch
 from rbcli.sweeps.load import load_sweep
 from rbcli.sweeps.meshes import local_scene_dir, mesh_names, read_mesh_files
-from rbcli.sweeps.run import sweep_job
+from rbcli.sweeps.run import SweepOutputError, run_sweep, sweep_job
 
 
 def test_the_shipped_files_are_every_relative_mesh_a_variant_can_name():
@@ -62,3 +62,25 @@ def test_a_log_written_on_another_machine_is_named_with_its_host(spring_sweep, t
     assert row["log"] == f"{socket.gethostname()}:{(tmp_path / 'logs' / 'variant-000000.mcap').resolve()}"
     (same,) = run_batch(replace(job, client_host=socket.gethostname()), [(0, spec.variant_values(0))])
     assert same["log"] == str((tmp_path / "logs" / "variant-000000.mcap").resolve())
+
+
+def test_a_folder_of_rows_from_other_mesh_bytes_is_refused(tmp_path):
+    """The folder's fingerprint holds the mesh files' hashes: after the mesh changes, resuming would mix
+    rows of two different bodies, so the folder is refused (as for a changed scene) unless fresh."""
+    root = Path(__file__).resolve().parents[2]
+    (tmp_path / "meshes").mkdir()
+    cube = (root / "scenes" / "meshes" / "cube.obj").read_bytes()
+    (tmp_path / "meshes" / "cube.obj").write_bytes(cube)
+    (tmp_path / "crate.yaml").write_text(
+        "name: crate\nsimulation: {dt: 0.001, steps: 50, integrator: split2}\nbodies:\n"
+        "  - {name: crate, mesh: {file: meshes/cube.obj, scale: 0.5}, spacing: 0.1, density: 500}\n"
+    )
+    sweep = tmp_path / "crate.sweep.yaml"
+    sweep.write_text("scene: crate.yaml\naxes:\n  - path: bodies[0].velocity\n    values: [[0, 0, 1], [1, 0, 0]]\n")
+    spec = load_sweep(sweep)
+    assert run_sweep(spec, scheduler="serial", output=tmp_path / "out").ran == 2
+    assert run_sweep(spec, scheduler="serial", output=tmp_path / "out").ran == 0  # the same bytes: resumes
+    (tmp_path / "meshes" / "cube.obj").write_bytes(cube.replace(b"1", b"2", 1))
+    with pytest.raises(SweepOutputError, match="mesh files have changed"):
+        run_sweep(spec, scheduler="serial", output=tmp_path / "out")
+    assert run_sweep(spec, scheduler="serial", output=tmp_path / "out", fresh=True).ran == 2
