@@ -30,7 +30,7 @@ from rbcli.physics.integrators import INTEGRATORS
 from rbcli.physics.rotation import quat_to_matrix
 from rbcli.physics.step import STATUS_DIVERGED, empty_buffers
 from rbcli.record.memory_sink import SinkMemory
-from rbcli.runner.loop import run
+from rbcli.runner.simulation import run
 from rbcli.scene.spec import BodySpec, RecordSpec, SceneSpec, SimulationSpec
 
 FLIP, GENERIC, ROD, FAST, STEADY = (

@@ -325,7 +325,7 @@ def _stop_signals() -> Iterator[_Stops]:
 
 def _warm_up_kernels(compiled, quiet: bool) -> None:  # noqa: ANN001
     """Compile (or load from cache) the step kernels, saying so if it takes noticeable time."""
-    from rbcli.runner.loop import warm_up
+    from rbcli.runner.simulation import warm_up
 
     timer = threading.Timer(0.5, lambda: messages.status("compiling kernels (first run only)…") if not quiet else None)
     timer.start()

@@ -96,33 +96,6 @@ class _InterruptFlag:
             signal.signal(signal.SIGINT, self._previous)
 
 
-def warm_up(compiled: CompiledScene) -> None:
-    """Compile or load from cache the chunk kernel for this scene's integrator and force types."""
-    from rbcli.runner.simulation import Simulation, SimulationDiverged
-
-    try:
-        Simulation(compiled).step(0)
-    except SimulationDiverged:
-        # step(0) checks the initial state: one out of bounds (a Simulation built in code) is the run's to
-        # report, as divergence at step 0 (exit 3); here it escaped `rbsim run` as a traceback
-        pass
-
-
-def run(
-    compiled: CompiledScene,
-    sinks: Sequence[Sink],
-    *,
-    progress: ProgressCallback | None = None,
-    threaded: bool = True,
-) -> RunSummary:
-    """Integrate the compiled scene from its initial state, streaming frames to every sink; always
-    closes the sinks. threaded: write the recorded blocks in a background thread (runner.recorder),
-    overlapping the integration; False writes them in this thread. The files are the same either way."""
-    from rbcli.runner.simulation import Simulation
-
-    return Simulation(compiled).run(sinks=sinks, progress=progress, threaded=threaded)
-
-
 def run_simulation(
     sim: Simulation,
     sinks: Sequence[Sink],

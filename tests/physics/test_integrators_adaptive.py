@@ -18,7 +18,7 @@ from rbcli.physics.frames import user_orientation
 from rbcli.physics.integrators import get_integrator
 from rbcli.physics.step import STATUS_FULL, STATUS_OK, empty_buffers
 from rbcli.record.memory_sink import SinkMemory
-from rbcli.runner.loop import run
+from rbcli.runner.simulation import run
 
 FLIP = ((1.0, 2.0, 3.0), (0.01, 5.0, 0.0))
 GENERIC = ((1.0, 2.0, 3.0), (1.0, 1.0, 2.0))
