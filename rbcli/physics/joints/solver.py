@@ -89,6 +89,14 @@ class SolverWork(NamedTuple):
     loop_inv_mass: np.ndarray  # (loop_body_count,): copies of the loop bodies' W (solve_rows gets no model)
     loop_inv_inertia: np.ndarray  # (loop_body_count, 3, 3)
     entry_jac: np.ndarray  # (entry_count, 6, 6): rows of entry_joint[e] at its loop body (copied by factor)
+    # iterative refinement, only with loops (sizes 0 without): copies of the rows and W, A lambda's scratch
+    refine_jac_a: np.ndarray  # (row_total, 6)
+    refine_jac_b: np.ndarray  # (row_total, 6)
+    refine_inv_mass: np.ndarray  # (body_count,)
+    refine_inv_inertia: np.ndarray  # (body_count, 3, 3)
+    refine_body: np.ndarray  # (body_count, 6): G^T lambda, then W G^T lambda
+    refine_residual: np.ndarray  # (row_total,): rhs - A lambda
+    refine_correction: np.ndarray  # (row_total,)
 
 
 def joint_graph(body_a: np.ndarray, body_b: np.ndarray, body_ground: np.ndarray, row_count: np.ndarray) -> JointGraph:
@@ -100,6 +108,8 @@ def make_solver_work(graph: JointGraph) -> SolverWork:
     """SolverWork sized for `graph`: O(nodes + rows + loop_rows^2) floats."""
     nodes, joints = graph.node_kind.shape[0], graph.joint_node.shape[0]
     k, loop_bodies = graph.loop_joint.shape[0], graph.loop_body.shape[0]
+    rows_refined = int(graph.row_total[0]) if k else 0
+    bodies_refined = graph.body_ground.shape[0] if k else 0
     return SolverWork(
         node_D=np.zeros((nodes, 6, 6)),
         node_inv_pivot=np.zeros((nodes, 6)),
@@ -120,6 +130,13 @@ def make_solver_work(graph: JointGraph) -> SolverWork:
         loop_inv_mass=np.zeros(loop_bodies),
         loop_inv_inertia=np.zeros((loop_bodies, 3, 3)),
         entry_jac=np.zeros((graph.entry_joint.shape[0], 6, 6)),
+        refine_jac_a=np.zeros((rows_refined, 6)),
+        refine_jac_b=np.zeros((rows_refined, 6)),
+        refine_inv_mass=np.zeros(bodies_refined),
+        refine_inv_inertia=np.zeros((bodies_refined, 3, 3)),
+        refine_body=np.zeros((bodies_refined, 6)),
+        refine_residual=np.zeros(rows_refined),
+        refine_correction=np.zeros(rows_refined),
     )
 
 
@@ -492,6 +509,15 @@ def factor_rows(graph, work, row_start, row_count, body_a, body_b, jac_a, jac_b,
     if k == 0:
         return count
     _factor_loops(graph, work, row_start, row_count, body_a, jac_a, jac_b, inv_mass, inv_inertia_world)
+    for r in range(work.refine_jac_a.shape[0]):
+        for c in range(6):
+            work.refine_jac_a[r, c] = jac_a[r, c]
+            work.refine_jac_b[r, c] = jac_b[r, c]
+    for b in range(work.refine_inv_mass.shape[0]):
+        work.refine_inv_mass[b] = inv_mass[b]
+        for r in range(3):
+            for c in range(3):
+                work.refine_inv_inertia[b, r, c] = inv_inertia_world[b, r, c]
     for t in range(work.loop_rank[0], k):
         row = work.loop_perm[t]
         work.redundant_row[count] = row_start[graph.loop_joint[row]] + graph.loop_local[row]
@@ -514,8 +540,58 @@ def _tree_rows_in(graph, work, row_start, row_count, rhs) -> None:  # noqa: ANN0
 
 
 @numba.njit(**STEP_KERNEL)
+def _residual(graph, work, row_start, row_count, body_a, body_b, rhs, lam) -> None:  # noqa: ANN001
+    """work.refine_residual = rhs - G W G^T lam, from the rows copied by factor_rows: O(rows + bodies)."""
+    jac_a, jac_b, impulse = work.refine_jac_a, work.refine_jac_b, work.refine_body
+    for b in range(impulse.shape[0]):
+        for c in range(6):
+            impulse[b, c] = 0.0
+    for j in range(row_start.shape[0]):
+        for side in range(2):
+            body = body_a[j] if side == 0 else body_b[j]
+            if _moving(graph, body):
+                jac = jac_a if side == 0 else jac_b
+                for r in range(row_start[j], row_start[j] + row_count[j]):
+                    for c in range(6):
+                        impulse[body, c] += jac[r, c] * lam[r]
+    for b in range(impulse.shape[0]):  # W G^T lam, in place (angular part read whole first)
+        a0, a1, a2 = impulse[b, 3], impulse[b, 4], impulse[b, 5]
+        Iw = work.refine_inv_inertia[b]
+        for c in range(3):
+            impulse[b, c] *= work.refine_inv_mass[b]
+            impulse[b, 3 + c] = Iw[c, 0] * a0 + Iw[c, 1] * a1 + Iw[c, 2] * a2
+    for j in range(row_start.shape[0]):
+        for r in range(row_start[j], row_start[j] + row_count[j]):
+            v = rhs[r]
+            for side in range(2):
+                body = body_a[j] if side == 0 else body_b[j]
+                if _moving(graph, body):
+                    jac = jac_a if side == 0 else jac_b
+                    v -= _dot6(jac[r], impulse[body])
+            work.refine_residual[r] = v
+
+
+@numba.njit(**STEP_KERNEL)
 def solve_rows(graph, work, row_start, row_count, body_a, body_b, rhs, out) -> None:  # noqa: ANN001
-    """out = A^-1 rhs (shape (row_total,)) after factor_rows; redundant rows get 0. out may not alias rhs."""
+    """out = A^-1 rhs (shape (row_total,), rows 0 .. row_total - 1) after factor_rows; redundant rows get 0.
+
+    With loops, one step of iterative refinement follows (out += A^-1 (rhs - A out)): the loop rows' Schur
+    complement is formed from full tree solves, so its error is ~ eps cond(A_TT) |A| rather than the
+    eps |A| of a Cholesky-type form; the refinement's residual, computed from the rows themselves, brings
+    the result back to the accuracy of a backward-stable solve (docs/joint_solver.md). out may not alias rhs.
+    """
+    _solve_once(graph, work, row_start, row_count, rhs, out)
+    if graph.loop_joint.shape[0] == 0:
+        return
+    _residual(graph, work, row_start, row_count, body_a, body_b, rhs, out)
+    _solve_once(graph, work, row_start, row_count, work.refine_residual, work.refine_correction)
+    for r in range(out.shape[0]):
+        out[r] += work.refine_correction[r]
+
+
+@numba.njit(**STEP_KERNEL)
+def _solve_once(graph, work, row_start, row_count, rhs, out) -> None:  # noqa: ANN001
+    """out = A^-1 rhs from the factor: a tree solve, and with loops the Schur step and a second tree solve."""
     off = graph.node_offset
     _tree_rows_in(graph, work, row_start, row_count, rhs)
     _tree_solve(graph, work)
