@@ -1,0 +1,256 @@
+"""Jointed chains: rbsim's multiplier solver against MuJoCo 4.0 (Euler), measured in the same run.
+
+    python benchmarks/bench_joints.py [--quick] [--steps N]
+
+The issue's chains (issue 27): hinge or ball chains of 10, 100, 400 (and, for rbsim, 10,000) capsule
+links, 0.1 m long (the segment between the two joint anchors), radius 0.01 m, density 1000 kg/m^3, hinge
+axes parallel (world y), released horizontal (along world x, the first link hinged to the world at the
+origin) under gravity -9.81 m/s^2 z, dt 1e-3, no contact.
+
+MuJoCo: the chain as nested bodies in an MJCF generated here (capsule geoms with contype = conaffinity
+= 0, one hinge or ball joint per link), integrator Euler, timed as `mj_step(m, d, nstep=steps)` from the
+released pose. Its coordinates are the joint angles, so its constraint error is 0 by construction.
+
+rbsim: for now the solver alone, as the RATTLE-type step will use it: per step one `factor_rows` and three
+`solve_rows` (the simplified Newton of the position projection and the velocity projection) on the rows of
+the chain in a sagging pose (link i turned by 0.3 sin(pi i / n) about y, so the rows are not axis-aligned),
+in a compiled loop. The constraint error beside each rate is the solve's relative residual
+|A lambda - rhs| / |rhs| (A = G W G^T applied from the rows, not from the factor). `full_step_chain` is the
+hook for the whole split2 step once the joints integration (scene format, stages) merges: it returns None
+until then and the table says so.
+
+Rates are link-steps per second (links x steps / wall second), best of `--repeats` (a shared machine is
+noisy: the median/best spread is printed), and the load average is printed beside them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numba
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from rbcli.physics.joints.solver import factor_rows, joint_graph, make_solver_work, solve_rows  # noqa: E402
+
+LINK_LENGTH = 0.1  # [m]
+LINK_RADIUS = 0.01  # [m]
+DENSITY = 1000.0  # [kg/m^3]
+DT = 1e-3  # [s]
+SIZES = (10, 100, 400)
+RBSIM_SIZES = (10, 100, 400, 10_000)
+# MuJoCo 4.0 Euler as the issue measured it (link-steps/s), and the issue's targets (split2 / MuJoCo)
+ISSUE_MUJOCO = {("hinge", 10): 2.3e6, ("hinge", 100): 1.3e6, ("hinge", 400): 1.3e5,
+                ("ball", 10): 1.1e6, ("ball", 100): 9.0e4, ("ball", 400): 5.1e3}  # fmt: skip
+TARGET_RATIO = {10: 2.0, 100: 5.0, 400: 20.0}
+TARGET_FLAT = 1.5  # cost per link from 10 to 10,000 links, at most this ratio
+
+
+def capsule_mass_properties() -> tuple[float, float, float]:
+    """(mass [kg], axial moment, transverse moment about the centre [kg m^2]) of a capsule: a cylinder of
+    length l and radius r plus two hemispheres (each of mass m_h = 2/3 pi r^3 rho, axial 2/5 m_h r^2,
+    transverse 2/5 m_h r^2 + m_h (l^2 / 4 + 3 l r / 8) about the centre: the parallel-axis theorem from the
+    hemisphere's centre of mass 3 r / 8 from its flat face)."""
+    r, l = LINK_RADIUS, LINK_LENGTH
+    m_c, m_h = DENSITY * math.pi * r * r * l, DENSITY * 2.0 / 3.0 * math.pi * r**3
+    axial = m_c * r * r / 2 + 2 * (0.4 * m_h * r * r)
+    transverse = m_c * (3 * r * r + l * l) / 12 + 2 * (0.4 * m_h * r * r - m_h * (3 * r / 8) ** 2)
+    transverse += 2 * m_h * (l / 2 + 3 * r / 8) ** 2
+    return m_c + 2 * m_h, axial, transverse
+
+
+def chain_rows(links: int, joint: str, sag: float = 0.3) -> dict[str, np.ndarray]:
+    """The chain's bodies, joints and rows in a sagging pose: anchors p_i, link i from p_i to p_i+1 turned by
+    theta_i = sag sin(pi i / n) about y; joint i connects link i - 1 (the world for i = 0) and link i at p_i.
+    Rows as tests/physics/test_joint_solver.py's hinge_rows (anchor velocities equal; a hinge adds w_a - w_b
+    normal to the axis)."""
+    theta = sag * np.sin(np.pi * np.arange(links) / links)
+    direction = np.stack([np.cos(theta), np.zeros(links), -np.sin(theta)], axis=1)
+    anchor = np.concatenate([np.zeros((1, 3)), np.cumsum(LINK_LENGTH * direction, axis=0)])
+    center = anchor[:-1] + 0.5 * LINK_LENGTH * direction
+    mass, axial, transverse = capsule_mass_properties()
+    c, s = np.cos(theta), np.sin(theta)
+    rotation = np.zeros((links, 3, 3))  # world from body (body x = the link's axis), about y by theta
+    rotation[:, 0, 0], rotation[:, 0, 2], rotation[:, 1, 1], rotation[:, 2, 0], rotation[:, 2, 2] = c, s, 1, -s, c
+    inv_inertia = rotation @ np.diag([1 / axial, 1 / transverse, 1 / transverse]) @ rotation.transpose(0, 2, 1)
+    per_joint = 5 if joint == "hinge" else 3
+    r_a = anchor[:-1] - np.concatenate([np.zeros((1, 3)), center[:-1]])  # anchor from body a (unused at the world)
+    r_b = anchor[:-1] - center
+    eye = np.eye(3)
+    jac_a, jac_b = np.zeros((links, per_joint, 6)), np.zeros((links, per_joint, 6))
+    jac_a[:, :3, :3], jac_b[:, :3, :3] = eye, -eye
+    jac_a[:, :3, 3:] = np.cross(r_a[:, None, :], eye[None, :, :])  # row e_k: (e_k, r x e_k)
+    jac_b[:, :3, 3:] = -np.cross(r_b[:, None, :], eye[None, :, :])
+    if joint == "hinge":  # axis y: w_a - w_b has no x or z component
+        jac_a[:, 3, 3], jac_a[:, 4, 5], jac_b[:, 3, 3], jac_b[:, 4, 5] = 1.0, 1.0, -1.0, -1.0
+    return {
+        "body_a": np.arange(-1, links - 1, dtype=np.int64),
+        "body_b": np.arange(links, dtype=np.int64),
+        "ground": np.zeros(links, dtype=bool),
+        "row_count": np.full(links, per_joint, dtype=np.int64),
+        "row_start": per_joint * np.arange(links, dtype=np.int64),
+        "jac_a": np.ascontiguousarray(jac_a.reshape(-1, 6)),
+        "jac_b": np.ascontiguousarray(jac_b.reshape(-1, 6)),
+        "inv_mass": np.full(links, 1.0 / mass),
+        "inv_inertia": np.ascontiguousarray(inv_inertia),
+    }
+
+
+def apply_A(s: dict[str, np.ndarray], lam: np.ndarray) -> np.ndarray:
+    """A lambda = G W G^T lambda from the rows (numpy, vectorised over rows): the residual's reference."""
+    n, rows = s["ground"].shape[0], np.repeat(np.arange(s["body_a"].shape[0]), s["row_count"])
+    impulse = np.zeros((n, 6))
+    sides = [(s["body_a"][rows], s["jac_a"]), (s["body_b"][rows], s["jac_b"])]
+    for body, jac in sides:
+        moving = body >= 0
+        np.add.at(impulse, body[moving], jac[moving] * lam[moving, None])
+    velocity = np.concatenate(
+        [impulse[:, :3] * s["inv_mass"][:, None], np.einsum("bij,bj->bi", s["inv_inertia"], impulse[:, 3:])], axis=1
+    )
+    out = np.zeros_like(lam)
+    for body, jac in sides:
+        moving = body >= 0
+        out[moving] += np.einsum("ri,ri->r", jac[moving], velocity[body[moving]])
+    return out
+
+
+@numba.njit(cache=True)
+def _solver_steps(
+    steps, graph, work, row_start, row_count, body_a, body_b, jac_a, jac_b, inv_mass, inv_inertia, rhs, out
+):  # noqa: ANN001, ANN202, E501
+    """`steps` rounds of one factor and three solves (the step's use of the solver), in compiled code."""
+    redundant = 0
+    for _ in range(steps):
+        redundant += factor_rows(graph, work, row_start, row_count, body_a, body_b, jac_a, jac_b, inv_mass, inv_inertia)
+        for _ in range(3):
+            solve_rows(graph, work, row_start, row_count, body_a, body_b, rhs, out)
+    return redundant
+
+
+@numba.njit(cache=True)
+def _factor_steps(steps, graph, work, row_start, row_count, body_a, body_b, jac_a, jac_b, inv_mass, inv_inertia):  # noqa: ANN001, ANN202, E501
+    """`steps` factors alone: the factor's share of a step."""
+    redundant = 0
+    for _ in range(steps):
+        redundant += factor_rows(graph, work, row_start, row_count, body_a, body_b, jac_a, jac_b, inv_mass, inv_inertia)
+    return redundant
+
+
+def time_solver(links: int, joint: str, steps: int, repeats: int) -> tuple[list[float], float, float]:
+    """(seconds per run of `steps` rounds for each repeat, relative residual, factor share of the time)."""
+    s = chain_rows(links, joint)
+    graph = joint_graph(s["body_a"], s["body_b"], s["ground"], s["row_count"])
+    work = make_solver_work(graph)
+    rhs = np.random.default_rng(links).normal(size=s["jac_a"].shape[0])
+    out = np.zeros_like(rhs)
+    args = (graph, work, s["row_start"], s["row_count"], s["body_a"], s["body_b"], s["jac_a"], s["jac_b"])
+    args = (*args, s["inv_mass"], s["inv_inertia"], rhs, out)
+    assert _solver_steps(1, *args) == 0
+    times = []
+    for _ in range(repeats):
+        started = time.perf_counter()
+        _solver_steps(steps, *args)
+        times.append(time.perf_counter() - started)
+    residual = float(np.linalg.norm(apply_A(s, out) - rhs) / np.linalg.norm(rhs))
+    _factor_steps(1, *args[:10])
+    factor_times = []
+    for _ in range(repeats):
+        started = time.perf_counter()
+        _factor_steps(steps, *args[:10])
+        factor_times.append(time.perf_counter() - started)
+    return times, residual, min(factor_times) / min(times)
+
+
+def mujoco_xml(links: int, joint: str) -> str:
+    """The chain as MJCF: nested bodies, a capsule from the joint to the next anchor, no contact."""
+    body = ""
+    for _ in range(links):
+        body = (
+            f'<body pos="{LINK_LENGTH} 0 0">'
+            f'<joint type="{joint}" pos="0 0 0" axis="0 1 0" damping="0"/>'
+            f'<geom type="capsule" fromto="0 0 0 {LINK_LENGTH} 0 0" size="{LINK_RADIUS}" density="{DENSITY}"'
+            f' contype="0" conaffinity="0"/>'
+            f"{body}</body>"
+        )
+    body = body.replace(f'<body pos="{LINK_LENGTH} 0 0">', '<body pos="0 0 0">', 1)  # the first link at the origin
+    return (
+        '<mujoco><option timestep="0.001" integrator="Euler" gravity="0 0 -9.81"/>'
+        f"<worldbody>{body}</worldbody></mujoco>"
+    )
+
+
+def time_mujoco(links: int, joint: str, steps: int, repeats: int) -> list[float] | None:
+    """Seconds per `mj_step(nstep=steps)` from the released pose, per repeat; None without mujoco."""
+    try:
+        import mujoco
+    except ImportError:
+        return None
+    model = mujoco.MjModel.from_xml_string(mujoco_xml(links, joint))
+    data = mujoco.MjData(model)
+    mujoco.mj_step(model, data, nstep=10)  # warm: first-call allocations
+    times = []
+    for _ in range(repeats):
+        mujoco.mj_resetData(model, data)
+        started = time.perf_counter()
+        mujoco.mj_step(model, data, nstep=steps)
+        times.append(time.perf_counter() - started)
+    return times
+
+
+def full_step_chain(links: int, joint: str) -> None:
+    """Hook: the chain as an rbsim scene run by split2 with its joint stages (link-steps/s and the position
+    constraint error after the run). To be written once the joints integration (scenes/joints/, the
+    `joints:` section, RATTLE-type stages) is on main; until then there is nothing to run."""
+    return None
+
+
+def spread(times: list[float]) -> float:
+    return statistics.median(times) / min(times) - 1.0
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="fewer steps and repeats (a smoke run)")
+    parser.add_argument("--steps", type=int, default=2000, help="steps per timed run (scaled down for long chains)")
+    parser.add_argument("--repeats", type=int, default=5)
+    options = parser.parse_args()
+    steps, repeats = (200, 2) if options.quick else (options.steps, options.repeats)
+    print(f"load average {os.getloadavg()[0]:.2f} at the start, {os.cpu_count()} cores")
+    print("link-steps/s; rbsim = factor_rows + 3 solve_rows per step; residual = |A lambda - rhs| / |rhs|")
+    header = f"{'chain':>6} {'links':>6} {'MuJoCo':>9} {'(issue)':>9} {'rbsim solver':>13} {'ratio':>7} {'target':>7}"
+    print(header + f" {'ns/link':>8} {'factor':>7} {'residual':>9} {'spread':>7} {'full step':>10}")
+    for joint in ("hinge", "ball"):
+        cost = {}
+        for links in RBSIM_SIZES:
+            n_steps = max(20, steps * 100 // max(links, 100))  # ~ the same work per timed run
+            times, residual, factor_share = time_solver(links, joint, n_steps, repeats)
+            rate = links * n_steps / min(times)
+            cost[links] = 1e9 / rate
+            mujoco_rate, ratio, target = float("nan"), float("nan"), float("nan")
+            if links in TARGET_RATIO:
+                mj = time_mujoco(links, joint, max(20, n_steps // (4 if joint == "ball" else 1)), repeats)
+                if mj is not None:
+                    mujoco_rate = links * max(20, n_steps // (4 if joint == "ball" else 1)) / min(mj)
+                    ratio, target = rate / mujoco_rate, TARGET_RATIO[links]
+            issue = ISSUE_MUJOCO.get((joint, links), float("nan"))
+            full = full_step_chain(links, joint)
+            print(
+                f"{joint:>6} {links:>6} {mujoco_rate:9.3g} {issue:9.2g} {rate:13.3g} {ratio:7.2f} {target:7.1f}"
+                f" {cost[links]:8.0f} {factor_share:7.0%} {residual:9.1e} {spread(times):7.0%}"
+                f" {'n/a (hook)' if full is None else full:>10}"
+            )
+        flat = cost[10_000] / cost[10]
+        print(f"{joint}: cost per link 10,000 / 10 links = {flat:.2f} (target <= {TARGET_FLAT})")
+    print(f"load average {os.getloadavg()[0]:.2f} at the end")
+
+
+if __name__ == "__main__":
+    main()
