@@ -10,9 +10,10 @@ Method (docs/joint_solver.md): the augmented system H [y; x] = [0; -rhs], H = [[
 x = lambda (y = -W G^T lambda). Its graph over bodies and tree joints is a forest (solver_graph.py): bodies
 of degree <= 2 are eliminated analytically, the rest is factored by block LDL^T leaves first, no fill-in:
 
-    D_i = H_ii - sum over children c of H_ci^T L_ci,    L_ip = D_i^-1 H_ip      (p: i's parent)
+    D_i = H_ii - sum over children c of H_ci^T D_c^-1 H_ci = L_i Delta_i L_i^T,    Y_i = L_i^-1 H_ip
 
-and solved by z_p -= L_ip^T z_i (leaves first), w_i = D_i^-1 z_i, x_i = w_i - L_ip x_p (root first).
+(p: i's parent; D_c^-1 H_ci's product is Y_c^T Delta_c^-1 Y_c, so L_i^-T never enters the factor), and
+solved leaves first and then root first through Y (_tree_solve), every node's work a few d x d products.
 Loop joints' rows (k of them) are auxiliary (Baraff section 7): the tree's factor gives the Schur
 complement S = A_LL - A_LT A_TT^-1 A_TL column by column (k tree solves), S is factored densely with
 diagonal pivoting (O(n k + k^3)), and a solve is two tree solves plus O(k^2).
@@ -72,9 +73,10 @@ class JointGraph(NamedTuple):
 class SolverWork(NamedTuple):
     """The solver's mutable arrays, allocated once (make_solver_work; Data owns them); sizes O(n + k^2)."""
 
-    node_D: np.ndarray  # (node_count, 6, 6): LDL^T of each pivot block D_i: unit L below the diagonal, d on it
-    node_inv_pivot: np.ndarray  # (node_count, 6): 1 / d, 0 for a dropped (redundant) row
-    node_L: np.ndarray  # (node_count, 6, 6): L_ip = D_i^-1 H_ip, (dim_i, dim_parent)
+    # blocks are (block_dim, block_dim), block_dim the largest node dimension (3 for a ball chain, 6 with hubs)
+    node_D: np.ndarray  # (node_count, block_dim, block_dim): D_i = L_i Delta_i L_i^T, unit L_i below the diagonal
+    node_inv_pivot: np.ndarray  # (node_count, block_dim): 1 / Delta_i, 0 for a dropped (redundant) row
+    node_Y: np.ndarray  # (node_count, block_dim, block_dim): Y_i = L_i^-1 H_ip, (dim_i, dim_parent)
     vec: np.ndarray  # (node vector size,): the tree solve's right-hand side and solution
     block: np.ndarray  # (6, 6): an edge block H_ip being formed
     jw: np.ndarray  # (6, 6): rows times W_b of one joint at one body
@@ -111,11 +113,12 @@ def make_solver_work(graph: JointGraph) -> SolverWork:
     nodes, joints = graph.node_kind.shape[0], graph.joint_node.shape[0]
     k, loop_bodies = graph.loop_joint.shape[0], graph.loop_body.shape[0]
     rows_refined = int(graph.row_total[0]) if k else 0
+    block_dim = int(np.diff(graph.node_offset).max()) if nodes else 1
     bodies_refined = graph.body_ground.shape[0] if k else 0
     return SolverWork(
-        node_D=np.zeros((nodes, 6, 6)),
-        node_inv_pivot=np.zeros((nodes, 6)),
-        node_L=np.zeros((nodes, 6, 6)),
+        node_D=np.zeros((nodes, block_dim, block_dim)),
+        node_inv_pivot=np.zeros((nodes, block_dim)),
+        node_Y=np.zeros((nodes, block_dim, block_dim)),
         vec=np.zeros(int(graph.node_offset[-1])),
         block=np.zeros((6, 6)),
         jw=np.zeros((6, 6)),
@@ -188,40 +191,6 @@ def _ldl_block(D, inv_pivot, dim, scale, tol) -> int:  # noqa: ANN001
 
 
 @numba.njit(cache=True, inline="always")
-def _ldl_solve_column(D, inv_pivot, dim, X, col) -> None:  # noqa: ANN001
-    """X[:dim, col] = D^-1 X[:dim, col] from _ldl_block's factor (dropped rows give 0)."""
-    for i in range(dim):
-        v = X[i, col]
-        for t in range(i):
-            v -= D[i, t] * X[t, col]
-        X[i, col] = v
-    for i in range(dim):
-        X[i, col] *= inv_pivot[i]
-    for i in range(dim - 1, -1, -1):
-        v = X[i, col]
-        for t in range(i + 1, dim):
-            v -= D[t, i] * X[t, col]
-        X[i, col] = v
-
-
-@numba.njit(cache=True, inline="always")
-def _ldl_solve_vector(D, inv_pivot, dim, x, o) -> None:  # noqa: ANN001
-    """x[o:o + dim] = D^-1 x[o:o + dim]."""
-    for i in range(dim):
-        v = x[o + i]
-        for t in range(i):
-            v -= D[i, t] * x[o + t]
-        x[o + i] = v
-    for i in range(dim):
-        x[o + i] *= inv_pivot[i]
-    for i in range(dim - 1, -1, -1):
-        v = x[o + i]
-        for t in range(i + 1, dim):
-            v -= D[t, i] * x[o + t]
-        x[o + i] = v
-
-
-@numba.njit(cache=True, inline="always")
 def _joint_jac(j, body, body_a, jac_a, jac_b):  # noqa: ANN001, ANN202
     """The Jacobian array holding joint j's rows at `body` (its side a or b)."""
     return jac_a if body_a[j] == body else jac_b
@@ -229,29 +198,44 @@ def _joint_jac(j, body, body_a, jac_a, jac_b):  # noqa: ANN001, ANN202
 
 @numba.njit(**STEP_KERNEL)
 def _tree_solve(graph, work) -> None:  # noqa: ANN001
-    """work.vec = H_T^-1 work.vec over the forest (the factor of factor_rows)."""
-    x, L = work.vec, work.node_L
+    """work.vec = H_T^-1 work.vec over the forest, from factor_rows' D_i = L_i Delta_i L_i^T, Y_i = L_i^-1 H_ip.
+
+    With U_ip = D_i^-1 H_ip = L_i^-T Delta_i^-1 Y_i, H_T = U^T D U: leaves first s_i = Delta_i^-1 L_i^-1 z_i
+    and z_p -= Y_i^T s_i (= U_ip^T z_i); root first x_i = L_i^-T (s_i - Delta_i^-1 Y_i x_p) (= w_i - U_ip x_p).
+    """
+    x, Y, D, inv = work.vec, work.node_Y, work.node_D, work.node_inv_pivot
     off, parent = graph.node_offset, graph.node_parent
     nodes = parent.shape[0]
-    for i in range(nodes):  # z_p -= L_ip^T z_i, then w_i = D_i^-1 z_i: children are final before parents
+    for i in range(nodes):
         o, d, p = off[i], off[i + 1] - off[i], parent[i]
+        for r in range(d):
+            v = x[o + r]
+            for t in range(r):
+                v -= D[i, r, t] * x[o + t]
+            x[o + r] = v
+        for r in range(d):
+            x[o + r] *= inv[i, r]
         if p >= 0:
             op, dp = off[p], off[p + 1] - off[p]
             for c in range(dp):
                 v = 0.0
                 for r in range(d):
-                    v += L[i, r, c] * x[o + r]
+                    v += Y[i, r, c] * x[o + r]
                 x[op + c] -= v
-        _ldl_solve_vector(work.node_D[i], work.node_inv_pivot[i], d, x, o)
-    for i in range(nodes - 1, -1, -1):  # x_i = w_i - L_ip x_p, root first
-        p = parent[i]
+    for i in range(nodes - 1, -1, -1):
+        o, d, p = off[i], off[i + 1] - off[i], parent[i]
         if p >= 0:
-            o, d, op, dp = off[i], off[i + 1] - off[i], off[p], off[p + 1] - off[p]
+            op, dp = off[p], off[p + 1] - off[p]
             for r in range(d):
                 v = 0.0
                 for c in range(dp):
-                    v += L[i, r, c] * x[op + c]
-                x[o + r] -= v
+                    v += Y[i, r, c] * x[op + c]
+                x[o + r] -= inv[i, r] * v
+        for r in range(d - 1, -1, -1):
+            v = x[o + r]
+            for t in range(r + 1, d):
+                v -= D[i, t, r] * x[o + t]
+            x[o + r] = v
 
 
 @numba.njit(**STEP_KERNEL)
@@ -496,16 +480,26 @@ def factor_rows(graph, work, row_start, row_count, body_a, body_b, jac_a, jac_b,
         if p < 0:
             continue
         _edge_block(graph, work, i, row_start, row_count, body_a, jac_a, jac_b, inv_mass, inv_inertia_world)
-        dp, H, Li, Dp = off[p + 1] - off[p], work.block, work.node_L[i], work.node_D[p]
-        for c in range(dp):
-            for r in range(d):
-                Li[r, c] = H[r, c]
-            _ldl_solve_column(D, work.node_inv_pivot[i], d, Li, c)
-        for a in range(dp):  # D_p -= H_ip^T L_ip, lower triangle
+        dp, H, Yi, Dp, inv, Z = (
+            off[p + 1] - off[p],
+            work.block,
+            work.node_Y[i],
+            work.node_D[p],
+            work.node_inv_pivot[i],
+            work.jw,
+        )
+        for r in range(d):  # Y_i = L_i^-1 H_ip, and Z = Delta_i^-1 Y_i
+            for c in range(dp):
+                v = H[r, c]
+                for t in range(r):
+                    v -= D[r, t] * Yi[t, c]
+                Yi[r, c] = v
+                Z[r, c] = v * inv[r]
+        for a in range(dp):  # D_p -= H_ip^T D_i^-1 H_ip = Y_i^T Delta_i^-1 Y_i, lower triangle
             for c in range(a + 1):
                 v = 0.0
                 for r in range(d):
-                    v += H[r, a] * Li[r, c]
+                    v += Yi[r, a] * Z[r, c]
                 Dp[a, c] -= v
     k = graph.loop_joint.shape[0]
     if k == 0:
