@@ -164,7 +164,7 @@ def _dot6(u, v) -> float:  # noqa: ANN001
     return u[0] * v[0] + u[1] * v[1] + u[2] * v[2] + u[3] * v[3] + u[4] * v[4] + u[5] * v[5]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _ldl_block(D, inv_pivot, dim, scale, tol) -> int:  # noqa: ANN001
     """In-place LDL^T of the symmetric dim x dim block D (its lower triangle), no pivoting; returns the
     bitmask of dropped rows (|d_k| <= tol * scale[k]: its L column and 1 / d_k set to 0)."""
@@ -196,7 +196,7 @@ def _joint_jac(j, body, body_a, jac_a, jac_b):  # noqa: ANN001, ANN202
     return jac_a if body_a[j] == body else jac_b
 
 
-@numba.njit(**STEP_KERNEL)
+@numba.njit(cache=True, inline="always")
 def _tree_solve(graph, work) -> None:  # noqa: ANN001
     """work.vec = H_T^-1 work.vec over the forest, from factor_rows' D_i = L_i Delta_i L_i^T, Y_i = L_i^-1 H_ip.
 
@@ -286,7 +286,7 @@ def _init_blocks(graph, work, row_start, row_count, body_a, body_b, jac_a, jac_b
         D[5, 5] = (Iw[0, 0] * Iw[1, 1] - Iw[0, 1] * Iw[1, 0]) * inv_det
 
 
-@numba.njit(**STEP_KERNEL)
+@numba.njit(cache=True, inline="always")
 def _edge_block(graph, work, i, row_start, row_count, body_a, jac_a, jac_b, inv_mass, inv_inertia_world) -> None:  # noqa: ANN001, E501
     """work.block = H_ip, the block between node i and its parent (dim_i x dim_parent)."""
     p, body, H = graph.node_parent[i], graph.node_edge_body[i], work.block
@@ -521,7 +521,7 @@ def factor_rows(graph, work, row_start, row_count, body_a, body_b, jac_a, jac_b,
     return count
 
 
-@numba.njit(**STEP_KERNEL)
+@numba.njit(cache=True, inline="always")
 def _tree_rows_in(graph, work, row_start, row_count, rhs) -> None:  # noqa: ANN001
     """work.vec = [0 at hubs; -rhs at tree joints] (the augmented right-hand side, module docstring)."""
     off = graph.node_offset
@@ -585,7 +585,7 @@ def solve_rows(graph, work, row_start, row_count, body_a, body_b, rhs, out) -> N
         out[r] += work.refine_correction[r]
 
 
-@numba.njit(**STEP_KERNEL)
+@numba.njit(cache=True, inline="always")
 def _solve_once(graph, work, row_start, row_count, rhs, out) -> None:  # noqa: ANN001
     """out = A^-1 rhs from the factor: a tree solve, and with loops the Schur step and a second tree solve."""
     off = graph.node_offset
