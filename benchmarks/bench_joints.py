@@ -52,6 +52,7 @@ ISSUE_MUJOCO = {("hinge", 10): 2.3e6, ("hinge", 100): 1.3e6, ("hinge", 400): 1.3
                 ("ball", 10): 1.1e6, ("ball", 100): 9.0e4, ("ball", 400): 5.1e3}  # fmt: skip
 TARGET_RATIO = {10: 2.0, 100: 5.0, 400: 20.0}
 TARGET_FLAT = 1.5  # cost per link from 10 to 10,000 links, at most this ratio
+MUJOCO_SECONDS = 0.5  # CPU seconds per timed MuJoCo run
 
 
 def capsule_mass_properties() -> tuple[float, float, float]:
@@ -104,24 +105,6 @@ def chain_rows(links: int, joint: str, sag: float = 0.3) -> dict[str, np.ndarray
     }
 
 
-def apply_A(s: dict[str, np.ndarray], lam: np.ndarray) -> np.ndarray:
-    """A lambda = G W G^T lambda from the rows (numpy, vectorised over rows): the residual's reference."""
-    n, rows = s["ground"].shape[0], np.repeat(np.arange(s["body_a"].shape[0]), s["row_count"])
-    impulse = np.zeros((n, 6))
-    sides = [(s["body_a"][rows], s["jac_a"]), (s["body_b"][rows], s["jac_b"])]
-    for body, jac in sides:
-        moving = body >= 0
-        np.add.at(impulse, body[moving], jac[moving] * lam[moving, None])
-    velocity = np.concatenate(
-        [impulse[:, :3] * s["inv_mass"][:, None], np.einsum("bij,bj->bi", s["inv_inertia"], impulse[:, 3:])], axis=1
-    )
-    out = np.zeros_like(lam)
-    for body, jac in sides:
-        moving = body >= 0
-        out[moving] += np.einsum("ri,ri->r", jac[moving], velocity[body[moving]])
-    return out
-
-
 @numba.njit(cache=True)
 def _solver_steps(
     steps, graph, work, row_start, row_count, body_a, body_b, jac_a, jac_b, inv_mass, inv_inertia, rhs, out
@@ -144,29 +127,53 @@ def _factor_steps(steps, graph, work, row_start, row_count, body_a, body_b, jac_
     return redundant
 
 
-def time_solver(links: int, joint: str, steps: int, repeats: int) -> tuple[list[float], float, float]:
-    """(seconds per run of `steps` rounds for each repeat, relative residual, factor share of the time)."""
-    s = chain_rows(links, joint)
-    graph = joint_graph(s["body_a"], s["body_b"], s["ground"], s["row_count"])
-    work = make_solver_work(graph)
-    rhs = np.random.default_rng(links).normal(size=s["jac_a"].shape[0])
-    out = np.zeros_like(rhs)
-    args = (graph, work, s["row_start"], s["row_count"], s["body_a"], s["body_b"], s["jac_a"], s["jac_b"])
-    args = (*args, s["inv_mass"], s["inv_inertia"], rhs, out)
-    assert _solver_steps(1, *args) == 0
-    times = []
-    for _ in range(repeats):
-        started = time.perf_counter()
-        _solver_steps(steps, *args)
-        times.append(time.perf_counter() - started)
-    residual = float(np.linalg.norm(apply_A(s, out) - rhs) / np.linalg.norm(rhs))
-    _factor_steps(1, *args[:10])
-    factor_times = []
-    for _ in range(repeats):
-        started = time.perf_counter()
-        _factor_steps(steps, *args[:10])
-        factor_times.append(time.perf_counter() - started)
-    return times, residual, min(factor_times) / min(times)
+def velocity_rows(s: dict[str, np.ndarray], velocity: np.ndarray) -> np.ndarray:
+    """G v: each row's velocity error for body velocities (v, omega) `velocity` (bodies, 6), world frame."""
+    rows = np.repeat(np.arange(s["body_a"].shape[0]), s["row_count"])
+    out = np.zeros(s["jac_a"].shape[0])
+    for body, jac in ((s["body_a"][rows], s["jac_a"]), (s["body_b"][rows], s["jac_b"])):
+        moving = body >= 0
+        out[moving] += np.einsum("ri,ri->r", jac[moving], velocity[body[moving]])
+    return out
+
+
+class SolverRun:
+    """The chain's rows, graph and work, and `steps` rounds of factor + 3 solves as one timed call."""
+
+    def __init__(self, links: int, joint: str) -> None:
+        self.rows = chain_rows(links, joint)
+        s = self.rows
+        graph = joint_graph(s["body_a"], s["body_b"], s["ground"], s["row_count"])
+        # rhs = G v for random body velocities: the velocity projection's system (v' = v - W G^T lambda)
+        self.velocity = np.random.default_rng(links).normal(size=(links, 6))
+        self.rhs = velocity_rows(s, self.velocity)
+        self.out = np.zeros_like(self.rhs)
+        self.args = (graph, make_solver_work(graph), s["row_start"], s["row_count"], s["body_a"], s["body_b"])
+        self.args = (*self.args, s["jac_a"], s["jac_b"], s["inv_mass"], s["inv_inertia"])
+        assert _solver_steps(1, *self.args, self.rhs, self.out) == 0 and _factor_steps(1, *self.args) == 0
+
+    def run(self, steps: int) -> float:
+        started = time.process_time()
+        _solver_steps(steps, *self.args, self.rhs, self.out)
+        return time.process_time() - started
+
+    def run_factor(self, steps: int) -> float:
+        started = time.process_time()
+        _factor_steps(steps, *self.args)
+        return time.process_time() - started
+
+    def constraint_error(self) -> float:
+        """|G v'| / |G v| after one velocity projection v' = v - W G^T lambda, A lambda = G v."""
+        s, lam = self.rows, self.out
+        rows = np.repeat(np.arange(s["body_a"].shape[0]), s["row_count"])
+        impulse = np.zeros_like(self.velocity)
+        for body, jac in ((s["body_a"][rows], s["jac_a"]), (s["body_b"][rows], s["jac_b"])):
+            moving = body >= 0
+            np.add.at(impulse, body[moving], jac[moving] * lam[moving, None])
+        change = np.concatenate(
+            [impulse[:, :3] * s["inv_mass"][:, None], np.einsum("bij,bj->bi", s["inv_inertia"], impulse[:, 3:])], axis=1
+        )
+        return float(np.linalg.norm(velocity_rows(s, self.velocity - change)) / np.linalg.norm(self.rhs))
 
 
 def mujoco_xml(links: int, joint: str) -> str:
@@ -182,27 +189,31 @@ def mujoco_xml(links: int, joint: str) -> str:
         )
     body = body.replace(f'<body pos="{LINK_LENGTH} 0 0">', '<body pos="0 0 0">', 1)  # the first link at the origin
     return (
-        '<mujoco><option timestep="0.001" integrator="Euler" gravity="0 0 -9.81"/>'
+        f'<mujoco><option timestep="{DT}" integrator="Euler" gravity="0 0 -9.81"/>'
         f"<worldbody>{body}</worldbody></mujoco>"
     )
 
 
-def time_mujoco(links: int, joint: str, steps: int, repeats: int) -> list[float] | None:
-    """Seconds per `mj_step(nstep=steps)` from the released pose, per repeat; None without mujoco."""
-    try:
+class MujocoRun:
+    """The chain in MuJoCo; `mj_step(m, d, nstep=steps)` from the released pose as one timed call."""
+
+    def __init__(self, links: int, joint: str) -> None:
         import mujoco
-    except ImportError:
-        return None
-    model = mujoco.MjModel.from_xml_string(mujoco_xml(links, joint))
-    data = mujoco.MjData(model)
-    mujoco.mj_step(model, data, nstep=10)  # warm: first-call allocations
-    times = []
-    for _ in range(repeats):
-        mujoco.mj_resetData(model, data)
-        started = time.perf_counter()
-        mujoco.mj_step(model, data, nstep=steps)
-        times.append(time.perf_counter() - started)
-    return times
+
+        self.mujoco = mujoco
+        self.model = mujoco.MjModel.from_xml_string(mujoco_xml(links, joint))
+        self.data = mujoco.MjData(self.model)
+        mujoco.mj_step(self.model, self.data, nstep=10)  # warm: first-call allocations
+
+    def steps_for(self, seconds: float) -> int:
+        """Steps that take about `seconds` (its cost per link grows with the chain: a dense mass matrix)."""
+        return max(10, int(10 * seconds / max(self.run(10), 1e-6)))
+
+    def run(self, steps: int) -> float:
+        self.mujoco.mj_resetData(self.model, self.data)
+        started = time.process_time()
+        self.mujoco.mj_step(self.model, self.data, nstep=steps)
+        return time.process_time() - started
 
 
 def full_step_chain(links: int, joint: str) -> None:
@@ -216,39 +227,59 @@ def spread(times: list[float]) -> float:
     return statistics.median(times) / min(times) - 1.0
 
 
+def have_mujoco() -> bool:
+    try:
+        import mujoco  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer steps and repeats (a smoke run)")
-    parser.add_argument("--steps", type=int, default=2000, help="steps per timed run (scaled down for long chains)")
+    parser.add_argument("--link-steps", type=float, default=1e6, help="rbsim link-steps per timed run")
     parser.add_argument("--repeats", type=int, default=5)
     options = parser.parse_args()
-    steps, repeats = (200, 2) if options.quick else (options.steps, options.repeats)
-    print(f"load average {os.getloadavg()[0]:.2f} at the start, {os.cpu_count()} cores")
-    print("link-steps/s; rbsim = factor_rows + 3 solve_rows per step; residual = |A lambda - rhs| / |rhs|")
-    header = f"{'chain':>6} {'links':>6} {'MuJoCo':>9} {'(issue)':>9} {'rbsim solver':>13} {'ratio':>7} {'target':>7}"
-    print(header + f" {'ns/link':>8} {'factor':>7} {'residual':>9} {'spread':>7} {'full step':>10}")
+    budget, repeats = (2e5, 3) if options.quick else (options.link_steps, options.repeats)
+    mujoco_present = have_mujoco()
+    print(f"load average {os.getloadavg()[0]:.2f} at the start, {os.cpu_count()} cores; CPU time of this process")
+    print("link-steps per CPU second; rbsim = factor_rows + 3 solve_rows per step (the solver alone);")
+    print("error = |G v'| / |G v| after one velocity projection; spread = median / best - 1 of the repeats")
+    print(
+        f"{'chain':>6} {'links':>6} {'MuJoCo':>9} {'(issue)':>9} {'rbsim':>9} {'ratio':>6} {'target':>6}"
+        f" {'ns/link':>8} {'factor':>7} {'error':>8} {'spread':>11} {'full step':>10}"
+    )
     for joint in ("hinge", "ball"):
         cost = {}
         for links in RBSIM_SIZES:
-            n_steps = max(20, steps * 100 // max(links, 100))  # ~ the same work per timed run
-            times, residual, factor_share = time_solver(links, joint, n_steps, repeats)
-            rate = links * n_steps / min(times)
-            cost[links] = 1e9 / rate
-            mujoco_rate, ratio, target = float("nan"), float("nan"), float("nan")
-            if links in TARGET_RATIO:
-                mj = time_mujoco(links, joint, max(20, n_steps // (4 if joint == "ball" else 1)), repeats)
+            steps = max(10, int(budget / links))
+            solver = SolverRun(links, joint)
+            mj = MujocoRun(links, joint) if mujoco_present and links in TARGET_RATIO else None
+            mj_steps = mj.steps_for(MUJOCO_SECONDS / (4 if options.quick else 1)) if mj is not None else 0
+            times, factor_times, mj_times = [], [], []
+            for _ in range(repeats):  # interleaved, so a change of load hits both engines alike
+                times.append(solver.run(steps))
+                factor_times.append(solver.run_factor(steps))
                 if mj is not None:
-                    mujoco_rate = links * max(20, n_steps // (4 if joint == "ball" else 1)) / min(mj)
-                    ratio, target = rate / mujoco_rate, TARGET_RATIO[links]
-            issue = ISSUE_MUJOCO.get((joint, links), float("nan"))
+                    mj_times.append(mj.run(mj_steps))
+            rate = links * steps / min(times)
+            cost[links] = 1e9 / rate
+            mj_rate = links * mj_steps / min(mj_times) if mj_times else float("nan")
+            ratio = rate / mj_rate
+            spreads = f"{spread(times):4.0%}" + (f" / {spread(mj_times):4.0%}" if mj_times else "")
             full = full_step_chain(links, joint)
             print(
-                f"{joint:>6} {links:>6} {mujoco_rate:9.3g} {issue:9.2g} {rate:13.3g} {ratio:7.2f} {target:7.1f}"
-                f" {cost[links]:8.0f} {factor_share:7.0%} {residual:9.1e} {spread(times):7.0%}"
+                f"{joint:>6} {links:>6} {mj_rate:9.3g} {ISSUE_MUJOCO.get((joint, links), float('nan')):9.2g}"
+                f" {rate:9.3g} {ratio:6.2f} {TARGET_RATIO.get(links, float('nan')):6.1f} {cost[links]:8.0f}"
+                f" {min(factor_times) / min(times):7.0%} {solver.constraint_error():8.1e} {spreads:>11}"
                 f" {'n/a (hook)' if full is None else full:>10}"
             )
-        flat = cost[10_000] / cost[10]
-        print(f"{joint}: cost per link 10,000 / 10 links = {flat:.2f} (target <= {TARGET_FLAT})")
+        flat = cost[RBSIM_SIZES[-1]] / cost[RBSIM_SIZES[0]]
+        print(
+            f"{joint}: cost per link at {RBSIM_SIZES[-1]:,} / at {RBSIM_SIZES[0]} links = {flat:.2f}"
+            f" (target <= {TARGET_FLAT})"
+        )
     print(f"load average {os.getloadavg()[0]:.2f} at the end")
 
 
