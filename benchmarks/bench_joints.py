@@ -15,9 +15,10 @@ rbsim: for now the solver alone, as the RATTLE-type step will use it: per step o
 `solve_rows` (the simplified Newton of the position projection and the velocity projection) on the rows of
 the chain in a sagging pose (link i turned by 0.3 sin(pi i / n) about y, so the rows are not axis-aligned),
 in a compiled loop. The constraint error beside each rate is the solve's relative residual
-|A lambda - rhs| / |rhs| (A = G W G^T applied from the rows, not from the factor). `full_step_chain` is the
-hook for the whole split2 step once the joints integration (scene format, stages) merges: it returns None
-until then and the table says so.
+|A lambda - rhs| / |rhs| (A = G W G^T applied from the rows, not from the factor). `--full-step` adds the
+whole split2 step (`full_step_chain`: the chain written as an rbsim scene, its rate, the anchor gap and
+hinge-axis misalignment after the run, and its ratio to MuJoCo); it needs the joints integration (scene
+format, stages) and reports why it did not run on a checkout without it.
 
 Rates are link-steps per second (links x steps / wall second), best of `--repeats` (a shared machine is
 noisy: the median/best spread is printed), and the load average is printed beside them.
@@ -53,6 +54,8 @@ ISSUE_MUJOCO = {("hinge", 10): 2.3e6, ("hinge", 100): 1.3e6, ("hinge", 400): 1.3
 TARGET_RATIO = {10: 2.0, 100: 5.0, 400: 20.0}
 TARGET_FLAT = 1.5  # cost per link from 10 to 10,000 links, at most this ratio
 MUJOCO_SECONDS = 0.5  # CPU seconds per timed MuJoCo run
+MUJOCO_SEGMENT = 1000  # steps from the released pose per segment: 1 s, well before Euler's instability (4.4 s
+# for the 100-link hinge chain, measured)
 
 
 def capsule_mass_properties() -> tuple[float, float, float]:
@@ -210,17 +213,83 @@ class MujocoRun:
         return max(10, int(10 * seconds / max(self.run(10), 1e-6)))
 
     def run(self, steps: int) -> float:
-        self.mujoco.mj_resetData(self.model, self.data)
-        started = time.process_time()
-        self.mujoco.mj_step(self.model, self.data, nstep=steps)
-        return time.process_time() - started
+        """CPU seconds of `steps` steps, in segments of at most MUJOCO_SEGMENT from the released pose (a long
+        Euler run of a long chain goes unstable: MuJoCo then warns and resets itself, which would be timed)."""
+        elapsed = 0.0
+        while steps > 0:
+            segment = min(steps, MUJOCO_SEGMENT)
+            self.mujoco.mj_resetData(self.model, self.data)
+            started = time.process_time()
+            self.mujoco.mj_step(self.model, self.data, nstep=segment)
+            elapsed += time.process_time() - started
+            steps -= segment
+        return elapsed
 
 
-def full_step_chain(links: int, joint: str) -> None:
-    """Hook: the chain as an rbsim scene run by split2 with its joint stages (link-steps/s and the position
-    constraint error after the run). To be written once the joints integration (scenes/joints/, the
-    `joints:` section, RATTLE-type stages) is on main; until then there is nothing to run."""
-    return None
+def chain_scene_yaml(links: int, joint: str, duration: float) -> str:
+    """The chain as an rbsim scene (the joints format of docs/joints.md): capsule links filled with ~30
+    particles each (mass set to the capsule's: the lattice only shapes the inertia), released horizontal."""
+    mass = capsule_mass_properties()[0]
+    axis = ", axis: [0, 1, 0]" if joint == "hinge" else ""
+    lines = [
+        f"name: {joint}_chain_{links}",
+        f"simulation: {{dt: {DT}, duration: {duration}, integrator: split2, record: {{every: 1000000}}}}",
+        "gravity: [0, 0, -9.81]",
+        "bodies:",
+    ]
+    for i in range(links):
+        shape = f"{{type: capsule, radius: {LINK_RADIUS}, height: {LINK_LENGTH}, axis: x}}"
+        x = (i + 0.5) * LINK_LENGTH
+        lines.append(f"  - {{name: link{i}, shape: {shape}, count: 30, mass: {mass!r}, position: [{x!r}, 0, 0]}}")
+    lines.append("joints:")
+    for i in range(links):
+        parent = "world" if i == 0 else f"link{i - 1}"
+        anchor = f"[{i * LINK_LENGTH!r}, 0, 0]"
+        lines.append(f"  - {{name: j{i}, type: {joint}, bodies: [{parent}, link{i}], anchor: {anchor}{axis}}}")
+    return "\n".join(lines) + "\n"
+
+
+def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate v (3,) by each unit quaternion q (n, 4), (w, x, y, z)."""
+    w, u = q[:, :1], q[:, 1:]
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
+FULL_STEP_REFUSED: list[str] = []  # why the scene loader refused the chain (printed once)
+
+
+def full_step_chain(links: int, joint: str, steps: int) -> tuple[float, float] | None:
+    """The chain as an rbsim scene run by split2 with its joint stages: (link-steps per CPU second, the
+    largest anchor gap [m] after the run, or the hinge axes' misalignment [rad] if larger). None when this
+    checkout's scene format has no joints yet (the hook waits for the joints integration to merge)."""
+    import tempfile
+
+    import rbcli
+
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "chain.yaml"
+        path.write_text(chain_scene_yaml(links, joint, duration=(steps + 1) * DT))
+        try:
+            simulation = rbcli.Simulation(path)
+        except Exception as error:  # noqa: BLE001 - a loader without joints refuses the section
+            if not FULL_STEP_REFUSED:
+                FULL_STEP_REFUSED.append(f"{type(error).__name__}: {str(error).splitlines()[0][:120]}")
+                print(f"  full step not run: {FULL_STEP_REFUSED[0]}")
+            return None
+    simulation.step(1)  # compiles (or loads the kernels)
+    started = time.process_time()
+    simulation.step(steps)
+    elapsed = time.process_time() - started
+    state = simulation.state
+    half = np.array([0.5 * LINK_LENGTH, 0.0, 0.0])
+    near, far = state.x - _rotate(state.q, half), state.x + _rotate(state.q, half)
+    gap = max(float(np.linalg.norm(near[0])), float(np.max(np.linalg.norm(near[1:] - far[:-1], axis=1), initial=0.0)))
+    if joint == "hinge":
+        axes = _rotate(state.q, np.array([0.0, 1.0, 0.0]))
+        gap = max(gap, float(np.max(np.linalg.norm(np.cross(axes[1:], axes[:-1]), axis=1), initial=0.0)))
+        gap = max(gap, float(np.linalg.norm(np.cross(axes[0], [0.0, 1.0, 0.0]))))
+    return links * steps / elapsed, gap
 
 
 def spread(times: list[float]) -> float:
@@ -240,6 +309,9 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="fewer steps and repeats (a smoke run)")
     parser.add_argument("--link-steps", type=float, default=1e6, help="rbsim link-steps per timed run")
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument(
+        "--full-step", action="store_true", help="also run the chains as rbsim scenes (split2 + joint stages)"
+    )
     options = parser.parse_args()
     budget, repeats = (2e5, 3) if options.quick else (options.link_steps, options.repeats)
     mujoco_present = have_mujoco()
@@ -248,7 +320,8 @@ def main() -> None:
     print("error = |G v'| / |G v| after one velocity projection; spread = median / best - 1 of the repeats")
     print(
         f"{'chain':>6} {'links':>6} {'MuJoCo':>9} {'(issue)':>9} {'rbsim':>9} {'ratio':>6} {'target':>6}"
-        f" {'ns/link':>8} {'factor':>7} {'error':>8} {'spread':>11} {'full step':>10}"
+        f" {'ns/link':>8} {'factor':>7} {'error':>8} {'spread':>11}"
+        + (f" {'split2':>9} {'gap':>8} {'ratio':>6}" if options.full_step else "")
     )
     for joint in ("hinge", "ball"):
         cost = {}
@@ -268,12 +341,12 @@ def main() -> None:
             mj_rate = links * mj_steps / min(mj_times) if mj_times else float("nan")
             ratio = rate / mj_rate
             spreads = f"{spread(times):4.0%}" + (f" / {spread(mj_times):4.0%}" if mj_times else "")
-            full = full_step_chain(links, joint)
+            full = full_step_chain(links, joint, steps) if options.full_step and links in TARGET_RATIO else None
             print(
                 f"{joint:>6} {links:>6} {mj_rate:9.3g} {ISSUE_MUJOCO.get((joint, links), float('nan')):9.2g}"
                 f" {rate:9.3g} {ratio:6.2f} {TARGET_RATIO.get(links, float('nan')):6.1f} {cost[links]:8.0f}"
                 f" {min(factor_times) / min(times):7.0%} {solver.constraint_error():8.1e} {spreads:>11}"
-                f" {'n/a (hook)' if full is None else full:>10}"
+                + (f" {full[0]:9.3g} {full[1]:8.1e} {full[0] / mj_rate:6.2f}" if full else "")
             )
         flat = cost[RBSIM_SIZES[-1]] / cost[RBSIM_SIZES[0]]
         print(
