@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from rbcli.physics.joints.solver import factor_rows, joint_graph, make_solver_work, solve_rows
-from rbcli.physics.joints.solver_graph import NODE_BODY, NODE_JOINT
+from rbcli.physics.joints.solver_graph import NODE_BODY, NODE_JOINT, redundancy_by_joint
 
 ROOT = Path(__file__).resolve().parents[2]
 EPS = np.finfo(float).eps
@@ -228,7 +228,7 @@ def hinge_system(centers, joints):  # noqa: ANN001, ANN201
     }
 
 
-def check_redundant(s, expected: int, joint: int) -> None:  # noqa: ANN001
+def check_redundant(s, expected: int, joint: int, involved: list[int]) -> None:  # noqa: ANN001
     """A rank-deficient A: `expected` rows reported, all of `joint`; for a consistent rhs (= A z) the answer
     solves A lambda = rhs and gives the same constraint impulse G^T lambda as the minimum-norm lstsq one
     (G^T lambda is unique for a consistent rhs: the velocity change W G^T lambda is the projection)."""
@@ -242,6 +242,9 @@ def check_redundant(s, expected: int, joint: int) -> None:  # noqa: ANN001
     first = s["row_start"][joint]
     assert set(work.redundant_row[:count]) <= set(range(first, first + s["row_count"][joint]))
     assert np.all(out[work.redundant_row[:count]] == 0.0)
+    graph = joint_graph(s["body_a"], s["body_b"], s["ground"], s["row_count"])
+    rows = (s["row_start"], s["row_count"], work.redundant_row[:count])
+    assert redundancy_by_joint(s["body_a"], s["body_b"], s["ground"], graph.joint_node, *rows) == [(involved, expected)]
     scale = np.linalg.norm(A) * np.linalg.norm(out) + np.linalg.norm(rhs)
     assert np.linalg.norm(A @ out - rhs) <= 1e-13 * scale
     reference = np.linalg.lstsq(A, rhs, rcond=None)[0]
@@ -254,13 +257,13 @@ def test_planar_four_bar_has_three_redundant_rows() -> None:
     centers = [(p[0] + p[1]) / 2, (p[1] + p[2]) / 2, (p[2] + p[3]) / 2]
     z = [0, 0, 1.0]
     s = hinge_system(centers, [(-1, 0, p[0], z), (0, 1, p[1], z), (1, 2, p[2], z), (2, -1, p[3], z)])
-    check_redundant(s, 3, joint=3)
+    check_redundant(s, 3, joint=3, involved=[3, 2, 1, 0])  # the loop joint, then its cycle from its body a (2)
 
 
 def test_door_on_two_coaxial_hinges() -> None:
     """A door on a top and a bottom hinge with one axis: the second hinge's 5 rows repeat the first's."""
     s = hinge_system([np.array([0.5, 0, 1.0])], [(-1, 0, np.zeros(3), [0, 0, 1.0]), (0, -1, [0, 0, 2.0], [0, 0, 1])])
-    check_redundant(s, 5, joint=1)
+    check_redundant(s, 5, joint=1, involved=[1, 0])
 
 
 def test_repeated_row_inside_a_tree_joint() -> None:
@@ -268,7 +271,7 @@ def test_repeated_row_inside_a_tree_joint() -> None:
     rng = np.random.default_rng(2)
     s = random_system(rng, 3, [(-1, 0), (0, 1), (1, 2)], counts=[3, 4, 2], mass_range=(0.1, 10.0))
     s["jac_a"][5], s["jac_b"][5] = 2 * s["jac_a"][4], 2 * s["jac_b"][4]  # joint 1's row 2 = 2 x its row 1
-    check_redundant(s, 1, joint=1)
+    check_redundant(s, 1, joint=1, involved=[1])
 
 
 def test_work_arrays_grow_linearly() -> None:

@@ -182,3 +182,57 @@ def build_graph_arrays(body_a: object, body_b: object, body_ground: object, row_
         "entry_joint": np.array(entry_joint, dtype=np.int64),
         "row_total": np.array([counts.sum()], dtype=np.int64),
     }
+
+
+def loop_cycle(
+    body_a: np.ndarray, body_b: np.ndarray, body_ground: np.ndarray, in_tree: np.ndarray, joint: int
+) -> list[int]:
+    """The joints of the cycle that loop joint `joint` closes: itself, then the tree joints on the path
+    between its two ends (the world counts as one vertex), in path order. For a loader's warning."""
+    body_count = body_ground.shape[0]
+
+    def end(body: int) -> int:
+        return body if body >= 0 and not body_ground[body] else body_count
+
+    neighbours: list[list[tuple[int, int]]] = [[] for _ in range(body_count + 1)]
+    for j in np.flatnonzero(in_tree):
+        u, w = end(int(body_a[j])), end(int(body_b[j]))
+        neighbours[u].append((w, int(j)))
+        neighbours[w].append((u, int(j)))
+    start, goal = end(int(body_a[joint])), end(int(body_b[joint]))
+    came: dict[int, tuple[int, int]] = {start: (-1, -1)}
+    queue = deque([start])
+    while queue and goal not in came:
+        u = queue.popleft()
+        for w, j in neighbours[u]:
+            if w not in came:
+                came[w] = (u, j)
+                queue.append(w)
+    path, v = [], goal
+    while v in came and came[v][0] >= 0:
+        v, j = came[v]
+        path.append(j)
+    return [joint, *path[::-1]]
+
+
+def redundancy_by_joint(
+    body_a: np.ndarray,
+    body_b: np.ndarray,
+    body_ground: np.ndarray,
+    joint_node: np.ndarray,
+    row_start: np.ndarray,
+    row_count: np.ndarray,
+    redundant_row: np.ndarray,
+) -> list[tuple[list[int], int]]:
+    """The redundant rows of a factor (SolverWork.redundant_row[:count]) grouped for a warning: for each joint
+    that owns some, (the joints involved, how many rows). A loop joint's rows involve its whole cycle (e.g.
+    a door's two coaxial hinges: ([door_bottom, door_top], 5)); a tree joint's rows only itself."""
+    owner = np.searchsorted(row_start, redundant_row, side="right") - 1
+    report = []
+    for joint in np.unique(owner):
+        rows = int(np.count_nonzero(owner == joint))
+        if joint_node[joint] >= 0:
+            report.append(([int(joint)], rows))
+        else:
+            report.append((loop_cycle(body_a, body_b, body_ground, joint_node >= 0, int(joint)), rows))
+    return report
