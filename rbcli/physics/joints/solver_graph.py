@@ -195,10 +195,10 @@ def loop_cycle(
         return body if body >= 0 and not body_ground[body] else body_count
 
     neighbours: list[list[tuple[int, int]]] = [[] for _ in range(body_count + 1)]
-    for j in np.flatnonzero(in_tree):
-        u, w = end(int(body_a[j])), end(int(body_b[j]))
-        neighbours[u].append((w, int(j)))
-        neighbours[w].append((u, int(j)))
+    for tree_joint in np.flatnonzero(in_tree).tolist():
+        u, w = end(int(body_a[tree_joint])), end(int(body_b[tree_joint]))
+        neighbours[u].append((w, tree_joint))
+        neighbours[w].append((u, tree_joint))
     start, goal = end(int(body_a[joint])), end(int(body_b[joint]))
     came: dict[int, tuple[int, int]] = {start: (-1, -1)}
     queue = deque([start])
@@ -208,10 +208,11 @@ def loop_cycle(
             if w not in came:
                 came[w] = (u, j)
                 queue.append(w)
-    path, v = [], goal
+    path: list[int] = []
+    v = goal
     while v in came and came[v][0] >= 0:
-        v, j = came[v]
-        path.append(j)
+        v, step = came[v]
+        path.append(step)
     return [joint, *path[::-1]]
 
 
