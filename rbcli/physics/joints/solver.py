@@ -59,6 +59,8 @@ class JointGraph(NamedTuple):
     node_parent: np.ndarray  # int64 (node_count,): parent node (a larger index), -1 for a root
     node_edge_body: np.ndarray  # int64 (node_count,): the body the edge to the parent passes through, -1: root
     node_offset: np.ndarray  # int64 (node_count + 1,): each node's slice of the node vector
+    node_child_start: np.ndarray  # int64 (node_count + 1,): each node's slice of node_child
+    node_child: np.ndarray  # int64 (node_count - root_count,): children of each node (smaller indices)
     body_node: np.ndarray  # int64 (body_count,): node of a hub body, -1 for an eliminated or unjointed body
     loop_joint: np.ndarray  # int64 (loop_row_count,): joint of each loop row
     loop_local: np.ndarray  # int64 (loop_row_count,): its row within the joint
@@ -197,31 +199,43 @@ def _joint_jac(j, body, body_a, jac_a, jac_b):  # noqa: ANN001, ANN202
 
 
 @numba.njit(cache=True, inline="always")
-def _tree_solve(graph, work) -> None:  # noqa: ANN001
-    """work.vec = H_T^-1 work.vec over the forest, from factor_rows' D_i = L_i Delta_i L_i^T, Y_i = L_i^-1 H_ip.
+def _tree_solve(graph, work, row_start, row_count, rhs, out, from_rows, to_rows) -> None:  # noqa: ANN001
+    """work.vec = H_T^-1 z over the forest, from factor_rows' D_i = L_i Delta_i L_i^T, Y_i = L_i^-1 H_ip.
 
-    With U_ip = D_i^-1 H_ip = L_i^-T Delta_i^-1 Y_i, H_T = U^T D U: leaves first s_i = Delta_i^-1 L_i^-1 z_i
-    and z_p -= Y_i^T s_i (= U_ip^T z_i); root first x_i = L_i^-T (s_i - Delta_i^-1 Y_i x_p) (= w_i - U_ip x_p).
+    z = work.vec, or with from_rows [0 at hubs; -rhs at tree joints] read in the first sweep; with to_rows
+    the tree joints' multipliers are also written to `out` in the second. With U_ip = D_i^-1 H_ip =
+    L_i^-T Delta_i^-1 Y_i, H_T = U^T D U: leaves first z_i -= sum over children c of Y_c^T s_c (= U_ci^T z_c)
+    and s_i = Delta_i^-1 L_i^-1 z_i; root first x_i = L_i^-T (s_i - Delta_i^-1 Y_i x_p) (= w_i - U_ip x_p).
     """
     x, Y, D, inv = work.vec, work.node_Y, work.node_D, work.node_inv_pivot
-    off, parent = graph.node_offset, graph.node_parent
+    off, parent, kind, item = graph.node_offset, graph.node_parent, graph.node_kind, graph.node_item
+    child_start, child = graph.node_child_start, graph.node_child
     nodes = parent.shape[0]
     for i in range(nodes):
-        o, d, p = off[i], off[i + 1] - off[i], parent[i]
-        for r in range(d):
+        o, d = off[i], off[i + 1] - off[i]
+        if from_rows:
+            if kind[i] == NODE_JOINT:
+                rs = row_start[item[i]]
+                for r in range(d):
+                    x[o + r] = -rhs[rs + r]
+            else:
+                for r in range(d):
+                    x[o + r] = 0.0
+        for e in range(child_start[i], child_start[i + 1]):
+            c = child[e]
+            oc, dc = off[c], off[c + 1] - off[c]
+            for col in range(d):
+                v = 0.0
+                for r in range(dc):
+                    v += Y[c, r, col] * x[oc + r]
+                x[o + col] -= v
+        for r in range(d):  # t_i = L_i^-1 z_i, then s_i = Delta_i^-1 t_i (the substitution needs t unscaled)
             v = x[o + r]
             for t in range(r):
                 v -= D[i, r, t] * x[o + t]
             x[o + r] = v
         for r in range(d):
             x[o + r] *= inv[i, r]
-        if p >= 0:
-            op, dp = off[p], off[p + 1] - off[p]
-            for c in range(dp):
-                v = 0.0
-                for r in range(d):
-                    v += Y[i, r, c] * x[o + r]
-                x[op + c] -= v
     for i in range(nodes - 1, -1, -1):
         o, d, p = off[i], off[i + 1] - off[i], parent[i]
         if p >= 0:
@@ -236,6 +250,10 @@ def _tree_solve(graph, work) -> None:  # noqa: ANN001
             for t in range(r + 1, d):
                 v -= D[i, t, r] * x[o + t]
             x[o + r] = v
+        if to_rows and kind[i] == NODE_JOINT:
+            rs = row_start[item[i]]
+            for r in range(d):
+                out[rs + r] = x[o + r]
 
 
 @numba.njit(**STEP_KERNEL)
@@ -414,7 +432,7 @@ def _factor_loops(graph, work, row_start, row_count, body_a, jac_a, jac_b, inv_m
         for r in range(work.vec.shape[0]):
             work.vec[r] = 0.0
         _bodies_to_tree(graph, work, row_count, work.loop_g)
-        _tree_solve(graph, work)  # X = A_TT^-1 A_TL e_col
+        _tree_solve(graph, work, row_start, row_count, work.vec, work.vec, False, False)  # X = A_TT^-1 A_TL e_col
         _tree_to_bodies(graph, work, row_count, work.vec)  # u = W G_T^T X
         for r in range(k):
             lam[r] = 0.0
@@ -521,20 +539,6 @@ def factor_rows(graph, work, row_start, row_count, body_a, body_b, jac_a, jac_b,
     return count
 
 
-@numba.njit(cache=True, inline="always")
-def _tree_rows_in(graph, work, row_start, row_count, rhs) -> None:  # noqa: ANN001
-    """work.vec = [0 at hubs; -rhs at tree joints] (the augmented right-hand side, module docstring)."""
-    off = graph.node_offset
-    for i in range(graph.node_kind.shape[0]):
-        if graph.node_kind[i] == NODE_JOINT:
-            j = graph.node_item[i]
-            for r in range(row_count[j]):
-                work.vec[off[i] + r] = -rhs[row_start[j] + r]
-        else:
-            for r in range(6):
-                work.vec[off[i] + r] = 0.0
-
-
 @numba.njit(**STEP_KERNEL)
 def _residual(graph, work, row_start, row_count, body_a, body_b, rhs, lam) -> None:  # noqa: ANN001
     """work.refine_residual = rhs - G W G^T lam, from the rows copied by factor_rows: O(rows + bodies)."""
@@ -589,13 +593,7 @@ def solve_rows(graph, work, row_start, row_count, body_a, body_b, rhs, out) -> N
 def _solve_once(graph, work, row_start, row_count, rhs, out) -> None:  # noqa: ANN001
     """out = A^-1 rhs from the factor: a tree solve, and with loops the Schur step and a second tree solve."""
     off = graph.node_offset
-    _tree_rows_in(graph, work, row_start, row_count, rhs)
-    _tree_solve(graph, work)
-    for i in range(graph.node_kind.shape[0]):
-        if graph.node_kind[i] == NODE_JOINT:
-            j = graph.node_item[i]
-            for r in range(row_count[j]):
-                out[row_start[j] + r] = work.vec[off[i] + r]
+    _tree_solve(graph, work, row_start, row_count, rhs, out, True, True)
     k = graph.loop_joint.shape[0]
     if k == 0:
         return
@@ -630,7 +628,7 @@ def _solve_once(graph, work, row_start, row_count, rhs, out) -> None:  # noqa: A
     for r in range(work.vec.shape[0]):
         work.vec[r] = 0.0
     _bodies_to_tree(graph, work, row_count, work.loop_g)
-    _tree_solve(graph, work)
+    _tree_solve(graph, work, row_start, row_count, work.vec, work.vec, False, False)
     for i in range(graph.node_kind.shape[0]):
         if graph.node_kind[i] == NODE_JOINT:
             j = graph.node_item[i]

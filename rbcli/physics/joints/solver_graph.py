@@ -172,6 +172,12 @@ def build_graph_arrays(body_a: object, body_b: object, body_ground: object, row_
         "node_parent": node_parent,
         "node_edge_body": bfs_edge_body[order].astype(np.int64),
         "node_offset": node_offset,
+        "node_child_start": np.concatenate(
+            [[0], np.cumsum(np.bincount(node_parent[node_parent >= 0], minlength=order.size))]
+        ).astype(np.int64),
+        "node_child": np.flatnonzero(node_parent >= 0)[np.argsort(node_parent[node_parent >= 0], kind="stable")].astype(
+            np.int64
+        ),
         "body_node": node_of_vertex[joint_count:].copy(),
         "loop_joint": loop_joint,
         "loop_local": loop_local,
