@@ -1,6 +1,6 @@
 """Jointed chains: rbsim's multiplier solver against MuJoCo 4.0 (Euler), measured in the same run.
 
-    python benchmarks/bench_joints.py [--quick] [--steps N]
+    python benchmarks/bench_joints.py [--quick] [--link-steps N] [--repeats N] [--full-step]
 
 The issue's chains (issue 27): hinge or ball chains of 10, 100, 400 (and, for rbsim, 10,000) capsule
 links, 0.1 m long (the segment between the two joint anchors), radius 0.01 m, density 1000 kg/m^3, hinge
@@ -8,20 +8,23 @@ axes parallel (world y), released horizontal (along world x, the first link hing
 origin) under gravity -9.81 m/s^2 z, dt 1e-3, no contact.
 
 MuJoCo: the chain as nested bodies in an MJCF generated here (capsule geoms with contype = conaffinity
-= 0, one hinge or ball joint per link), integrator Euler, timed as `mj_step(m, d, nstep=steps)` from the
-released pose. Its coordinates are the joint angles, so its constraint error is 0 by construction.
+= 0, one hinge or ball joint per link), integrator Euler, timed as `mj_step(m, d, nstep)` from the
+released pose in segments of 1,000 steps (longer Euler runs of long chains go unstable). Its coordinates
+are the joint angles, so its constraint error is 0 by construction.
 
-rbsim: for now the solver alone, as the RATTLE-type step will use it: per step one `factor_rows` and three
+rbsim: the solver alone, as the RATTLE-type step uses it: per step one `factor_rows` and three
 `solve_rows` (the simplified Newton of the position projection and the velocity projection) on the rows of
 the chain in a sagging pose (link i turned by 0.3 sin(pi i / n) about y, so the rows are not axis-aligned),
-in a compiled loop. The constraint error beside each rate is the solve's relative residual
-|A lambda - rhs| / |rhs| (A = G W G^T applied from the rows, not from the factor). `--full-step` adds the
-whole split2 step (`full_step_chain`: the chain written as an rbsim scene, its rate, the anchor gap and
-hinge-axis misalignment after the run, and its ratio to MuJoCo); it needs the joints integration (scene
-format, stages) and reports why it did not run on a checkout without it.
+in a compiled loop, rhs = G v for random body velocities v. The error beside each rate is what one
+velocity projection leaves, |G v'| / |G v| with v' = v - W G^T lambda (computed in numpy from the rows,
+not from the factor). `--full-step` adds the whole split2 step (`full_step_chain`: the chain written as
+an rbsim scene, its rate, the anchor gap and hinge-axis misalignment after the run, and its ratio to
+MuJoCo); it needs the joints integration (scene format, stages) and says why it did not run on a
+checkout without it.
 
-Rates are link-steps per second (links x steps / wall second), best of `--repeats` (a shared machine is
-noisy: the median/best spread is printed), and the load average is printed beside them.
+Rates are link-steps per CPU second of this process (links x steps / time.process_time: the machine is
+shared, and CPU time is what load changes least), best of `--repeats`, rbsim and MuJoCo interleaved; the
+median/best spread and the load average are printed beside them.
 """
 
 from __future__ import annotations
