@@ -1,0 +1,1 @@
+"""Joints: constraint rows on the maximal state, solved with Lagrange multipliers (docs/joint_solver.md)."""
