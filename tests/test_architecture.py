@@ -3,6 +3,7 @@ table, checked on every import statement of every file); physics is pure numeric
 stays light."""
 
 import ast
+import functools
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -130,6 +131,7 @@ def _type_checking_only(tree: ast.Module) -> set[int]:
     return inside
 
 
+@functools.cache
 def _module_imports() -> dict[str, dict[str, str]]:
     """module -> {imported rbcli module: file:line} for every import of one rbcli module by another that
     runs: at module level or inside a function (a lazy import between two rbcli modules that need each
