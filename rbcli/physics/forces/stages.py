@@ -33,7 +33,6 @@ from numba.core import types
 from numba.extending import overload
 
 from rbcli.physics.contact.force import accumulate_contact, begin_contact_step, commit_contacts, hold_static_bodies
-from rbcli.physics.contact.kinematic import kinematic_begin, kinematic_end
 from rbcli.physics.forces.drag import accumulate_drag
 from rbcli.physics.forces.field import accumulate_field
 from rbcli.physics.forces.impulse import apply_impulses
@@ -48,6 +47,7 @@ from rbcli.physics.forces.tables import (
     TERM_TORQUE,
 )
 from rbcli.physics.forces.torque import accumulate_torque
+from rbcli.physics.kinematic import kinematic_begin, kinematic_end
 from rbcli.physics.step import STEP_KERNEL
 
 # the dispatchers' implementations compile with the step kernels' options (cached, no reference counting);
@@ -253,7 +253,7 @@ def _contact_record_stage(work, frames, filled, due):  # noqa: ANN001, ANN202
 
 def kinematic_begin_stage(model, forces, t, h, x, q, P, L) -> bool:  # noqa: ANN001
     """Kinematic bodies at their exact pose at t, moving at their mean velocity over [t, t + h)
-    (contact/kinematic.py), when the scene has any; True when it moved something."""
+    (physics/kinematic.py), when the scene has any; True when it moved something."""
     _kernel_only()
     return False
 
@@ -273,7 +273,7 @@ def _kinematic_begin_stage(model, forces, t, h, x, q, P, L):  # noqa: ANN001, AN
 
 
 def kinematic_end_stage(model, forces, t, x, q, P, L) -> None:  # noqa: ANN001
-    """Kinematic bodies at their exact x, q, P, L at t (contact/kinematic.py) when the scene has any."""
+    """Kinematic bodies at their exact x, q, P, L at t (physics/kinematic.py) when the scene has any."""
     _kernel_only()
 
 
