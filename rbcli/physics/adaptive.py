@@ -161,7 +161,9 @@ def run_adaptive_chunk(
                 h = min(h_max, max(h, h_try * factor))
                 t = target * dt
                 index = target
-                contact_record_stage(force_data.contact, frames, filled, index % record_every == 0)
+                contact_record_stage(
+                    forces.contact, force_data.contact, x, q, frames, filled, index % record_every == 0
+                )
                 filled, status = record_if_due(index, record_every, x, q, P, L, frames, filled)
             else:
                 h = min(h_max, h_try * factor)

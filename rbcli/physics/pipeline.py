@@ -123,9 +123,9 @@ STEP_STAGES: tuple[Stage, ...] = (
     ),
     Stage(
         "contact_record",
-        "contact_record: on recording steps, the step's contact count, deepest overlap and energy",
+        "contact_record: on recording steps, the state's contact count, deepest overlap and energy",
         ("from rbcli.physics.forces.stages import contact_record_stage",),
-        "contact_record_stage(contact_work, frames, filled, (index + 1) % record_every == 0)",
+        "contact_record_stage(contact, contact_work, x, q, frames, filled, (index + 1) % record_every == 0)",
     ),
     Stage(
         "record",

@@ -180,6 +180,8 @@ def _contact_force(sink, contact, work, owner, partner, ba, bb, n0, n1, n2, over
                 work.trial_count[owner] = slot + 1
             else:
                 work.counters[COUNT_OVERFLOW] += 1
+                if work.overflow_sphere[0] < 0:
+                    work.overflow_sphere[0] = owner
         push(x, ba, c0, c1, c2, f0, f1, f2, sink.F, sink.tau)
         if bb >= 0:
             push(x, bb, c0, c1, c2, -f0, -f1, -f2, sink.F, sink.tau)

@@ -110,6 +110,41 @@ def contact_wrench_history_numpy(
     return F, tau, count, proposals
 
 
+def contact_energy_numpy(contact: ContactTable, x: np.ndarray, q: np.ndarray, history: dict | None = None) -> float:
+    """V_c [J] of one state, O(n^2): 1/2 k d^2 per overlap (k mixed as the force stage mixes it) plus
+    1/2 k_t |xi|^2 per contact with friction whose elongation xi [m] `history` holds (keys as in
+    `contact_wrench_history_numpy`)."""
+    history = history or {}
+    pos = sphere_positions_numpy(contact, x, q)
+    r, body, inv = contact.sphere_radius, contact.sphere_body, contact.body_inv_contact_mass
+    energy = 0.0
+
+    def add(key: tuple[int, int], k: float, overlap: float, mu: float) -> float:
+        xi = np.asarray(history.get(key, np.zeros(3))) if mu > 0.0 else np.zeros(3)
+        return 0.5 * k * overlap**2 + 0.5 * contact.tangential_ratio * k * float(xi @ xi)
+
+    for i in range(len(r)):
+        if inv[body[i]] == 0.0:
+            continue
+        for p in range(contact.plane_point.shape[0]):
+            overlap = r[i] - (pos[i] - contact.plane_point[p]) @ contact.plane_normal[p]
+            if overlap > 0.0:
+                mu = np.sqrt(contact.body_friction[body[i]] * contact.plane_friction[p])
+                energy += add((i, PLANE_PARTNER_BASE - p), contact.body_plane_stiffness[body[i]], overlap, mu)
+    for i in range(len(r)):
+        for j in range(i + 1, len(r)):
+            a, b = body[i], body[j]
+            if a == b or (inv[a] == 0.0 and inv[b] == 0.0):
+                continue
+            dist = float(np.linalg.norm(pos[i] - pos[j]))
+            overlap = r[i] + r[j] - dist
+            if overlap > 0.0 and dist > 0.0:
+                ka, kb = contact.body_stiffness[a], contact.body_stiffness[b]
+                mu = np.sqrt(contact.body_friction[a] * contact.body_friction[b])
+                energy += add((i, j), 2.0 * ka * kb / (ka + kb), overlap, mu)
+    return energy
+
+
 def contact_step_numpy(
     model, contact: ContactTable, x, q, P, L, history: dict, h: float, force: np.ndarray,  # noqa: ANN001
 ) -> dict:  # fmt: skip
