@@ -34,7 +34,7 @@ kinematic_begin, and only for an accepted attempt kinematic_end and contact_comm
 f(y_new) at t + h, becomes the history); contact_record and record on recorded grid times. A rejected
 attempt's evaluations wrote only trial arrays, so `restore` plus the untouched history is exactly the
 state before it: the step is retried as if never tried (tested), and k_1 (FSAL) stays valid. Kinematic
-bodies (contact/kinematic.py) are put at their mean motion over each attempt, which changes the state,
+bodies (physics/kinematic.py) are put at their mean motion over each attempt, which changes the state,
 so k_1 is evaluated again for them (one evaluation more per attempt, only in scenes that have kinematic
 bodies). Stiffness: contact forces switch on and off (the dashpot at first touch, the Coulomb cap), so
 the error estimate rejects steps across a switch until they are short, and no accuracy argument bounds

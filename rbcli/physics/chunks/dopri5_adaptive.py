@@ -115,8 +115,8 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
             h_next = min(h_max, max(h_next, h * factor))
             t = target * dt
             index = target
-            # contact_record: on recording steps, the step's contact count, deepest overlap and energy
-            contact_record_stage(contact_work, frames, filled, index % record_every == 0)
+            # contact_record: on recording steps, the state's contact count, deepest overlap and energy
+            contact_record_stage(contact, contact_work, x, q, frames, filled, index % record_every == 0)
             # record: on recording steps, the divergence check and the state copied into the next frame
             filled, status = record_if_due(index, record_every, x, q, P, L, frames, filled)
             if index == land and index < end and status == STATUS_OK:
