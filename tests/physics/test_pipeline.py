@@ -123,8 +123,9 @@ def test_a_stage_added_to_the_list_runs_in_the_generated_loop(tmp_path, name):
 def test_a_step_start_stage_added_to_the_list_runs_at_every_grid_step_of_the_adaptive_loop(tmp_path):
     """The same push as a step-start stage (before the impulses), with no `lands_at`: the adaptive loop
     must land on every grid index and run it there, as the fixed-step loop does, so after n grid steps
-    P_x is P0 + n pushes exactly (no forces: dopri5 leaves P as it is, exactly) and the frame at grid
-    step 5 holds five pushes; the unchanged loop (the committed one) leaves P alone."""
+    P_x is P0 + n pushes exactly (no forces: dopri5 leaves P as it is, exactly; with `lands_at="end"`
+    the stage runs at the chunk's start only: one push, checked by hand) and the frame at grid step 5
+    holds five pushes."""
     from conftest import make_scene, random_bodies
 
     from rbcli.api import prepare
@@ -135,20 +136,17 @@ def test_a_step_start_stage_added_to_the_list_runs_at_every_grid_step_of_the_ada
     assert "land = min(land, index + 1)" in adaptive_source("dopri5", "dopri5", (PUSH_STAGE, *STEP_STAGES))
     compiled = prepare(make_scene(random_bodies(3, seed=2), integrator="dopri5"))
     steps, every = 12, 5
-    P_end = []
-    for run_chunk in (pushed.run_chunk, INTEGRATORS["dopri5"].adaptive_chunk().run_chunk):
-        data = make_data(compiled.initial_state, compiled.forces, 0, adaptive=True, tolerance=1e-6, duration=0.012)
-        P0 = data.state.P.copy()
-        frames = empty_buffers(4, 3)
-        done, filled, status = run_chunk(
-            compiled.model.kernel(), compiled.forces.kernel(), data.kernel(), 1e-3, 0, steps, every, frames, 0
-        )
-        assert (done, filled, status) == (steps, 2, 0)
-        P_end.append(data.state.P.copy())
-        if run_chunk is pushed.run_chunk:
-            assert np.array_equal(frames.P[0][:, 0], P0[:, 0] + every * PUSH)
-    assert np.array_equal(P_end[0][:, 0], P0[:, 0] + steps * PUSH) and np.array_equal(P_end[0][:, 1:], P0[:, 1:])
-    assert np.array_equal(P_end[1], P0)
+    data = make_data(compiled.initial_state, compiled.forces, 0, adaptive=True, tolerance=1e-6, duration=0.012)
+    P0 = data.state.P.copy()
+    frames = empty_buffers(4, 3)
+    done, filled, status = pushed.run_chunk(
+        compiled.model.kernel(), compiled.forces.kernel(), data.kernel(), 1e-3, 0, steps, every, frames, 0
+    )
+    assert (done, filled, status) == (steps, 2, 0)
+    assert np.array_equal(frames.P[0][:, 0], P0[:, 0] + every * PUSH)
+    assert np.array_equal(data.state.P[:, 0], P0[:, 0] + steps * PUSH) and np.array_equal(
+        data.state.P[:, 1:], P0[:, 1:]
+    )
 
 
 def test_committed_force_pass_is_generated_from_the_force_stage_list():
@@ -193,7 +191,7 @@ def test_a_force_stage_added_to_the_list_runs_in_the_generated_pass(tmp_path):
                         schedule=[NO_SCHEDULE])  # fmt: skip
     with_field = compiled.forces._replace(field=field)
     expected = compiled.model.body_mass[:, None] * np.array([0.0, 0.0, -9.81])
-    for forces, kick in ((with_field, KICK), (compiled.forces.kernel(), 0.0)):
+    for forces, kick in ((with_field.kernel(), KICK), (compiled.forces.kernel(), 0.0)):  # only what each has
         F, tau = np.zeros((3, 3)), np.zeros((3, 3))
         module.accumulate_wrench(model, forces, make_force_data(forces), 0.0, s.x, s.q, s.P, s.L, F, tau)
         assert np.array_equal(F[:, 0::2], expected[:, 0::2])
