@@ -30,8 +30,10 @@ import math
 
 import numba
 
-from rbcli.physics.contact.broad_phase import HALF_SHELL, bucket_of, build_grid
+from rbcli.physics.contact.body_phase import body_phase, place_spheres, whole_grid_hashed
+from rbcli.physics.contact.broad_phase import HALF_SHELL, bucket_of, build_grid_of
 from rbcli.physics.contact.tables import (
+    ACTIVE_PLANE,
     COUNT_CANDIDATES,
     COUNT_CONTACTS,
     COUNT_EVALUATIONS,
@@ -68,36 +70,44 @@ def commit_contacts(model, contact, work, x, q, P, L) -> None:  # noqa: ANN001
     rest = work.clock[1] - s_last
     if rest != 0.0:  # the end-of-step velocities (the evaluation's are no longer needed)
         _body_velocities(model, work, x, q, P, L)
-    for i in range(work.hist_count.shape[0]):
-        count = work.trial_count[i]
-        work.hist_count[i] = count
-        if count == 0:
+    # only bodies flagged in the last evaluation hold trial contacts, only bodies that held some keep a
+    # history to forget: the others' spheres are not visited (body_phase.py), in sphere order as before
+    start, trial, history = contact.body_sphere_start, work.body_trial, work.body_history
+    for body in range(trial.shape[0]):
+        if trial[body] == 0 and history[body] == 0:
             continue
-        ba = contact.sphere_body[i]
-        for k in range(count):
-            partner = work.trial_partner[i, k]
-            if rest == 0.0:  # evaluated at the end of the step (rk4's last stage): nothing to advance
-                work.hist_partner[i, k] = partner
-                for j in range(3):
-                    work.hist_xi[i, k, j] = work.trial_xi[i, k, j]
+        history[body] = 0
+        for i in range(start[body], start[body + 1]):
+            count = work.trial_count[i]
+            work.hist_count[i] = count
+            if count == 0:
                 continue
-            c0, c1, c2 = work.trial_point[i, k, 0], work.trial_point[i, k, 1], work.trial_point[i, k, 2]
-            n0, n1, n2 = work.trial_normal[i, k, 0], work.trial_normal[i, k, 1], work.trial_normal[i, k, 2]
-            v0, v1, v2 = _velocity_at(work, x, ba, c0, c1, c2)
-            if partner >= 0:
-                w0, w1, w2 = _velocity_at(work, x, contact.sphere_body[partner], c0, c1, c2)
-                v0, v1, v2 = v0 - w0, v1 - w1, v2 - w2
-            vn = v0 * n0 + v1 * n1 + v2 * n2
-            e0 = work.trial_xi[i, k, 0] + rest * (v0 - vn * n0)
-            e1 = work.trial_xi[i, k, 1] + rest * (v1 - vn * n1)
-            e2 = work.trial_xi[i, k, 2] + rest * (v2 - vn * n2)
-            limit = work.trial_limit[i, k]
-            length2 = e0 * e0 + e1 * e1 + e2 * e2
-            if length2 > limit * limit:
-                scale = limit / math.sqrt(length2)
-                e0, e1, e2 = e0 * scale, e1 * scale, e2 * scale
-            work.hist_partner[i, k] = partner
-            work.hist_xi[i, k, 0], work.hist_xi[i, k, 1], work.hist_xi[i, k, 2] = e0, e1, e2
+            history[body] = 1
+            ba = contact.sphere_body[i]
+            for k in range(count):
+                partner = work.trial_partner[i, k]
+                if rest == 0.0:  # evaluated at the end of the step (rk4's last stage): nothing to advance
+                    work.hist_partner[i, k] = partner
+                    for j in range(3):
+                        work.hist_xi[i, k, j] = work.trial_xi[i, k, j]
+                    continue
+                c0, c1, c2 = work.trial_point[i, k, 0], work.trial_point[i, k, 1], work.trial_point[i, k, 2]
+                n0, n1, n2 = work.trial_normal[i, k, 0], work.trial_normal[i, k, 1], work.trial_normal[i, k, 2]
+                v0, v1, v2 = _velocity_at(work, x, ba, c0, c1, c2)
+                if partner >= 0:
+                    w0, w1, w2 = _velocity_at(work, x, contact.sphere_body[partner], c0, c1, c2)
+                    v0, v1, v2 = v0 - w0, v1 - w1, v2 - w2
+                vn = v0 * n0 + v1 * n1 + v2 * n2
+                e0 = work.trial_xi[i, k, 0] + rest * (v0 - vn * n0)
+                e1 = work.trial_xi[i, k, 1] + rest * (v1 - vn * n1)
+                e2 = work.trial_xi[i, k, 2] + rest * (v2 - vn * n2)
+                limit = work.trial_limit[i, k]
+                length2 = e0 * e0 + e1 * e1 + e2 * e2
+                if length2 > limit * limit:
+                    scale = limit / math.sqrt(length2)
+                    e0, e1, e2 = e0 * scale, e1 * scale, e2 * scale
+                work.hist_partner[i, k] = partner
+                work.hist_xi[i, k, 0], work.hist_xi[i, k, 1], work.hist_xi[i, k, 2] = e0, e1, e2
 
 
 @numba.njit(**STEP_KERNEL)
@@ -113,9 +123,16 @@ def hold_static_bodies(contact, F, tau) -> None:  # noqa: ANN001
 def accumulate_contact(model, contact, work, t, x, q, P, L, F, tau) -> None:  # noqa: ANN001
     """Add every contact's force and torque to F and tau (world frame, about each centre of mass)."""
     _body_velocities(model, work, x, q, P, L)
-    _sphere_positions(contact, work, x, q)
-    grid = build_grid(contact, work)
-    work.trial_count[:] = 0
+    # the two-level broad phase: bodies whose boxes meet (body_phase.py), then only their spheres placed
+    # and gridded; trial contacts cleared only where the last evaluation could have left some
+    body_phase(contact, work, x, q, work.body_pair_none)
+    start = contact.body_sphere_start
+    for body in range(work.body_trial.shape[0]):
+        if work.body_trial[body]:
+            work.trial_count[start[body] : start[body + 1]] = 0
+        work.body_trial[body] = 1 if work.body_active[body] else 0
+    gridded = place_spheres(contact, work, x, q)
+    grid = build_grid_of(contact, work, gridded, whole_grid_hashed(contact, work) if gridded else False)
     work.stats[:] = 0.0
     work.counters[COUNT_EVALUATIONS] += 1
     s = t - work.clock[0]
@@ -127,7 +144,7 @@ def accumulate_contact(model, contact, work, t, x, q, P, L, F, tau) -> None:  # 
     cell, sp, order, start = work.sorted_cell, work.sorted_position, work.sorted_sphere, work.bucket_start
     dense = grid[0]
     candidates = 0
-    for a in range(order.shape[0]):
+    for a in range(gridded):
         ci, cj, ck = cell[a, 0], cell[a, 1], cell[a, 2]
         p0, p1, p2, ra = sp[a, 0], sp[a, 1], sp[a, 2], sp[a, 3]
         own = work.sphere_bucket[order[a]]
@@ -190,30 +207,35 @@ def _sphere_positions(contact, work, x, q) -> None:  # noqa: ANN001
 
 @numba.njit(cache=True, inline="always")
 def _plane_contacts(contact, work, x, s, h, F, tau) -> None:  # noqa: ANN001
+    """Every sphere against every plane its body's box meets (body_phase.py), spheres in index order and
+    planes in theirs for each, as a test of every sphere against every plane would find them."""
     pos = work.sphere_position
     planes = contact.plane_point.shape[0]
-    for i in range(pos.shape[0]):
-        b = contact.sphere_body[i]
-        if contact.body_inv_contact_mass[b] == 0.0:
+    start, active, near = contact.body_sphere_start, work.body_active, work.body_plane
+    for b in range(active.shape[0]):
+        if not active[b] & ACTIVE_PLANE:
             continue
-        r = contact.sphere_radius[i]
-        for p in range(planes):
-            n0, n1, n2 = contact.plane_normal[p, 0], contact.plane_normal[p, 1], contact.plane_normal[p, 2]
-            dist = (
-                (pos[i, 0] - contact.plane_point[p, 0]) * n0
-                + (pos[i, 1] - contact.plane_point[p, 1]) * n1
-                + (pos[i, 2] - contact.plane_point[p, 2]) * n2
-            )
-            overlap = r - dist
-            if overlap <= 0.0:
-                continue
-            back = r - 0.5 * overlap  # contact point: halfway through the overlap
-            c0, c1, c2 = pos[i, 0] - back * n0, pos[i, 1] - back * n1, pos[i, 2] - back * n2
-            k = contact.body_plane_stiffness[b]
-            zeta = min(contact.body_damping_ratio[b], contact.plane_damping_ratio[p])
-            mu = contact.body_friction_root[b] * contact.plane_friction_root[p]
-            _resolve(contact, work, x, s, h, i, PLANE_PARTNER_BASE - p, b, -1, n0, n1, n2, overlap,
-                     c0, c1, c2, k, zeta, mu, F, tau)  # fmt: skip
+        for i in range(start[b], start[b + 1]):
+            r = contact.sphere_radius[i]
+            for p in range(planes):
+                if near[b, p] == 0:
+                    continue
+                n0, n1, n2 = contact.plane_normal[p, 0], contact.plane_normal[p, 1], contact.plane_normal[p, 2]
+                dist = (
+                    (pos[i, 0] - contact.plane_point[p, 0]) * n0
+                    + (pos[i, 1] - contact.plane_point[p, 1]) * n1
+                    + (pos[i, 2] - contact.plane_point[p, 2]) * n2
+                )
+                overlap = r - dist
+                if overlap <= 0.0:
+                    continue
+                back = r - 0.5 * overlap  # contact point: halfway through the overlap
+                c0, c1, c2 = pos[i, 0] - back * n0, pos[i, 1] - back * n1, pos[i, 2] - back * n2
+                k = contact.body_plane_stiffness[b]
+                zeta = min(contact.body_damping_ratio[b], contact.plane_damping_ratio[p])
+                mu = contact.body_friction_root[b] * contact.plane_friction_root[p]
+                _resolve(contact, work, x, s, h, i, PLANE_PARTNER_BASE - p, b, -1, n0, n1, n2, overlap,
+                         c0, c1, c2, k, zeta, mu, F, tau)  # fmt: skip
 
 
 @numba.njit(cache=True, inline="always")

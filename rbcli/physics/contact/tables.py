@@ -86,6 +86,7 @@ class ContactTable(NamedTuple):
     body_large: np.ndarray  # bool (body_count,): rho_max > LARGE_BODY x the median, outside the body grid
     body_cell_size: float  # [m] the body grid's cell: the largest 2 rho_max of the other bodies
     cell_size: float  # [m] broad-phase grid cell: the largest sphere diameter
+    sphere_radius_min: float  # [m] the smallest sphere radius (body_phase.whole_grid_hashed)
     tangential_ratio: float  # k_t / k_n of every contact
     bucket_count: int  # size of the broad phase's bucket table (see broad_phase.py)
     # [s] the smallest stable step of the contacts the scene can form (parameters.stable_step; inf: none
@@ -139,6 +140,10 @@ class ContactWork(NamedTuple):
     body_plane: np.ndarray  # uint8 (body_count, plane_count), 1: the body's box meets the plane
     body_sweep: np.ndarray  # int64 (SWEEP_COUNT,): body pairs, box tests, spheres gridded
     active_sphere: np.ndarray  # int64 (sphere_count,), the spheres of bodies in body pairs, ascending
+    body_trial: np.ndarray  # uint8 (body_count,), 1: its spheres may hold trial contacts (flagged last evaluation)
+    body_pair_none: np.ndarray  # int64 (0, 2): the force stage takes body_phase's flags, not its pair list
+    # uint8 (body_count,), 1: its spheres may hold history (set by commit_contacts; all 1 after a restore)
+    body_history: np.ndarray
 
 
 def _ro(values: object, dtype: type, *shape: int) -> np.ndarray:
@@ -202,6 +207,7 @@ def contact_table(
         body_large=_ro(large, np.bool_),
         body_cell_size=body_cell,
         cell_size=float(2.0 * radius.max()) if spheres else 1.0,
+        sphere_radius_min=float(radius.min()) if spheres else 0.0,
         tangential_ratio=float(tangential_ratio),
         bucket_count=int(buckets),
         stable_step=float(stable_step),
@@ -268,6 +274,9 @@ def make_contact_work(contact: ContactTable, body_count: int, *, history: bool =
         body_plane=np.zeros((b, contact.plane_point.shape[0] if s else 0), dtype=np.uint8),
         body_sweep=np.zeros(SWEEP_COUNT, dtype=np.int64),
         active_sphere=np.zeros(s, dtype=np.int64),
+        body_trial=np.zeros(b, dtype=np.uint8),
+        body_pair_none=np.zeros((0, 2), dtype=np.int64),
+        body_history=np.zeros(b, dtype=np.uint8),
     )
 
 
