@@ -132,7 +132,8 @@ def accumulate_contact(model, contact, work, t, x, q, P, L, F, tau) -> None:  # 
             work.trial_count[start[body] : start[body + 1]] = 0
         work.body_trial[body] = 1 if work.body_active[body] else 0
     gridded = place_spheres(contact, work, x, q)
-    grid = build_grid_of(contact, work, gridded, whole_grid_hashed(contact, work) if gridded else False)
+    hashed = whole_grid_hashed(contact, work) if gridded and not contact.body_level_off else False
+    grid = build_grid_of(contact, work, gridded, hashed)
     work.stats[:] = 0.0
     work.counters[COUNT_EVALUATIONS] += 1
     s = t - work.clock[0]

@@ -85,6 +85,7 @@ class ContactTable(NamedTuple):
     body_bound_radius: np.ndarray
     body_large: np.ndarray  # bool (body_count,): rho_max > LARGE_BODY x the median, outside the body grid
     body_cell_size: float  # [m] the body grid's cell: the largest 2 rho_max of the other bodies
+    body_level_off: bool  # spheres <= 2 colliding bodies: the body level is skipped (body_phase.py)
     cell_size: float  # [m] broad-phase grid cell: the largest sphere diameter
     sphere_radius_min: float  # [m] the smallest sphere radius (body_phase.whole_grid_hashed)
     tangential_ratio: float  # k_t / k_n of every contact
@@ -206,6 +207,7 @@ def contact_table(
         body_bound_radius=_ro(rho, np.float64),
         body_large=_ro(large, np.bool_),
         body_cell_size=body_cell,
+        body_level_off=bool(spheres <= 2 * int(finite.sum())),
         cell_size=float(2.0 * radius.max()) if spheres else 1.0,
         sphere_radius_min=float(radius.min()) if spheres else 0.0,
         tangential_ratio=float(tangential_ratio),
