@@ -137,6 +137,23 @@ def test_physics_imports_only_numpy_and_numba():
         assert banned not in loaded, f"rbcli.physics imported {banned}"
 
 
+# what physics/contact/ may import besides itself: the one-body rotation kernels and the kernel options,
+# nothing that uses contact (forces, integrators, the pipeline) and no kinematic bodies (physics/kinematic.py)
+CONTACT_MAY_IMPORT = ("rbcli.physics.rotation", "rbcli.physics.rotation_kernels", "rbcli.physics.step")
+
+
+def test_contact_imports_nothing_above_it():
+    wrong = [
+        f"{path.relative_to(ROOT)}:{line}: {name}"
+        for path in sorted((PACKAGE / "physics" / "contact").glob("*.py"))
+        for name, line in _imported_names(path)
+        if name.startswith("rbcli.")
+        and not name.startswith("rbcli.physics.contact.")
+        and not any(name == allowed or name.startswith(allowed + ".") for allowed in CONTACT_MAY_IMPORT)
+    ]
+    assert not wrong, "\n".join(wrong)
+
+
 @pytest.mark.parametrize("heavy", ["numba", "rerun", "mcap"])
 def test_cli_front_door_does_not_import_heavy_libraries(heavy):
     assert heavy not in _modules_after("import rbcli.cli.app")

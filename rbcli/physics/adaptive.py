@@ -28,7 +28,7 @@ contact_begin (the springs' clock: this attempt's [t, t + h)) before the stages,
 accepted attempt kinematic_end and contact_commit (the last evaluation, f(y_new) at t + h, becomes the
 history). A rejected attempt's evaluations wrote only trial arrays, so `restore` plus the untouched
 history is exactly the state before it: the step is retried as if never tried (tested), and k_1 (FSAL)
-stays valid. Kinematic bodies (contact/kinematic.py) are put at their mean motion over each attempt,
+stays valid. Kinematic bodies (physics/kinematic.py) are put at their mean motion over each attempt,
 which changes the state, so k_1 is evaluated again for them (one evaluation more per attempt, only in
 scenes that have kinematic bodies). Stiffness: contact forces switch on and off (the dashpot at first
 touch, the Coulomb cap), so the error estimate rejects steps across a switch until they are short,
@@ -161,7 +161,9 @@ def run_adaptive_chunk(
                 h = min(h_max, max(h, h_try * factor))
                 t = target * dt
                 index = target
-                contact_record_stage(force_data.contact, frames, filled, index % record_every == 0)
+                contact_record_stage(
+                    forces.contact, force_data.contact, x, q, frames, filled, index % record_every == 0
+                )
                 filled, status = record_if_due(index, record_every, x, q, P, L, frames, filled)
             else:
                 h = min(h_max, h_try * factor)

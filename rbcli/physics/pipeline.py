@@ -5,7 +5,7 @@ A step from grid index n (t = n dt) to n + 1 runs, in this order (STEP_STAGES):
     impulses        exact jumps P += J, L += r x J of the impulses due in [t, t + dt)  (forces/impulse.py)
     then data.substeps times (1 unless contact sub-stepping is on), over [ts, ts + h), h = dt / substeps:
       contact_begin   the contact springs' clock: the (sub-)step being taken            (contact/force.py)
-      kinematic_begin kinematic bodies at their exact pose, at their mean velocity   (contact/kinematic.py)
+      kinematic_begin kinematic bodies at their exact pose, at their mean velocity  (physics/kinematic.py)
       update          the integrator's maths (integrators/<name>.py `step`); every force evaluation it
                       needs is the force pass `forces/wrench.accumulate_wrench`, itself a list of force
                       stages (gravity, fields, point forces, torques, springs, drag, contact), each
@@ -123,9 +123,9 @@ STEP_STAGES: tuple[Stage, ...] = (
     ),
     Stage(
         "contact_record",
-        "contact_record: on recording steps, the step's contact count, deepest overlap and energy",
+        "contact_record: on recording steps, the state's contact count, deepest overlap and energy",
         ("from rbcli.physics.forces.stages import contact_record_stage",),
-        "contact_record_stage(contact_work, frames, filled, (index + 1) % record_every == 0)",
+        "contact_record_stage(contact, contact_work, x, q, frames, filled, (index + 1) % record_every == 0)",
     ),
     Stage(
         "record",

@@ -151,3 +151,48 @@ def test_body_phase_work_grows_linearly():
         rates.append(work.body_sweep[SWEEP_CHECKS] / bodies)
     assert max(rates) < 1.25 * min(rates), rates
     assert max(rates) < 60.0, rates  # the neighbours within a cell or two, not a scan of thousands
+
+
+@pytest.mark.parametrize("outlier", [False, True], ids=["dense grid", "hashed grid"])
+def test_the_force_stage_through_the_body_level_equals_brute_force(outlier):
+    """Clouds of 3-5 spheres (the body level on: more than 2 spheres per body), some far apart, some
+    touching, a static one and a tilted plane: the force stage's wrench equals the O(n^2) sum over every
+    sphere pair and plane (contact_wrench_numpy), and it found the same number of contacts. A body a
+    million metres away makes the grid over every sphere hashed, so the subset's grid is hashed too."""
+    import rbcli
+    from rbcli.physics.contact.force import accumulate_contact, hold_static_bodies
+    from rbcli.physics.contact.reference import contact_wrench_numpy
+    from rbcli.physics.contact.tables import STAT_CONTACTS
+    from rbcli.scene.load import load_scene_text
+
+    rng = np.random.default_rng(11)
+    bodies = []
+    for i in range(90):
+        k = int(rng.integers(3, 6))
+        pts = rng.uniform(-0.03, 0.03, (k, 3)).round(4).tolist()
+        rad = rng.uniform(0.01, 0.03, k).round(4).tolist()
+        pos = (rng.uniform(-0.3, 0.3, 3) + (np.array([5.0, 0.0, 0.0]) if i % 5 == 0 else 0.0)).tolist()
+        motion = f", velocity: {rng.normal(size=3).tolist()}, angular_velocity: {rng.normal(size=3).tolist()}"
+        motion = ", static: true" if i == 1 else motion
+        bodies.append(f"  - {{name: c{i}, particles: {{positions: {pts}, masses: {[0.1] * k}, radius: {rad}}}, "
+                      f"position: {pos}{motion}}}")  # fmt: skip
+    if outlier:
+        bodies.append("  - {name: far, particles: {positions: [[0, 0, 0], [0.01, 0, 0], [0, 0.01, 0]], "
+                      "masses: [1, 1, 1], radius: [0.02, 0.02, 0.02]}, position: [1e6, -3e5, 2e5]}")  # fmt: skip
+    text = ("simulation: {dt: 0.001, steps: 10, integrator: split2}\ncontact:\n"
+            "  planes: [{point: [0, 0, -0.25], normal: [0.1, 0.2, 1], friction: 0.3}]\n"
+            "  material: {restitution: 0.4, friction: 0.6}\nbodies:\n" + "\n".join(bodies) + "\n")  # fmt: skip
+    sim = rbcli.Simulation(load_scene_text(text))
+    contact = sim.forces.contact
+    assert not contact.body_level_off
+    work = make_contact_work(contact, sim.model.body_count)
+    s = sim.data.state
+    F, tau = np.zeros_like(s.x), np.zeros_like(s.x)
+    accumulate_contact(sim.model.kernel(), contact, work, 0.0, s.x, s.q, s.P, s.L, F, tau)
+    hold_static_bodies(contact, F, tau)
+    F_ref, tau_ref, found = contact_wrench_numpy(sim.model, contact, s.x, s.q, s.P, s.L)
+    assert work.stats[STAT_CONTACTS] == found > 30
+    assert work.body_sweep[2] < contact.sphere_radius.shape[0]  # some spheres were left out of the grid
+    scale = np.abs(F_ref).max()
+    np.testing.assert_allclose(F, F_ref, rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(tau, tau_ref, rtol=0, atol=1e-12 * scale)

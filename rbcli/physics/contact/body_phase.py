@@ -44,7 +44,7 @@ import numpy as np
 
 from rbcli.physics.contact.broad_phase import _PRIME_X, _PRIME_Y, _PRIME_Z, HALF_SHELL, _cell
 from rbcli.physics.contact.tables import ACTIVE_PAIR, ACTIVE_PLANE, SWEEP_CHECKS, SWEEP_PAIRS, SWEEP_SPHERES
-from rbcli.physics.integrators.kinematics import rotate
+from rbcli.physics.rotation_kernels import rotate
 
 _FEW_BODIES = 8  # up to this many bodies every pair is tested (28 box tests): less than setting up the grid
 _BOX_PAD = 1e-9  # of rho_max: far above R's rounding (~1e-16 rho), far below any contact's overlap
@@ -229,6 +229,15 @@ def body_phase(contact, work, x, q, pairs) -> int:  # noqa: ANN001
     work.body_sweep[SWEEP_PAIRS] = count
     work.body_sweep[SWEEP_CHECKS] = checks
     return count
+
+
+def body_pairs_numpy(lo: np.ndarray, hi: np.ndarray, inv_mass: np.ndarray) -> set[tuple[int, int]]:
+    """Reference: every pair (a < b) of boxes that overlap on all three axes, not both of infinite
+    contact mass, by brute force O(n^2) (tests)."""
+    overlap = np.all((lo[:, None, :] <= hi[None, :, :]) & (lo[None, :, :] <= hi[:, None, :]), axis=-1)
+    overlap &= ~((inv_mass[:, None] == 0.0) & (inv_mass[None, :] == 0.0))
+    a, b = np.nonzero(np.triu(overlap, k=1))
+    return set(zip(a.tolist(), b.tolist(), strict=True))
 
 
 @numba.njit(cache=True, inline="always")

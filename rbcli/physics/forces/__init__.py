@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from rbcli.physics.contact.tables import ContactTable, KinematicTable, contact_table, kinematic_table
+from rbcli.physics.contact.tables import ContactTable, contact_table
 from rbcli.physics.forces.tables import (
     NO_SCHEDULE,
     TERM_NAMES,
@@ -30,6 +30,7 @@ from rbcli.physics.forces.tables import (
     ForceData,
     ForceTables,
     ImpulseTable,
+    KinematicTable,
     PointForceTable,
     ScheduleTable,
     SpringTable,
@@ -37,6 +38,7 @@ from rbcli.physics.forces.tables import (
     drag_table,
     field_table,
     impulse_table,
+    kinematic_table,
     make_force_data,
     point_force_table,
     schedule_table,

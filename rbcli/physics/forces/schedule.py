@@ -3,7 +3,7 @@
 s(t) = 0 outside start <= t < stop; inside: constant `offset`; piecewise-linear through knots (held
 at the end values outside them; right-continuous, so a repeated knot time is a step whose later value
 holds from that time on); or offset + amplitude sin(2 pi frequency t + phase). Its integral from 0,
-`schedule_integral`, moves kinematic bodies on a schedule (contact/kinematic.py) in closed form.
+`schedule_integral`, moves kinematic bodies on a schedule (physics/kinematic.py) in closed form.
 """
 
 from __future__ import annotations

@@ -33,7 +33,7 @@ from numba.core import types
 from numba.extending import overload
 
 from rbcli.physics.contact.force import accumulate_contact, begin_contact_step, commit_contacts, hold_static_bodies
-from rbcli.physics.contact.kinematic import kinematic_begin, kinematic_end
+from rbcli.physics.contact.state import record_contact_state
 from rbcli.physics.forces.drag import accumulate_drag
 from rbcli.physics.forces.field import accumulate_field
 from rbcli.physics.forces.impulse import apply_impulses
@@ -48,6 +48,7 @@ from rbcli.physics.forces.tables import (
     TERM_TORQUE,
 )
 from rbcli.physics.forces.torque import accumulate_torque
+from rbcli.physics.kinematic import kinematic_begin, kinematic_end
 from rbcli.physics.step import STEP_KERNEL
 
 # the dispatchers' implementations compile with the step kernels' options (cached, no reference counting);
@@ -232,28 +233,28 @@ def _contact_commit_stage(model, contact, work, x, q, P, L):  # noqa: ANN001, AN
     return run
 
 
-def contact_record_stage(work, frames, filled, due) -> None:  # noqa: ANN001
-    """On a recording step, put the step's contact statistics (count, deepest overlap, stored energy of its
-    last force evaluation) in the frame the record stage is about to fill, when the scene has contact."""
+def contact_record_stage(contact, work, x, q, frames, filled, due) -> None:  # noqa: ANN001
+    """On a recording step, put the contact statistics of the state (count, deepest overlap, stored energy,
+    history overflows so far: contact/state.py) in the frame the record stage is about to fill, when the
+    scene has contact."""
     _kernel_only()
 
 
 @overload(contact_record_stage, jit_options=_OPTIONS)
-def _contact_record_stage(work, frames, filled, due):  # noqa: ANN001, ANN202
-    if _absent(work):
-        return lambda work, frames, filled, due: None
+def _contact_record_stage(contact, work, x, q, frames, filled, due):  # noqa: ANN001, ANN202
+    if _absent(contact, work):
+        return lambda contact, work, x, q, frames, filled, due: None
 
-    def run(work, frames, filled, due):  # noqa: ANN001, ANN202
-        if due and filled < frames.contact.shape[0]:
-            for k in range(frames.contact.shape[1]):
-                frames.contact[filled, k] = work.stats[k]
+    def run(contact, work, x, q, frames, filled, due):  # noqa: ANN001, ANN202
+        if due and filled < frames.contact.shape[0] and contact.sphere_body.shape[0]:
+            record_contact_state(contact, work, x, q, frames.contact, filled)
 
     return run
 
 
 def kinematic_begin_stage(model, forces, t, h, x, q, P, L) -> bool:  # noqa: ANN001
     """Kinematic bodies at their exact pose at t, moving at their mean velocity over [t, t + h)
-    (contact/kinematic.py), when the scene has any; True when it moved something."""
+    (physics/kinematic.py), when the scene has any; True when it moved something."""
     _kernel_only()
     return False
 
@@ -273,7 +274,7 @@ def _kinematic_begin_stage(model, forces, t, h, x, q, P, L):  # noqa: ANN001, AN
 
 
 def kinematic_end_stage(model, forces, t, x, q, P, L) -> None:  # noqa: ANN001
-    """Kinematic bodies at their exact x, q, P, L at t (contact/kinematic.py) when the scene has any."""
+    """Kinematic bodies at their exact x, q, P, L at t (physics/kinematic.py) when the scene has any."""
     _kernel_only()
 
 

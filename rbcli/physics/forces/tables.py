@@ -21,7 +21,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from rbcli.physics.contact.tables import ContactTable, ContactWork, KinematicTable, kinematic_table, make_contact_work
+from rbcli.physics.contact.tables import ContactTable, ContactWork, make_contact_work
 
 # Row column `schedule` value meaning "no schedule": the force acts at full strength at all times.
 NO_SCHEDULE = -1
@@ -36,6 +36,24 @@ SCHEDULE_KINDS = {"constant": SCHEDULE_CONSTANT, "piecewise_linear": SCHEDULE_PI
 # Indices into ForceData.term_evaluations, and the names force_terms_present reports.
 TERM_NAMES = ("gravity", "field", "point_force", "torque", "spring", "drag", "impulse", "contact")
 TERM_GRAVITY, TERM_FIELD, TERM_POINT_FORCE, TERM_TORQUE, TERM_SPRING, TERM_DRAG, TERM_IMPULSE, TERM_CONTACT = range(8)
+
+
+def _f(values, *shape: int) -> np.ndarray:  # noqa: ANN001
+    out = np.ascontiguousarray(np.asarray(values, dtype=np.float64).reshape((-1, *shape)))
+    out.setflags(write=False)
+    return out
+
+
+def _i(values) -> np.ndarray:  # noqa: ANN001
+    out = np.ascontiguousarray(np.asarray(values, dtype=np.int64).reshape(-1))
+    out.setflags(write=False)
+    return out
+
+
+def _b(values) -> np.ndarray:  # noqa: ANN001
+    out = np.ascontiguousarray(np.asarray(values, dtype=np.bool_).reshape(-1))
+    out.setflags(write=False)
+    return out
 
 
 class ScheduleTable(NamedTuple):
@@ -132,6 +150,34 @@ class ImpulseTable(NamedTuple):
     body_frame: np.ndarray  # bool (row_count,)
 
 
+class KinematicTable(NamedTuple):
+    """The prescribed motions of a scene's kinematic bodies, one row each (read-only; the closed form
+    and the stages that set it: physics/kinematic.py)."""
+
+    body: np.ndarray  # int64 (row_count,)
+    schedule: np.ndarray  # int64 (row_count,): NO_SCHEDULE (s = 1) or a ScheduleTable row of ForceTables
+    velocity: np.ndarray  # v0 [m/s] (row_count, 3), world
+    angular_velocity: np.ndarray  # w0 [rad/s] (row_count, 3), world
+    pivot: np.ndarray  # p0 [m] (row_count, 3), world, at t = 0
+    position: np.ndarray  # x0 [m] (row_count, 3), world, centre of mass at t = 0
+    orientation: np.ndarray  # q0 (row_count, 4) wxyz, world-from-principal at t = 0
+
+
+def kinematic_table(
+    body=(),  # noqa: ANN001
+    schedule=(),  # noqa: ANN001
+    velocity=(),  # noqa: ANN001
+    angular_velocity=(),  # noqa: ANN001
+    pivot=(),  # noqa: ANN001
+    position=(),  # noqa: ANN001
+    orientation=(),  # noqa: ANN001
+) -> KinematicTable:
+    """A KinematicTable with consistent dtypes (empty: a scene without kinematic bodies)."""
+
+    return KinematicTable(_i(body), _i(schedule), _f(velocity, 3), _f(angular_velocity, 3), _f(pivot, 3),
+                          _f(position, 3), _f(orientation, 4))  # fmt: skip
+
+
 class ForceTables(NamedTuple):
     """Every force term of a scene as arrays (numba-friendly).
 
@@ -141,7 +187,7 @@ class ForceTables(NamedTuple):
       the wrench leaves tau untouched (all zeros). Equal to torque_body.any().
     contact: contact spheres, materials, planes and static bodies (contact/tables.py; 0 spheres: no
       contact stage).
-    kinematic: the prescribed motions of kinematic bodies (contact/tables.py, contact/kinematic.py;
+    kinematic: the prescribed motions of kinematic bodies (KinematicTable; their stages: physics/kinematic.py;
       0 rows: no kinematic stages).
     torque_body: bool (body_count,): True for a body that some term can give a torque (a field row,
       a point force or spring end off its centre of mass, a pure torque, angular drag). Integrators
@@ -232,24 +278,6 @@ def make_force_data(forces: ForceTables | KernelForceTables) -> ForceData:
 
 
 # ---- constructors: every table has the same dtypes and layouts whether empty or not ----------------
-
-
-def _f(values, *shape: int) -> np.ndarray:  # noqa: ANN001
-    out = np.ascontiguousarray(np.asarray(values, dtype=np.float64).reshape((-1, *shape)))
-    out.setflags(write=False)
-    return out
-
-
-def _i(values) -> np.ndarray:  # noqa: ANN001
-    out = np.ascontiguousarray(np.asarray(values, dtype=np.int64).reshape(-1))
-    out.setflags(write=False)
-    return out
-
-
-def _b(values) -> np.ndarray:  # noqa: ANN001
-    out = np.ascontiguousarray(np.asarray(values, dtype=np.bool_).reshape(-1))
-    out.setflags(write=False)
-    return out
 
 
 def schedule_table(
