@@ -1,6 +1,6 @@
 """The sphere pile of the collisions issue (18): rbsim's contact against MuJoCo, in one process.
 
-    python benchmarks/bench_contact.py [--quick] [--no-mujoco] [--big]
+    python benchmarks/bench_contact.py [--quick] [--no-mujoco] [--big] [--sections pile,far,scenes]
 
 1,000 spheres (radius 0.05 m, density 1000 kg/m^3) on a jittered 10 x 10 x 10 lattice (spacing 0.12 m,
 lowest centres at z = 0.3 m, jitter +-0.01 m in x and y, numpy seed 0) dropped into a box (ground z = 0,
@@ -17,6 +17,9 @@ contact springs') never more than 1 % above its start; no sphere below z = -r or
 the end, the deepest overlap under 5 % of the radius and the kinetic energy under 1 % of its peak.
 Sphere-steps per second = spheres x steps / wall seconds of the stepping alone (compile excluded);
 contact pairs per second counts the contacts evaluated. `bench_speed.py --sections contact` runs this.
+far: two bricks 5 m apart with a `contact:` section (nothing touches) against the same scene without
+  one, ns per step, best of 5 interleaved blocks (target <= 1.2x).
+scenes: steps/s of dominoes.yaml and container_mix.yaml (broad-phase work: sphere pairs tested).
 """
 
 from __future__ import annotations
@@ -255,6 +258,68 @@ def pile_section(quick: bool, with_mujoco: bool, big: bool) -> list[str]:
     return report(results, mujoco_rate, version, big_result)
 
 
+FAR_BRICK = (
+    "{{name: {name}, shape: {{type: box, size: [0.2, 0.1, 0.05]}}, spacing: 0.0125, density: 600, "
+    "position: [{x}, 0, 1], velocity: [{v}, 0, 0], angular_velocity: [1, 2, 3]}}"
+)
+TARGET_FAR = 1.2  # a scene with contact and nothing touching / the same without a `contact:` section
+
+
+def far_scene(contact: bool) -> str:
+    """Two of box_drop's bricks (344 contact spheres each) 5 m apart, drifting apart and tumbling, and a
+    ground 1 km below: with `contact:` nothing ever touches."""
+    bricks = "".join("  - " + FAR_BRICK.format(name=f"b{i}", x=5.0 * i, v=0.1 * (2 * i - 1)) + "\n" for i in range(2))
+    return ("simulation: {dt: 0.001, steps: 100000, integrator: split2}\ngravity: [0, 0, -9.81]\n"
+            + ("contact: {ground: -1000}\n" if contact else "") + "bodies:\n" + bricks)  # fmt: skip
+
+
+def far_section(quick: bool) -> list[str]:
+    """ns per step of the far-apart scene with and without contact, best of 5 interleaved blocks."""
+    from rbcli.scene.load import load_scene_text
+
+    steps = 5_000 if quick else 20_000
+    sims = {c: rbcli.Simulation(load_scene_text(far_scene(c))) for c in (False, True)}
+    best = {c: math.inf for c in sims}
+    for sim in sims.values():
+        sim.step(100)  # compile or load the kernels
+    for _ in range(5):
+        for c, sim in sims.items():
+            began = time.perf_counter()
+            sim.step(steps)
+            best[c] = min(best[c], (time.perf_counter() - began) / steps)
+    ratio = best[True] / best[False]
+    return [
+        "### Contact when nothing touches: two bricks 5 m apart",
+        "",
+        f"- without `contact:` {best[False] * 1e9:.0f} ns/step, with it {best[True] * 1e9:.0f} ns/step: "
+        f"{ratio:.2f}x (target <= {TARGET_FAR}: {'met' if ratio <= TARGET_FAR else '**missed**'})",
+    ]
+
+
+def scenes_section(quick: bool) -> list[str]:
+    """Steps/s of scenes/contact/dominoes.yaml and container_mix.yaml (their dt; sub-steps as main chose
+    them, 2 and 1, so the broad phase is compared at the same work; and at `substeps: auto`)."""
+    from rbcli.scene.load import load_scene_text
+
+    lines = ["### Contact scenes", "", "| scene | sub-steps | steps | steps/s | sphere pairs tested per step |",
+             "|---|---:|---:|---:|---:|"]  # fmt: skip
+    for name, pinned, steps in (("dominoes", 2, 1500), ("container_mix", 1, 1500)):
+        path = ROOT / "scenes" / "contact" / f"{name}.yaml"
+        for substeps in (pinned, "auto"):
+            text = path.read_text().replace("substeps: auto", f"substeps: {substeps}")
+            sim = rbcli.Simulation(load_scene_text(text, file=str(path), base_dir=path.parent))
+            sim.step(10)
+            count = steps // 3 if quick else steps
+            before = int(sim.data.force.contact.counters[0])
+            began = time.perf_counter()
+            sim.step(count)
+            seconds = time.perf_counter() - began
+            tested = (int(sim.data.force.contact.counters[0]) - before) / count
+            lines.append(f"| {name} | {sim.settings.substeps} ({substeps}) | {count} | {count / seconds:.3g} | "
+                         f"{tested:.3g} |")  # fmt: skip
+    return lines
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
@@ -264,8 +329,17 @@ def main() -> None:
     )
     parser.add_argument("--no-mujoco", action="store_true")
     parser.add_argument("--big", action="store_true", help="also the 10^5-sphere pile (200 steps)")
+    parser.add_argument("--sections", default="pile,far,scenes", help="comma-separated: pile, far, scenes")
     args = parser.parse_args()
-    for line in pile_section(args.quick, not args.no_mujoco, args.big):
+    sections = args.sections.split(",")
+    lines = []
+    if "far" in sections:
+        lines += far_section(args.quick) + [""]
+    if "scenes" in sections:
+        lines += scenes_section(args.quick) + [""]
+    if "pile" in sections:
+        lines += pile_section(args.quick, not args.no_mujoco, args.big)
+    for line in lines:
         print(line)
 
 

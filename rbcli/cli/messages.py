@@ -7,7 +7,8 @@ One message is one line, never wrapped (editors, CI annotators and `grep` parse 
 text when stderr is not a terminal and coloured only on a terminal (not with NO_COLOR or TERM=dumb;
 FORCE_COLOR forces it). Text is written as it is: no markup language is interpreted, so nothing such as
 `[red]` can ever appear, and brackets in paths and units print as typed. Status lines (a run's summary, "wrote
-FILE") go through `status`, on stderr too, so stdout carries only what a command produces.
+FILE") go through `status`, on stderr too, so stdout carries only what a command produces. A list of
+issues prints its first MAX_SHOWN_ISSUES and a note with the count of the rest.
 """
 
 from __future__ import annotations
@@ -28,6 +29,9 @@ Severity = Literal["error", "warning", "note"]
 # ANSI SGR codes, as gcc and clang colour their diagnostics: bold location, bold red/magenta/cyan labels
 _BOLD, _RESET = "\x1b[1m", "\x1b[0m"
 _LABEL_COLOUR = {"error": "\x1b[1;31m", "warning": "\x1b[1;35m", "note": "\x1b[1;36m"}
+# a file with thousands of errors (a generated scene with one slip repeated) prints this many and a count:
+# the first ones locate the slip, and a screen of the same message hides the verdict
+MAX_SHOWN_ISSUES = 50
 
 
 class _Located(Protocol):
@@ -124,8 +128,19 @@ def issue(found: _Located, file: object | None = None) -> None:
 
 
 def issues(found: Iterable[_Located], file: object | None = None) -> None:
-    for each in found:
+    """The first MAX_SHOWN_ISSUES issues, in the order given (file order), then one note with how many
+    more there are and how many errors and warnings in all."""
+    found = list(found)
+    for each in found[:MAX_SHOWN_ISSUES]:
         issue(each, file)
+    rest = len(found) - MAX_SHOWN_ISSUES
+    if rest > 0:
+        errors = sum(each.severity == "error" for each in found)
+        warnings = len(found) - errors
+        counts = f"{errors:,} error{'s' * (errors != 1)}" + (
+            f" and {warnings:,} warning{'s' * (warnings != 1)}" if warnings else ""
+        )
+        emit("note", f"{rest:,} more issue{'s' * (rest != 1)} not shown ({counts} in all)", where=file)
 
 
 def status(text: str) -> None:

@@ -123,6 +123,8 @@ class Data:
                 )
         for name, target in mine.items():
             target[...] = arrays[name]
+        if self.force.contact is not None:  # the restored history may sit on any body (body_phase.py)
+            self.force.contact.body_history[:] = 1
 
     def clear_work(self) -> None:
         """Forget everything carried between steps but the state (after the state is set from outside):

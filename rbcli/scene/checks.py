@@ -15,6 +15,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from rbcli.physics.contact.parameters import (
+    DEPTH_FRACTION,
+    MAX_AUTO_SUBSTEPS,
+    SUBSTEP_SAFETY,
+    TRAVEL_FRACTION,
+    substeps_needed,
+    travel_step,
+)
 from rbcli.scene.force_specs import BodyPoint, ForceSpring
 from rbcli.scene.spec import SceneIssue
 
@@ -59,6 +67,7 @@ def contact_warnings(compiled: CompiledScene) -> list[SceneIssue]:
                 severity="warning",
             )
         )
+    issues += impact_warnings(compiled)
     if compiled.settings.integrator == "euler-matrix":
         issues.append(
             SceneIssue(
@@ -69,6 +78,54 @@ def contact_warnings(compiled: CompiledScene) -> list[SceneIssue]:
                 severity="warning",
             )
         )
+    return issues
+
+
+def impact_warnings(compiled: CompiledScene) -> list[SceneIssue]:
+    """Impacts the contacts cannot take (scene/contact_speed.py): the speed bound of a body whose spheres
+    would go deeper than DEPTH_FRACTION r, and `substeps: auto` capped at MAX_AUTO_SUBSTEPS below what its
+    travel and stability rules need. Each names the speed and the speed that the scene does take."""
+    contact, spec, settings = compiled.contact, compiled.spec, compiled.settings
+    if contact is None or spec.contact is None or contact.impact is None or settings.tolerance is not None:
+        return []
+    impact = contact.impact
+    issues = []
+    deep = impact.deep
+    if deep is not None:
+        others = f" ({deep.count - 1} more bod{'y' if deep.count == 2 else 'ies'} too)" if deep.count > 1 else ""
+        issues.append(
+            SceneIssue(
+                spec.contact.location,
+                f"body '{deep.body}' can hit at up to {deep.speed:.3g} m/s (its initial speed and fall): with "
+                f"{deep.stiffness:.3g} N/m per contact sphere, a sphere landing first may go {deep.depth:.2g} "
+                f"radii deep, more than {DEPTH_FRACTION:g}{others}; this stiffness takes {deep.speed_taken:.3g} m/s",
+                f"a material stiffness of at least {deep.stiffness_needed:.3g} N/m for that body (with substeps: "
+                "auto), or a lower speed or drop",
+                severity="warning",
+            )
+        )
+    if spec.contact.substeps is None:
+        travel = travel_step(impact.speed, impact.radius)
+        needed = substeps_needed(settings.dt, contact.stable_step, travel)
+        if needed > MAX_AUTO_SUBSTEPS:
+            h = settings.dt / MAX_AUTO_SUBSTEPS
+            taken = TRAVEL_FRACTION * impact.radius / h
+            stable = SUBSTEP_SAFETY * contact.stable_step
+            why = (f"body '{impact.body}' can move at up to {impact.speed:.3g} m/s and its spheres may move "
+                   f"{TRAVEL_FRACTION:g} of the smallest radius, {impact.radius:.3g} m, per sub-step")  # fmt: skip
+            if h <= stable:  # stable at the cap: the travel rule asks for more, and the cap sets the speed
+                why += f"; at {MAX_AUTO_SUBSTEPS:,} sub-steps it takes {taken:.3g} m/s"
+            else:
+                why += f", and the contacts' stable step is {contact.stable_step:.3g} s"
+            issues.append(
+                SceneIssue(
+                    spec.contact.location,
+                    f"substeps: auto would need {needed:,} sub-steps per step of {settings.dt:.3g} s ({why}); it "
+                    f"stops at {MAX_AUTO_SUBSTEPS:,}, so contacts may be missed or unstable",
+                    "a smaller dt, lower speeds, or a softer material",
+                    severity="warning",
+                )
+            )
     return issues
 
 

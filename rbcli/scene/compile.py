@@ -15,6 +15,7 @@ from rbcli.physics.rotation import quat_rotate, quat_rotate_inverse
 from rbcli.physics.state import STATE_LIMIT, State
 from rbcli.scene.compile_contact import ContactSummary, compile_contact, kinematic_initial_state, kinematic_rows
 from rbcli.scene.compile_forces import compile_force_tables
+from rbcli.scene.contact_speed import impact_bound
 from rbcli.scene.spec import SceneError, SceneIssue, SceneSpec
 
 
@@ -127,6 +128,8 @@ def compile_model(spec: SceneSpec) -> CompiledModel:
     motions = kinematic_rows(spec, model, state) if spec.contact is not None else []
     forces = compile_force_tables(spec.gravity, spec.forces, model, body_index, centres, contact, motions)
     kinematic_initial_state(forces, model, state)
+    if summary is not None and contact is not None:  # the speeds need the initial state, kinematic ones too
+        summary = replace(summary, impact=impact_bound(spec, model, state, contact))
     return CompiledModel(model, forces, state, summary)
 
 
@@ -251,9 +254,13 @@ def run_settings(
     if spec.contact is not None:
         substeps = spec.contact.substeps
         if substeps is None:
-            from rbcli.physics.contact.parameters import substeps_for
+            from rbcli.physics.contact.parameters import substeps_for, travel_step
 
-            substeps = substeps_for(settings.dt, contact.stable_step) if contact is not None else 1
+            substeps = 1
+            if contact is not None:
+                impact = contact.impact
+                travel = travel_step(impact.speed, impact.radius) if impact is not None else math.inf
+                substeps = substeps_for(settings.dt, contact.stable_step, travel)
         if settings.tolerance is not None:
             substeps = 1  # adaptive steps are capped at the contacts' stable step instead (physics/adaptive.py)
         settings = replace(settings, substeps=int(substeps))

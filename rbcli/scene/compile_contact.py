@@ -35,6 +35,7 @@ from rbcli.physics.model import Model
 from rbcli.physics.rotation import quat_to_matrix
 from rbcli.physics.state import State
 from rbcli.scene.compile_forces import KinematicRow
+from rbcli.scene.contact_speed import ImpactBound
 from rbcli.scene.spec import BodySpec, MaterialSpec, SceneError, SceneIssue, SceneSpec
 
 
@@ -49,6 +50,7 @@ class ContactSummary:
     stable_step: float  # [s] dt_crit of the stiffest, lightest contact (inf: nothing can collide)
     limiting_body: str  # the body that sets it
     stiffness: float  # [N/m] that body's per-sphere stiffness
+    impact: ImpactBound | None = None  # how fast spheres can meet (scene/contact_speed.py), set by compile_model
 
     def describe(self, substeps: int | None = None) -> str:
         """One line for `rbsim validate` and the run summary."""

@@ -1,17 +1,17 @@
 """The scene's `contact:` section and the bodies' contact keys, validated into ContactSpec / MaterialSpec.
 
-The schema has checked types and ranges; this adds what it cannot say: a plane normal of zero length,
-a container with min >= max, a restitution below what a dashpot reaches, a static body given a
-velocity, a particle body without radii (a contact sphere needs one). Every problem is located.
+The schema has checked types and ranges (restitution in [0.01, 1] included); this adds what it cannot
+say: a plane normal of zero length, a container with min >= max, a static body given a velocity, a
+particle body without radii (a contact sphere needs one). Every problem is located.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-from rbcli.physics.contact.parameters import LOWEST_RESTITUTION
 from rbcli.scene.issues import IssueCollector
 from rbcli.scene.spec import BodySpec, ContactSpec, KinematicSpec, MaterialSpec, PlaneSpec
 from rbcli.scene.yaml_located import YamlPath
@@ -22,15 +22,9 @@ def material_from_mapping(value: dict[str, Any] | None, path: YamlPath, issues: 
     if not value:
         return MaterialSpec()
     stiffness = value.get("stiffness")
+    # the schema holds restitution to [LOWEST_RESTITUTION, 1] (one rule: tests/scene/test_scene_contact_keys.py
+    # checks that its minimum is this constant), so a value here is in range
     restitution = value.get("restitution")
-    if restitution is not None and restitution < LOWEST_RESTITUTION:
-        issues.error(
-            (*path, "restitution"),
-            f"restitution {restitution:g} is below {LOWEST_RESTITUTION:g}: a spring-dashpot contact that dead "
-            "needs a damping ratio above 5 and steps far below the contact period",
-            f"a restitution in [{LOWEST_RESTITUTION:g}, 1]",
-        )
-        restitution = None
     return MaterialSpec(
         stiffness=None if stiffness in (None, "auto") else float(stiffness),
         restitution=None if restitution is None else float(restitution),
@@ -73,26 +67,33 @@ def _plane(point: Any, normal: Any, material: MaterialSpec, path: YamlPath, issu
     return PlaneSpec(_vector(point), _vector(n / length), material, issues.locate(path))
 
 
-def contact_from_mapping(section: dict[str, Any], issues: IssueCollector) -> ContactSpec | None:
-    """ContactSpec of the `contact:` mapping; None when it has errors (they are in `issues`)."""
+def contact_from_mapping(
+    section: dict[str, Any], issues: IssueCollector, clean: Callable[[YamlPath], bool] = lambda path: True
+) -> ContactSpec | None:
+    """ContactSpec of the `contact:` mapping; None when it has errors (they are in `issues`). `clean(path)`
+    is False for a part with schema errors (already reported): that part is not read, the others are."""
     path: YamlPath = ("contact",)
     before = issues.error_count
+    if not all(clean((*path, key)) for key in section):
+        before = -1  # a part has schema errors: check the others, return None
     planes: list[PlaneSpec | None] = []
     ground = section.get("ground")
-    if ground is not None:
+    if ground is not None and clean((*path, "ground")):
         entry = ground if isinstance(ground, dict) else {"height": ground}
         material = material_from_mapping({k: entry[k] for k in ("restitution", "friction") if k in entry},
                                          (*path, "ground"), issues)  # fmt: skip
         planes.append(_plane([0.0, 0.0, float(entry.get("height", 0.0))], [0.0, 0.0, 1.0], material,
                              (*path, "ground"), issues))  # fmt: skip
-    for i, entry in enumerate(section.get("planes", [])):
+    for i, entry in enumerate(section.get("planes", []) if clean((*path, "planes")) else []):
+        if not clean((*path, "planes", i)):
+            continue
         material = material_from_mapping({k: entry[k] for k in ("restitution", "friction") if k in entry},
                                          (*path, "planes", i), issues)  # fmt: skip
         planes.append(
             _plane(entry.get("point", [0.0, 0.0, 0.0]), entry["normal"], material, (*path, "planes", i), issues)
         )
     box = section.get("container")
-    if box is not None:
+    if box is not None and clean((*path, "container")):
         lo, hi = np.asarray(box["min"], dtype=float), np.asarray(box["max"], dtype=float)
         cpath = (*path, "container")
         if not np.all(lo < hi):
@@ -106,9 +107,10 @@ def contact_from_mapping(section: dict[str, Any], issues: IssueCollector) -> Con
             if box.get("lid", False):
                 walls.append((hi, (0, 0, -1)))
             planes.extend(_plane(point, normal, material, cpath, issues) for point, normal in walls)
-    material = material_from_mapping(section.get("material"), (*path, "material"), issues)
-    substeps = section.get("substeps", 1)
-    if issues.error_count > before:
+    material = material_from_mapping(section.get("material") if clean((*path, "material")) else None,
+                                     (*path, "material"), issues)  # fmt: skip
+    substeps = section.get("substeps", 1) if clean((*path, "substeps")) else 1
+    if issues.error_count > before or before < 0:
         return None
     return ContactSpec(
         planes=tuple(p for p in planes if p is not None),

@@ -158,10 +158,13 @@ def _analyse(
                 what = "static" if body.static else "kinematic"
                 issues.issues.append(SceneIssue(body.location, f"body '{body.name}': {what} bodies need contact",
                                                 "a `contact:` section (docs/contact.md)"))  # fmt: skip
-    if "contact" in data and clean(("contact",)):
+        _warn_materials_without_contact(entries, issues)
+    # the contact section's parts are checked apart (a schema error in its material still lets its planes
+    # and the bodies be checked: a scene gets all its problems at once); the section itself must be a mapping
+    if "contact" in data and isinstance(data["contact"], dict) and ("contact",) not in bad_paths:
         from rbcli.scene.contact_spec import check_contact_bodies, contact_from_mapping
 
-        contact = contact_from_mapping(data["contact"], issues)
+        contact = contact_from_mapping(data["contact"], issues, clean)
         check_contact_bodies(bodies, entries, issues)
         if simulation is not None and "integrator" not in data["simulation"]:
             # the tutorial's default (euler-matrix) gains energy in every bounce; split2 is symplectic,
@@ -196,6 +199,26 @@ def _analyse(
     except ValueError as exc:  # a run setting the checks above let through: located, never a traceback
         where = issues.locate(("simulation",), key=True)
         return None, sorted([*warnings, SceneIssue(where, f"simulation: {exc}")], key=SceneIssue.order)
+
+
+def _warn_materials_without_contact(entries: list[Any], issues: IssueCollector) -> None:
+    """A warning at each body's (or generator template's) `material` key in a scene without `contact:`:
+    nothing collides there, so the material is ignored, which a user who wrote one did not mean. A warning,
+    not an error as for `static: true`: the scene still runs as written. A material from `defaults` sits at
+    one place in the file and is reported there once (IssueCollector keeps one issue per location)."""
+    for i, entry in enumerate(entries):
+        if not isinstance(entry, dict):
+            continue
+        kind = "grid" if "grid" in entry else "random" if "random" in entry else None
+        owner = entry.get(kind) if kind is not None else None
+        target = owner.get("template") if isinstance(owner, dict) else entry
+        if not isinstance(target, dict) or "material" not in target:
+            continue
+        path = ("bodies", i, "material") if kind is None else ("bodies", i, kind, "template", "material")
+        name = (owner or {}).get("name") if kind is not None else entry.get("name")
+        issues.add(path, f"body '{name}': a material does nothing in a scene without `contact:` (no body collides)",
+                   "a `contact:` section (docs/contact.md), or no material", key=True, severity="warning",
+                   dedupe_key="material without contact")  # fmt: skip
 
 
 def _frozen_vector(value: list[float]) -> Any:

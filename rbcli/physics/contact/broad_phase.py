@@ -63,15 +63,31 @@ def bucket_of(ci, cj, ck, grid):  # noqa: ANN001, ANN201
 
 @numba.njit(cache=True)
 def build_grid(contact, work):  # noqa: ANN001, ANN201
-    """Cells, buckets and the bucket-sorted sphere order of the current sphere positions (work arrays);
-    returns the grid tuple `bucket_of` takes. Bucket b holds sorted_sphere[bucket_start[b] :
-    bucket_start[b + 1]]."""
-    pos, cell = work.sphere_position, work.sphere_cell
-    count = pos.shape[0]
+    """`build_grid_of` over every contact sphere."""
+    spheres = work.active_sphere
+    for i in range(spheres.shape[0]):
+        spheres[i] = i
+    return build_grid_of(contact, work, spheres.shape[0])
+
+
+@numba.njit(cache=True, inline="always")
+def build_grid_of(contact, work, count, hashed=False):  # noqa: ANN001, ANN201
+    """Cells, buckets and the bucket-sorted order of the spheres work.active_sphere[:count] (ascending
+    indices) at their positions in work.sphere_position; returns the grid tuple `bucket_of` takes. Bucket
+    b holds sorted_sphere[bucket_start[b] : bucket_start[b + 1]], sorted_* of length count.
+
+    A dense grid numbers cells row-major from the low corner of the spheres' box, so the order (by cell,
+    then by index) does not depend on where that corner is: a subset of spheres is walked in the order
+    of the whole, and only the buckets of its box (nx ny nz of them) are cleared and summed. When the grid
+    over every sphere would be hashed (`hashed`, body_phase.whole_grid_hashed), so is this one: a subset
+    in a dense grid would be walked in another order than the whole. Inlined: a
+    call passing the contact tuples increments and decrements the reference count of every array in them."""
+    pos, cell, spheres = work.sphere_position, work.sphere_cell, work.active_sphere
     inv_size = 1.0 / contact.cell_size
     lo0, lo1, lo2 = np.int64(2**62), np.int64(2**62), np.int64(2**62)
     hi0, hi1, hi2 = -lo0, -lo1, -lo2
-    for i in range(count):
+    for a in range(count):
+        i = spheres[a]
         c0, c1, c2 = _cell(pos[i, 0], inv_size), _cell(pos[i, 1], inv_size), _cell(pos[i, 2], inv_size)
         cell[i, 0], cell[i, 1], cell[i, 2] = c0, c1, c2
         lo0, lo1, lo2 = min(lo0, c0), min(lo1, c1), min(lo2, c2)
@@ -79,20 +95,24 @@ def build_grid(contact, work):  # noqa: ANN001, ANN201
     buckets = contact.bucket_count
     nx, ny, nz = hi0 - lo0 + 1, hi1 - lo1 + 1, hi2 - lo2 + 1  # each <= 2^41 + 1: no overflow
     dense = nx <= buckets and ny <= buckets and nz <= buckets and nx * ny <= buckets and nx * ny * nz <= buckets
+    dense = dense and not hashed  # hashed: the grid over every sphere would be (its walk order kept)
     grid = (dense, lo0, lo1, lo2, nx, ny, nz, np.int64(buckets - 1))
+    used = (nx * ny * nz if dense else buckets) if count > 0 else 0  # the buckets the grid can name
     start, bucket = work.bucket_start, work.sphere_bucket
-    start[:] = 0
-    for i in range(count):
+    start[: used + 1] = 0
+    for a in range(count):
+        i = spheres[a]
         b = bucket_of(cell[i, 0], cell[i, 1], cell[i, 2], grid)
         bucket[i] = b
         start[b] += 1
     running = 0
-    for b in range(buckets):  # inclusive prefix sum: start[b] = end of bucket b
+    for b in range(used):  # inclusive prefix sum: start[b] = end of bucket b
         running += start[b]
         start[b] = running
-    start[buckets] = count
+    start[used] = count
     order = work.sorted_sphere
-    for i in range(count - 1, -1, -1):  # stable: ascending sphere index within a bucket
+    for a in range(count - 1, -1, -1):  # stable: ascending sphere index within a bucket
+        i = spheres[a]
         b = bucket[i]
         start[b] -= 1
         order[start[b]] = i

@@ -93,36 +93,44 @@ def commit_contacts(model, contact, work, x, q, P, L) -> None:  # noqa: ANN001
     rest = work.clock[1] - s_last
     if rest != 0.0:  # the end-of-step velocities (the evaluation's are no longer needed)
         body_velocities(model, work, x, q, P, L)
-    for i in range(work.hist_count.shape[0]):
-        count = work.trial_count[i]
-        work.hist_count[i] = count
-        if count == 0:
+    # only bodies flagged in the last evaluation hold trial contacts, only bodies that held some keep a
+    # history to forget: the others' spheres are not visited (body_phase.py), in sphere order as before
+    start, trial, history = contact.body_sphere_start, work.body_trial, work.body_history
+    for body in range(trial.shape[0]):
+        if trial[body] == 0 and history[body] == 0:
             continue
-        ba = contact.sphere_body[i]
-        for k in range(count):
-            partner = work.trial_partner[i, k]
-            if rest == 0.0:  # evaluated at the end of the step (rk4's last stage): nothing to advance
-                work.hist_partner[i, k] = partner
-                for j in range(3):
-                    work.hist_xi[i, k, j] = work.trial_xi[i, k, j]
+        history[body] = 0
+        for i in range(start[body], start[body + 1]):
+            count = work.trial_count[i]
+            work.hist_count[i] = count
+            if count == 0:
                 continue
-            c0, c1, c2 = work.trial_point[i, k, 0], work.trial_point[i, k, 1], work.trial_point[i, k, 2]
-            n0, n1, n2 = work.trial_normal[i, k, 0], work.trial_normal[i, k, 1], work.trial_normal[i, k, 2]
-            v0, v1, v2 = velocity_at(work, x, ba, c0, c1, c2)
-            if partner >= 0:
-                w0, w1, w2 = velocity_at(work, x, contact.sphere_body[partner], c0, c1, c2)
-                v0, v1, v2 = v0 - w0, v1 - w1, v2 - w2
-            vn = v0 * n0 + v1 * n1 + v2 * n2
-            e0 = work.trial_xi[i, k, 0] + rest * (v0 - vn * n0)
-            e1 = work.trial_xi[i, k, 1] + rest * (v1 - vn * n1)
-            e2 = work.trial_xi[i, k, 2] + rest * (v2 - vn * n2)
-            limit = work.trial_limit[i, k]
-            length2 = e0 * e0 + e1 * e1 + e2 * e2
-            if length2 > limit * limit:
-                scale = limit / math.sqrt(length2)
-                e0, e1, e2 = e0 * scale, e1 * scale, e2 * scale
-            work.hist_partner[i, k] = partner
-            work.hist_xi[i, k, 0], work.hist_xi[i, k, 1], work.hist_xi[i, k, 2] = e0, e1, e2
+            history[body] = 1
+            ba = contact.sphere_body[i]
+            for k in range(count):
+                partner = work.trial_partner[i, k]
+                if rest == 0.0:  # evaluated at the end of the step (rk4's last stage): nothing to advance
+                    work.hist_partner[i, k] = partner
+                    for j in range(3):
+                        work.hist_xi[i, k, j] = work.trial_xi[i, k, j]
+                    continue
+                c0, c1, c2 = work.trial_point[i, k, 0], work.trial_point[i, k, 1], work.trial_point[i, k, 2]
+                n0, n1, n2 = work.trial_normal[i, k, 0], work.trial_normal[i, k, 1], work.trial_normal[i, k, 2]
+                v0, v1, v2 = velocity_at(work, x, ba, c0, c1, c2)
+                if partner >= 0:
+                    w0, w1, w2 = velocity_at(work, x, contact.sphere_body[partner], c0, c1, c2)
+                    v0, v1, v2 = v0 - w0, v1 - w1, v2 - w2
+                vn = v0 * n0 + v1 * n1 + v2 * n2
+                e0 = work.trial_xi[i, k, 0] + rest * (v0 - vn * n0)
+                e1 = work.trial_xi[i, k, 1] + rest * (v1 - vn * n1)
+                e2 = work.trial_xi[i, k, 2] + rest * (v2 - vn * n2)
+                limit = work.trial_limit[i, k]
+                length2 = e0 * e0 + e1 * e1 + e2 * e2
+                if length2 > limit * limit:
+                    scale = limit / math.sqrt(length2)
+                    e0, e1, e2 = e0 * scale, e1 * scale, e2 * scale
+                work.hist_partner[i, k] = partner
+                work.hist_xi[i, k, 0], work.hist_xi[i, k, 1], work.hist_xi[i, k, 2] = e0, e1, e2
 
 
 @numba.njit(**STEP_KERNEL)
@@ -138,8 +146,13 @@ def hold_static_bodies(contact, F, tau) -> None:  # noqa: ANN001
 def accumulate_contact(model, contact, work, t, x, q, P, L, F, tau) -> None:  # noqa: ANN001
     """Add every contact's force and torque to F and tau (world frame, about each centre of mass)."""
     body_velocities(model, work, x, q, P, L)
-    sphere_positions(contact, work, x, q)
-    work.trial_count[:] = 0
+    sphere_positions(contact, work, x, q)  # the two-level broad phase: flags the bodies that may touch
+    # trial contacts cleared only where the last evaluation could have left some (body_phase.py)
+    start = contact.body_sphere_start
+    for body in range(work.body_trial.shape[0]):
+        if work.body_trial[body]:
+            work.trial_count[start[body] : start[body + 1]] = 0
+        work.body_trial[body] = 1 if work.body_active[body] else 0
     work.stats[:] = 0.0
     work.counters[COUNT_EVALUATIONS] += 1
     s = t - work.clock[0]

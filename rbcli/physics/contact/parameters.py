@@ -50,6 +50,18 @@ DEFAULT_FRICTION = 0.5
 SUBSTEP_SAFETY = 0.5
 
 
+# auto sub-steps also keep the distance the fastest contact sphere can move in one sub-step under this
+# fraction of the smallest sphere radius: a contact with a plane or a resting body is found within 0.25 r of
+# its first touch (two spheres meeting head-on, each at that speed, within 0.5 r, DEPTH_FRACTION), so a
+# late-found contact does not act on an overlap it never had (an impact stiffer than its spring)
+TRAVEL_FRACTION = 0.25
+# the deepest a contact sphere should go, as a fraction of its radius: beyond it a sphere of a lattice
+# surface reaches past the next layer and a resting body's contacts change which spheres carry it
+DEPTH_FRACTION = 0.5
+# auto sub-steps stop here: a scene that would need more is warned about (the speed it cannot take), not run
+# at a million sub-steps a step
+MAX_AUTO_SUBSTEPS = 1000
+
 # restitutions below this need zeta > 4 (stable steps 8x shorter than undamped): refused at load
 LOWEST_RESTITUTION = 0.01
 _ZETA_MAX = 1000.0
@@ -183,8 +195,44 @@ def stable_step(
     return 2.0 * (math.sqrt(1.0 + zeta * zeta) - zeta) / math.sqrt(omega2[worst]), worst
 
 
-def substeps_for(dt: float, dt_crit: float) -> int:
-    """Sub-steps that bring dt / n under SUBSTEP_SAFETY dt_crit."""
-    if not math.isfinite(dt_crit) or dt_crit <= 0.0:
-        return 1
-    return max(1, math.ceil(dt / (SUBSTEP_SAFETY * dt_crit) - 1e-9))
+def substeps_needed(dt: float, dt_crit: float, travel_step: float = math.inf) -> int:
+    """Sub-steps that bring dt / n under SUBSTEP_SAFETY dt_crit and under travel_step [s] (the time in
+    which the fastest contact sphere moves TRAVEL_FRACTION of the smallest radius: `travel_step`), uncapped."""
+    n = 1
+    if math.isfinite(dt_crit) and dt_crit > 0.0:
+        n = max(n, math.ceil(dt / (SUBSTEP_SAFETY * dt_crit) - 1e-9))
+    if math.isfinite(travel_step) and travel_step > 0.0:
+        n = max(n, math.ceil(min(dt / travel_step, 1e18) - 1e-9))
+    return n
+
+
+def substeps_for(dt: float, dt_crit: float, travel_step: float = math.inf) -> int:
+    """`substeps_needed`, at most MAX_AUTO_SUBSTEPS (beyond it the scene is warned about: scene/checks.py)."""
+    return min(MAX_AUTO_SUBSTEPS, substeps_needed(dt, dt_crit, travel_step))
+
+
+def travel_step(speed: float, radius: float) -> float:
+    """[s] The time in which a sphere moving at `speed` [m/s] moves TRAVEL_FRACTION of `radius` [m] (inf
+    when nothing moves)."""
+    if not speed > 0.0:
+        return math.inf
+    return TRAVEL_FRACTION * radius / speed
+
+
+def peak_compression(zeta: float) -> float:
+    """The deepest compression of the linear spring-dashpot d'' + 2 zeta w d' + w^2 d = 0 hit at speed v,
+    as a multiple of v / w: d(0) = 0, d'(0) = v. (The clamp of the dashpot acts only after the peak: while
+    d grows, k d + c d' > 0.) Underdamped, d = v exp(-zeta w t) sin(wd t) / wd, wd = w sqrt(1 - zeta^2),
+    peaks where tan(wd t) = wd / (zeta w), at exp(-zeta atan2(s, zeta) / s) v / w, s = sqrt(1 - zeta^2);
+    overdamped, d = v (exp(l1 t) - exp(l2 t)) / (l1 - l2) peaks at t = ln(l2 / l1) / (l1 - l2)."""
+    if zeta <= 0.0:
+        return 1.0
+    if zeta < 1.0:
+        root = math.sqrt(1.0 - zeta * zeta)
+        return math.exp(-zeta * math.atan2(root, zeta) / root)
+    if zeta == 1.0:
+        return math.exp(-1.0)
+    root = math.sqrt(zeta * zeta - 1.0)
+    l1, l2 = -zeta + root, -zeta - root
+    t = math.log(l2 / l1) / (l1 - l2)
+    return (math.exp(l1 * t) - math.exp(l2 * t)) / (l1 - l2)

@@ -13,6 +13,9 @@ Materials mix as tables.py says: k in series (a plane: the body's plane stiffnes
 mu = sqrt(mu_a) sqrt(mu_b). Skipped: spheres of one body, pairs of two bodies that cannot move
 (static or kinematic: inverse contact mass 0), coincident centres (no normal).
 
+Which spheres are searched comes first from the body level (body_phase.py, through sphere_positions):
+planes only for spheres of bodies whose box meets them, pairs only among spheres of bodies whose boxes
+meet another's (the same contacts, in the same order where the whole grid would be dense or is hashed).
 Pairs come from the grid of broad_phase.py: each sphere looks at the later spheres of its own bucket
 and at every sphere of the 13 cells of its half shell, so each pair is found once; a hashed bucket may
 hold several cells, so a candidate of another cell is skipped by comparing cells (a dense bucket is one
@@ -30,9 +33,9 @@ import math
 
 import numba
 
-from rbcli.physics.contact.broad_phase import HALF_SHELL, bucket_of, build_grid
-from rbcli.physics.contact.tables import PLANE_PARTNER_BASE
-from rbcli.physics.rotation_kernels import rotate
+from rbcli.physics.contact.body_phase import body_phase, place_spheres, whole_grid_hashed
+from rbcli.physics.contact.broad_phase import HALF_SHELL, bucket_of, build_grid_of
+from rbcli.physics.contact.tables import ACTIVE_PLANE, PLANE_PARTNER_BASE, SWEEP_SPHERES
 
 
 def contact_found(sink, contact, work, owner, partner, ba, bb, n0, n1, n2, overlap, c0, c1, c2, k, zeta, mu):  # noqa: ANN001, ANN201
@@ -45,18 +48,12 @@ def contact_found(sink, contact, work, owner, partner, ba, bb, n0, n1, n2, overl
 
 @numba.njit(cache=True, inline="always")
 def sphere_positions(contact, work, x, q) -> None:  # noqa: ANN001
-    """p = x_b + R r0 of every contact sphere into work.sphere_position (no rotation for a sphere at its
-    body's centre)."""
-    pos = work.sphere_position
-    off = contact.sphere_offset
-    for i in range(pos.shape[0]):
-        b = contact.sphere_body[i]
-        o0, o1, o2 = off[i, 0], off[i, 1], off[i, 2]
-        if o0 == 0.0 and o1 == 0.0 and o2 == 0.0:
-            pos[i, 0], pos[i, 1], pos[i, 2] = x[b, 0], x[b, 1], x[b, 2]
-        else:
-            r0, r1, r2 = rotate(q[b, 0], q[b, 1], q[b, 2], q[b, 3], o0, o1, o2)
-            pos[i, 0], pos[i, 1], pos[i, 2] = x[b, 0] + r0, x[b, 1] + r1, x[b, 2] + r2
+    """The two-level broad phase's first half (body_phase.py): the bodies whose boxes meet another's or
+    a plane's flagged, and p = x_b + R r0 of their contact spheres into work.sphere_position (no rotation
+    for a sphere at its body's centre); the spheres of bodies in body pairs listed for the grid. The
+    other spheres keep stale positions: find_contacts reads only flagged ones."""
+    body_phase(contact, work, x, q, work.body_pair_none)
+    place_spheres(contact, work, x, q)
 
 
 @numba.njit(cache=True, inline="always")
@@ -65,11 +62,13 @@ def find_contacts(contact, work, sink) -> int:  # noqa: ANN001
     then plane), then the pairs in walk order, each handed to `contact_found(sink, ...)`; returns the
     candidate pairs tested (distance checks)."""
     _plane_contacts(contact, work, sink)
-    grid = build_grid(contact, work)
+    gridded = work.body_sweep[SWEEP_SPHERES]  # the spheres of bodies in body pairs (sphere_positions)
+    hashed = whole_grid_hashed(contact, work) if gridded and not contact.body_level_off else False
+    grid = build_grid_of(contact, work, gridded, hashed)
     cell, sp, order, start = work.sorted_cell, work.sorted_position, work.sorted_sphere, work.bucket_start
     dense = grid[0]
     candidates = 0
-    for a in range(order.shape[0]):
+    for a in range(gridded):
         ci, cj, ck = cell[a, 0], cell[a, 1], cell[a, 2]
         p0, p1, p2, ra = sp[a, 0], sp[a, 1], sp[a, 2], sp[a, 3]
         own = work.sphere_bucket[order[a]]
@@ -100,30 +99,35 @@ def find_contacts(contact, work, sink) -> int:  # noqa: ANN001
 
 @numba.njit(cache=True, inline="always")
 def _plane_contacts(contact, work, sink) -> None:  # noqa: ANN001
+    """Every sphere against every plane its body's box meets (body_phase.py), spheres in index order and
+    planes in theirs for each, as a test of every sphere against every plane would find them."""
     pos = work.sphere_position
     planes = contact.plane_point.shape[0]
-    for i in range(pos.shape[0]):
-        b = contact.sphere_body[i]
-        if contact.body_inv_contact_mass[b] == 0.0:
+    start, active, near = contact.body_sphere_start, work.body_active, work.body_plane
+    for b in range(active.shape[0]):
+        if not active[b] & ACTIVE_PLANE:
             continue
-        r = contact.sphere_radius[i]
-        for p in range(planes):
-            n0, n1, n2 = contact.plane_normal[p, 0], contact.plane_normal[p, 1], contact.plane_normal[p, 2]
-            dist = (
-                (pos[i, 0] - contact.plane_point[p, 0]) * n0
-                + (pos[i, 1] - contact.plane_point[p, 1]) * n1
-                + (pos[i, 2] - contact.plane_point[p, 2]) * n2
-            )
-            overlap = r - dist
-            if overlap <= 0.0:
-                continue
-            back = r - 0.5 * overlap  # contact point: halfway through the overlap
-            c0, c1, c2 = pos[i, 0] - back * n0, pos[i, 1] - back * n1, pos[i, 2] - back * n2
-            k = contact.body_plane_stiffness[b]
-            zeta = min(contact.body_damping_ratio[b], contact.plane_damping_ratio[p])
-            mu = contact.body_friction_root[b] * contact.plane_friction_root[p]
-            contact_found(sink, contact, work, i, PLANE_PARTNER_BASE - p, b, -1, n0, n1, n2, overlap,
-                          c0, c1, c2, k, zeta, mu)  # fmt: skip
+        for i in range(start[b], start[b + 1]):
+            r = contact.sphere_radius[i]
+            for p in range(planes):
+                if near[b, p] == 0:
+                    continue
+                n0, n1, n2 = contact.plane_normal[p, 0], contact.plane_normal[p, 1], contact.plane_normal[p, 2]
+                dist = (
+                    (pos[i, 0] - contact.plane_point[p, 0]) * n0
+                    + (pos[i, 1] - contact.plane_point[p, 1]) * n1
+                    + (pos[i, 2] - contact.plane_point[p, 2]) * n2
+                )
+                overlap = r - dist
+                if overlap <= 0.0:
+                    continue
+                back = r - 0.5 * overlap  # contact point: halfway through the overlap
+                c0, c1, c2 = pos[i, 0] - back * n0, pos[i, 1] - back * n1, pos[i, 2] - back * n2
+                k = contact.body_plane_stiffness[b]
+                zeta = min(contact.body_damping_ratio[b], contact.plane_damping_ratio[p])
+                mu = contact.body_friction_root[b] * contact.plane_friction_root[p]
+                contact_found(sink, contact, work, i, PLANE_PARTNER_BASE - p, b, -1, n0, n1, n2, overlap,
+                              c0, c1, c2, k, zeta, mu)  # fmt: skip
 
 
 @numba.njit(cache=True, inline="always")

@@ -47,6 +47,16 @@ FRAME_STAT_COUNT = 4
 COUNT_CANDIDATES, COUNT_CONTACTS, COUNT_OVERFLOW, COUNT_EVALUATIONS = range(4)
 COUNTER_COUNT = 4
 
+# ContactWork.body_active flags (body_phase.py)
+ACTIVE_PAIR = 1  # in a body pair: its spheres join the sphere grid
+ACTIVE_PLANE = 2  # near a plane: its spheres are tested against the flagged planes
+
+# ContactWork.body_sweep slots (body_phase.py)
+SWEEP_PAIRS, SWEEP_CHECKS, SWEEP_SPHERES = range(3)
+SWEEP_COUNT = 3
+# a body whose rho_max is above this many times the median is kept out of the body grid (body_phase.py)
+LARGE_BODY = 4.0
+
 
 class ContactTable(NamedTuple):
     """Contact geometry and materials of a scene (read-only)."""
@@ -70,7 +80,19 @@ class ContactTable(NamedTuple):
     plane_friction: np.ndarray  # (plane_count,)
     body_friction_root: np.ndarray  # sqrt(mu) per body: a pair's sqrt(mu_a mu_b) is one product
     plane_friction_root: np.ndarray  # sqrt(mu) per plane
+    # the body level of the broad phase (body_phase.py): spheres of body b are body_sphere_start[b] :
+    # body_sphere_start[b + 1] (int64, body_count + 1); the box of its spheres (radii included) in the
+    # principal frame, centre [m] and half extents [m] (body_count, 3; -inf: no spheres); rho_max [m]
+    # (body_count,), the farthest sphere surface from the centre of mass (-inf: no spheres)
+    body_sphere_start: np.ndarray
+    body_box_centre: np.ndarray
+    body_box_half: np.ndarray
+    body_bound_radius: np.ndarray
+    body_large: np.ndarray  # bool (body_count,): rho_max > LARGE_BODY x the median, outside the body grid
+    body_cell_size: float  # [m] the body grid's cell: the largest 2 rho_max of the other bodies
+    body_level_off: bool  # spheres <= 2 colliding bodies: the body level is skipped (body_phase.py)
     cell_size: float  # [m] broad-phase grid cell: the largest sphere diameter
+    sphere_radius_min: float  # [m] the smallest sphere radius (body_phase.whole_grid_hashed)
     tangential_ratio: float  # k_t / k_n of every contact
     bucket_count: int  # size of the broad phase's bucket table (see broad_phase.py)
     # [s] the smallest stable step of the contacts the scene can form (parameters.stable_step; inf: none
@@ -116,6 +138,21 @@ class ContactWork(NamedTuple):
     # int64 (1,): the sphere of the run's first contact whose history did not fit (-1: none), so the
     # runner can name its body; not carried by checkpoints (a resumed run names its own first)
     overflow_sphere: np.ndarray
+    # the body level of the broad phase (body_phase.py), per evaluation
+    body_lo: np.ndarray  # [m] (body_count, 3), world box of each body's spheres
+    body_hi: np.ndarray  # [m] (body_count, 3)
+    body_cell: np.ndarray  # int64 (body_count, 3), body grid cell of each box centre
+    body_bucket: np.ndarray  # int64 (body_count,), its hashed bucket (-1: not in the grid)
+    body_bucket_start: np.ndarray  # int64 (buckets + 1,), buckets a power of two >= 2 body_count
+    body_sorted: np.ndarray  # int64 (body_count,), gridded bodies ordered by bucket
+    body_active: np.ndarray  # uint8 (body_count,), body_phase.ACTIVE_PAIR | ACTIVE_PLANE
+    body_plane: np.ndarray  # uint8 (body_count, plane_count), 1: the body's box meets the plane
+    body_sweep: np.ndarray  # int64 (SWEEP_COUNT,): body pairs, box tests, spheres gridded
+    active_sphere: np.ndarray  # int64 (sphere_count,), the spheres of bodies in body pairs, ascending
+    body_trial: np.ndarray  # uint8 (body_count,), 1: its spheres may hold trial contacts (flagged last evaluation)
+    body_pair_none: np.ndarray  # int64 (0, 2): the force stage takes body_phase's flags, not its pair list
+    # uint8 (body_count,), 1: its spheres may hold history (set by commit_contacts; all 1 after a restore)
+    body_history: np.ndarray
 
 
 def _ro(values: object, dtype: type, *shape: int) -> np.ndarray:
@@ -145,6 +182,15 @@ def contact_table(
     """A ContactTable with consistent dtypes (all empty: a scene without contact)."""
     radius = _ro(sphere_radius, np.float64)
     spheres = radius.shape[0]
+    bodies = len(np.asarray(body_inv_contact_mass))
+    start, centre, half, rho = body_boxes_numpy(
+        np.asarray(sphere_body, dtype=np.int64).reshape(-1), np.asarray(sphere_offset, dtype=float).reshape(-1, 3),
+        radius, bodies,
+    )  # fmt: skip
+    finite = rho >= 0.0
+    large = finite & (rho > LARGE_BODY * (np.median(rho[finite]) if finite.any() else 0.0))
+    regular = finite & ~large
+    body_cell = float(2.0 * rho[regular].max()) if regular.any() else 1.0
     # a power of two >= 4 S: dense grids up to that many cells, hashed (with a mask) otherwise (broad_phase.py)
     buckets = 1 << int(4 * spheres - 1).bit_length() if spheres else 0
     return ContactTable(
@@ -163,11 +209,41 @@ def contact_table(
         plane_friction=_ro(plane_friction, np.float64),
         body_friction_root=_ro(np.sqrt(np.asarray(body_friction, dtype=np.float64)), np.float64),
         plane_friction_root=_ro(np.sqrt(np.asarray(plane_friction, dtype=np.float64)), np.float64),
+        body_sphere_start=_ro(start, np.int64),
+        body_box_centre=_ro(centre, np.float64, 3),
+        body_box_half=_ro(half, np.float64, 3),
+        body_bound_radius=_ro(rho, np.float64),
+        body_large=_ro(large, np.bool_),
+        body_cell_size=body_cell,
+        body_level_off=bool(spheres <= 2 * int(finite.sum())),
         cell_size=float(2.0 * radius.max()) if spheres else 1.0,
+        sphere_radius_min=float(radius.min()) if spheres else 0.0,
         tangential_ratio=float(tangential_ratio),
         bucket_count=int(buckets),
         stable_step=float(stable_step),
     )
+
+
+def body_boxes_numpy(
+    sphere_body: np.ndarray, sphere_offset: np.ndarray, sphere_radius: np.ndarray, body_count: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(body_sphere_start (body_count + 1,), box centre c (body_count, 3) and half extents e (body_count,
+    3) [m] in the principal frame, bound radius rho_max (body_count,) [m]) of each body's contact spheres
+    (spheres grouped by body, ascending); a body without spheres gets an empty box (e = -inf)."""
+    start = np.zeros(body_count + 1, dtype=np.int64)
+    np.add.at(start, sphere_body + 1, 1)
+    start = np.cumsum(start)
+    lo = np.full((body_count, 3), np.inf)
+    hi = np.full((body_count, 3), -np.inf)
+    r = sphere_radius[:, None]
+    np.minimum.at(lo, sphere_body, sphere_offset - r)
+    np.maximum.at(hi, sphere_body, sphere_offset + r)
+    rho = np.full(body_count, -np.inf)
+    np.maximum.at(rho, sphere_body, np.linalg.norm(sphere_offset, axis=1) + sphere_radius)
+    empty = ~np.isfinite(rho)
+    centre = np.where(empty[:, None], 0.0, 0.5 * (lo + hi))
+    half = np.where(empty[:, None], -np.inf, 0.5 * (hi - lo))
+    return start, centre, half, rho
 
 
 def make_contact_work(contact: ContactTable, body_count: int, *, history: bool = True) -> ContactWork:
@@ -199,4 +275,17 @@ def make_contact_work(contact: ContactTable, body_count: int, *, history: bool =
         stats=np.zeros(STAT_COUNT),
         counters=np.zeros(COUNTER_COUNT, dtype=np.int64),
         overflow_sphere=np.full(1, -1, dtype=np.int64),
+        body_lo=np.zeros((b, 3)),
+        body_hi=np.zeros((b, 3)),
+        body_cell=np.zeros((b, 3), dtype=np.int64),
+        body_bucket=np.zeros(b, dtype=np.int64),
+        body_bucket_start=np.zeros(((1 << max(1, 2 * b - 1).bit_length()) + 1) if b else 1, dtype=np.int64),
+        body_sorted=np.zeros(b, dtype=np.int64),
+        body_active=np.zeros(b, dtype=np.uint8),
+        body_plane=np.zeros((b, contact.plane_point.shape[0] if s else 0), dtype=np.uint8),
+        body_sweep=np.zeros(SWEEP_COUNT, dtype=np.int64),
+        active_sphere=np.zeros(s, dtype=np.int64),
+        body_trial=np.zeros(b, dtype=np.uint8),
+        body_pair_none=np.zeros((0, 2), dtype=np.int64),
+        body_history=np.zeros(b, dtype=np.uint8),
     )
