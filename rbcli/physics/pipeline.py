@@ -11,6 +11,9 @@ A step from grid index n (t = n dt) to n + 1 runs, in this order (STEP_STAGES):
                       stages (gravity, fields, point forces, torques, springs, drag, contact), each
                       present only when the scene has rows for it
       kinematic_end   kinematic bodies at their exact state at the end of the (sub-)step
+      joint_position  (split2, scenes with joints) the joints' impulse at the kick, by Newton, so the
+                      end configuration satisfies the joints to round-off               (joints/stages.py)
+      joint_velocity  (split2, scenes with joints) momenta projected onto the joints' velocity rows
       contact_commit  the last evaluation's contacts and tangential springs become the history
     record          on recording steps: the divergence check, then the state copied into the next frame
 
@@ -106,6 +109,22 @@ STEP_STAGES: tuple[Stage, ...] = (
         ("from rbcli.physics.forces.stages import kinematic_end_stage",),
         "kinematic_end_stage(model, forces, ts + h, x, q, P, L)",
         substep=True,
+    ),
+    Stage(
+        "joint_position",
+        "joint_position: the joints' impulse at the kick that puts the end configuration on g = 0 (RATTLE)",
+        ("from rbcli.physics.joints.stages import joint_position_stage",),
+        "joint_position_stage(model, forces, force_data, h, x, q, P, L)",
+        substep=True,
+        integrators=("split2",),
+    ),
+    Stage(
+        "joint_velocity",
+        "joint_velocity: the momenta projected so that the joints' rows have zero rate, G V = 0",
+        ("from rbcli.physics.joints.stages import joint_velocity_stage",),
+        "joint_velocity_stage(model, forces, force_data, h, x, q, P, L)",
+        substep=True,
+        integrators=("split2",),
     ),
     Stage(
         "contact_commit",

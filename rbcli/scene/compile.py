@@ -127,6 +127,11 @@ def compile_model(spec: SceneSpec) -> CompiledModel:
     motions = kinematic_rows(spec, model, state) if spec.contact is not None else []
     forces = compile_force_tables(spec.gravity, spec.forces, model, body_index, centres, contact, motions)
     kinematic_initial_state(forces, model, state)
+    if spec.joints:
+        from rbcli.scene.compile_joints import compile_joints
+
+        joints = compile_joints(spec.joints, spec.bodies, model, centres, state, has_contact=spec.contact is not None)
+        forces = forces._replace(joint=joints)
     return CompiledModel(model, forces, state, summary)
 
 
@@ -233,8 +238,8 @@ def run_settings(
     name = integrator if integrator is not None else sim.integrator
     from rbcli.physics.integrators import check_integrator
 
-    refusal = check_integrator(name)
-    if refusal is not None:
+    refusal = check_integrator(name, joints=bool(spec.joints))
+    if refusal is not None and refusal.key == "integrator":
         raise refuse("integrator", name, f"{refusal.reason}; {refusal.expected}")
     if tolerance is not None or sim.tolerance is not None:
         number("tolerance", tolerance if tolerance is not None else sim.tolerance)
@@ -257,7 +262,7 @@ def run_settings(
         if settings.tolerance is not None:
             substeps = 1  # adaptive steps are capped at the contacts' stable step instead (physics/adaptive.py)
         settings = replace(settings, substeps=int(substeps))
-    refusal = check_integrator(settings.integrator, tolerance=settings.tolerance is not None)
+    refusal = check_integrator(settings.integrator, tolerance=settings.tolerance is not None, joints=bool(spec.joints))
     if refusal is not None:
         raise ValueError(refusal.reason)
     return settings

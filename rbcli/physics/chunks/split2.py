@@ -15,6 +15,7 @@ from rbcli.physics.forces.stages import (
 )
 from rbcli.physics.integrators.split2 import SCRATCH_WIDTH
 from rbcli.physics.integrators.split2 import step as integrator_step
+from rbcli.physics.joints.stages import joint_position_stage, joint_velocity_stage
 from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, chunk_status, record_if_due
 
 __all__ = ["SCRATCH_WIDTH", "integrator_step", "run_chunk"]
@@ -49,6 +50,10 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
             integrator_step(model, forces, force_data, ts, h, x, q, P, L, F, tau, scratch)
             # kinematic_end: kinematic bodies at their exact state at the end of the (sub-)step (closed form)
             kinematic_end_stage(model, forces, ts + h, x, q, P, L)
+            # joint_position: the joints' impulse at the kick that puts the end configuration on g = 0 (RATTLE)
+            joint_position_stage(model, forces, force_data, h, x, q, P, L)
+            # joint_velocity: the momenta projected so that the joints' rows have zero rate, G V = 0
+            joint_velocity_stage(model, forces, force_data, h, x, q, P, L)
             # contact_commit: the (sub-)step is complete: its last evaluation's contacts become the history
             contact_commit_stage(model, contact, contact_work, x, q, P, L)
         # contact_record: on recording steps, the step's contact count, deepest overlap and energy

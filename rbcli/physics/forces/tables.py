@@ -22,6 +22,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from rbcli.physics.contact.tables import ContactTable, ContactWork, KinematicTable, kinematic_table, make_contact_work
+from rbcli.physics.joints.tables import JointTable, JointWork, make_joint_work
 
 # Row column `schedule` value meaning "no schedule": the force acts at full strength at all times.
 NO_SCHEDULE = -1
@@ -143,6 +144,8 @@ class ForceTables(NamedTuple):
       contact stage).
     kinematic: the prescribed motions of kinematic bodies (contact/tables.py, contact/kinematic.py;
       0 rows: no kinematic stages).
+    joint: the joints (physics/joints/tables.py), None without joints: the joint stages compile to
+      nothing (physics/joints/stages.py) in either form of the tables.
     torque_body: bool (body_count,): True for a body that some term can give a torque (a field row,
       a point force or spring end off its centre of mass, a pure torque, angular drag). Integrators
       run their torque path (L += h tau, the body-frame torque in Euler's equations) only for these
@@ -163,6 +166,7 @@ class ForceTables(NamedTuple):
     impulse: ImpulseTable
     contact: ContactTable
     kinematic: KinematicTable = kinematic_table()
+    joint: JointTable | None = None
 
     def kernel(self) -> KernelForceTables:
         """The tables as compiled kernels take them: None for each table without rows (see
@@ -175,6 +179,7 @@ class ForceTables(NamedTuple):
             self.gravity, self.has_gravity, self.has_torque, self.torque_body, self.schedule,
             rows(self.field), rows(self.point_force), rows(self.torque), rows(self.spring), rows(self.drag),
             rows(self.impulse), self.contact if contact_present(self.contact) else None, rows(self.kinematic),
+            self.joint if self.joint is not None and table_rows(self.joint) else None,
         )  # fmt: skip
 
 
@@ -198,6 +203,7 @@ class KernelForceTables(NamedTuple):
     impulse: ImpulseTable | None
     contact: ContactTable | None
     kinematic: KinematicTable | None = None
+    joint: JointTable | None = None
 
 
 def contact_present(contact: ContactTable | None) -> bool:
@@ -214,10 +220,12 @@ class ForceData(NamedTuple):
       found) it processed.
     contact: the contact stage's grid, per-evaluation arrays and contact history (contact/tables.py);
       None when the scene has no contact stage (`contact_present`), as KernelForceTables.contact is.
+    joint: the joint stages' work arrays (physics/joints/tables.py); None without joints.
     """
 
     term_evaluations: np.ndarray
     contact: ContactWork | None
+    joint: JointWork | None = None
 
 
 def make_force_data(forces: ForceTables | KernelForceTables) -> ForceData:
@@ -228,6 +236,7 @@ def make_force_data(forces: ForceTables | KernelForceTables) -> ForceData:
         contact=make_contact_work(contact, forces.torque_body.shape[0])
         if contact is not None and contact_present(contact)
         else None,
+        joint=make_joint_work(forces.joint) if forces.joint is not None and table_rows(forces.joint) else None,
     )
 
 

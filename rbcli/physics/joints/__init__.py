@@ -1,0 +1,8 @@
+"""Joints: constraints between bodies (or a body and the world) on the maximal state x, q, P, L.
+
+tables.py (numpy: the JointTable of the force tables, the JointWork of the run's Data), rows.py
+(the rows' residuals and Jacobians), dense.py + dense_layout.py (the dense fallback of the solver
+interface: factor_rows, solve_rows, joint_graph, make_solver_work), stages.py (the RATTLE-type position
+and velocity stages of split2's loop, with their dispatchers), reference.py (numpy twins for tests).
+docs/joints.md has the scene format, the rows and the integration scheme.
+"""
