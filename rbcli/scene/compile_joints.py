@@ -67,7 +67,7 @@ def compile_joints(
     return joint_table(**rows, body_ground=ground)
 
 
-def _unsupported(joint: JointSpec, has_contact: bool) -> None:
+def _unsupported(joint: JointSpec) -> None:
     """Refuse what the joint stages do not hold yet, rather than ignore it (docs/joints.md, next)."""
     later = "not supported yet (issue 27: limits, dampers and motors come with the next slice)"
     if joint.limits is not None:
@@ -76,13 +76,6 @@ def _unsupported(joint: JointSpec, has_contact: bool) -> None:
         raise _Invalid("damping", f"joint dampers are {later}", "damping: 0 or no `damping`")
     if joint.motor is not None:
         raise _Invalid("motor", f"joint motors are {later}", "a joint without `motor`")
-    if has_contact:
-        raise _Invalid(
-            "type",
-            "joints in a scene with contact are not supported yet (the jointed bodies' "
-            "collision exclusion comes with a later slice of issue 27)",
-            "a scene with joints and no `contact:` section",
-        )
 
 
 def _joint_row(
@@ -94,7 +87,7 @@ def _joint_row(
     state: State,
     has_contact: bool,
 ) -> dict[str, object]:
-    _unsupported(joint, has_contact)
+    _unsupported(joint)
     ends = [WORLD if name == WORLD_NAME else index[name] for name in joint.bodies]
     anchors = None if joint.anchors is None else [np.asarray(p, dtype=np.float64) for p in joint.anchors]
     axes = None if joint.axes is None else [np.asarray(u, dtype=np.float64) for u in joint.axes]
@@ -109,6 +102,13 @@ def _joint_row(
             "bodies",
             f"both ends are fixed (a static or kinematic body and {what}): the joint holds nothing",
             "at least one end a moving (dynamic) body",
+        )
+    if has_contact:
+        raise _Invalid(
+            "type",
+            "joints in a scene with contact are not supported yet (the jointed bodies' "
+            "collision exclusion comes with a later slice of issue 27)",
+            "a scene with joints and no `contact:` section",
         )
     R = quat_to_matrix(state.q)  # world-from-principal at t = 0
     E = quat_to_matrix(model.body_frame_q)  # user-from-principal
