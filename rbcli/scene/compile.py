@@ -70,6 +70,10 @@ class CompiledScene:
         from rbcli.scene.checks import stability_warnings
 
         issues = [*self.spec.warnings, *stability_warnings(self)]
+        if self.spec.joints:
+            from rbcli.scene.compile_joints import redundant_row_warnings
+
+            issues += redundant_row_warnings(self.spec.joints, self.forces.joint, self.model, self.initial_state)
         return sorted(issues, key=SceneIssue.order)
 
 

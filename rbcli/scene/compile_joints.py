@@ -210,3 +210,41 @@ def _body_size(model: Model, body: int) -> float:
     start, count = int(model.body_particle_start[body]), int(model.body_particle_count[body])
     offsets = model.particle_offset[start : start + count]
     return float(np.max(np.linalg.norm(offsets, axis=1))) if count else 0.0
+
+
+def redundant_row_warnings(joints: Sequence[JointSpec], table: JointTable | None, model: Model,
+                           state: State) -> list[SceneIssue]:  # fmt: skip
+    """A warning per joint that has rows repeating constraints of earlier joints (a loop that holds a
+    direction twice, as a planar four-bar of spatial hinges does: 3 rows), found as the solver finds them
+    (the zero pivots of A = G W G^T at the initial poses, rows in joint order): they are dropped with
+    multiplier 0 each step, and the loop still closes."""
+    if table is None:
+        return []
+    from rbcli.physics.joints.dense_layout import redundant_rows_numpy
+    from rbcli.physics.joints.reference import (
+        body_weights_numpy,
+        joint_rows_numpy,
+        rows_matrix_numpy,
+        weight_matrix_numpy,
+    )
+
+    _, ga, gb = joint_rows_numpy(table, state.x, state.q)
+    G = rows_matrix_numpy(table, ga, gb, state.x.shape[0])
+    A = G @ weight_matrix_numpy(*body_weights_numpy(model, table, state.q)) @ G.T
+    dropped = redundant_rows_numpy(A)
+    owner = np.searchsorted(table.row_start, dropped, side="right") - 1
+    issues = []
+    for j in np.unique(owner):
+        rows = [int(r - table.row_start[j]) for r in dropped[owner == j]]
+        joint = joints[int(j)]
+        others = ", ".join(repr(joints[int(k)].name) for k in range(int(j)))
+        listed = ", ".join(map(str, rows))
+        issues.append(SceneIssue(
+            joint.location,
+            f"joint '{joint.name}': {len(rows)} of its {int(table.row_count[j])} rows (rows {listed}) repeat "
+            f"constraints of earlier joints ({others}): a loop that holds a "
+            "direction twice; they are dropped (multiplier 0) and the loop still closes",
+            "a loop whose joints leave its free directions free (e.g. ball joints instead of hinges at one end)",
+            severity="warning",
+        ))  # fmt: skip
+    return issues

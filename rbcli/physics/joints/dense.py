@@ -15,12 +15,8 @@ from __future__ import annotations
 
 import numba
 
+from rbcli.physics.joints.dense_layout import REDUNDANT_PIVOT
 from rbcli.physics.step import STEP_KERNEL
-
-# a pivot this small relative to its row's diagonal means the row repeats earlier ones: the cancellation
-# of a truly redundant row leaves ~R eps of the diagonal (1e-14 for 100 rows); independent rows of real
-# joints keep pivots above 1e-6 of it (a hinge's axis rows against its ball rows, measured)
-REDUNDANT_PIVOT = 1e-10
 
 
 @numba.njit(**STEP_KERNEL)

@@ -13,6 +13,11 @@ from typing import NamedTuple
 
 import numpy as np
 
+# a pivot this small relative to its row's diagonal means the row repeats earlier ones: the cancellation
+# of a truly redundant row leaves ~R eps of the diagonal (1e-14 for 100 rows), while independent rows
+# keep pivots of order 1 of it (the rows of one joint are orthogonal directions)
+REDUNDANT_PIVOT = 1e-10
+
 
 class DenseGraph(NamedTuple):
     """What the dense solver needs of the joint graph: the total row count R."""
@@ -39,3 +44,20 @@ def joint_graph(body_a: np.ndarray, body_b: np.ndarray, body_ground: np.ndarray,
 def make_solver_work(graph: DenseGraph) -> DenseWork:
     rows = graph.row_total
     return DenseWork(np.zeros((rows, rows)), np.zeros((rows, 6)), np.zeros((rows, 6)), np.zeros(rows, dtype=np.int64))
+
+
+def redundant_rows_numpy(A: np.ndarray) -> np.ndarray:
+    """The rows `factor_rows` drops as redundant for the matrix A (the same rule, in numpy): int (k,)."""
+    rows = A.shape[0]
+    factor = np.zeros_like(A)
+    dropped = np.zeros(rows, dtype=bool)
+    for i in range(rows):
+        for c in range(i):
+            if not dropped[c]:
+                factor[i, c] = (A[i, c] - factor[i, :c] @ factor[c, :c]) / factor[c, c]
+        pivot = A[i, i] - factor[i, :i] @ factor[i, :i]
+        if not pivot > REDUNDANT_PIVOT * A[i, i]:
+            dropped[i], factor[i, i] = True, 1.0
+        else:
+            factor[i, i] = np.sqrt(pivot)
+    return np.flatnonzero(dropped)

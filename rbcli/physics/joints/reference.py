@@ -1,5 +1,7 @@
-"""Plain numpy twins of the joint kernels, for tests: the rows (rows.py) and a whole split2 step with its
-joint stages (stages.py), with a choice of where the position impulse's direction G is taken.
+"""Plain numpy twins of the joint kernels: the rows (rows.py) and a whole split2 step with its joint
+stages (stages.py), with a choice of where the position impulse's direction G is taken. Tests compare
+the kernels with them; scene/compile_joints.py uses the rows and matrices once, at compile time, to find
+redundant rows (a loop that constrains a direction twice) and warn about them.
 
 Written for clarity, one joint at a time, with a dense numpy solve; the compiled stages must agree with
 them to round-off. `direction="end"` is the plain post-projection (G at the end of the step), kept to
@@ -72,16 +74,18 @@ def joint_rows_numpy(table: JointTable, x: np.ndarray, q: np.ndarray) -> tuple[n
     return g, ga, gb
 
 
-def _weights(model, table: JointTable, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001
+def body_weights_numpy(model, table: JointTable, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001
+    """(1 / M (N,), R I0^-1 R^T (N, 3, 3)) at orientations q, zero for ground bodies; model: a Model or
+    KernelModel (body_mass, body_inertia)."""
     R = quat_to_matrix(q)
-    inv_inertia = np.einsum("bij,bj,bkj->bik", R, model.body_inertia_inv, R)
+    inv_inertia = np.einsum("bij,bj,bkj->bik", R, 1.0 / model.body_inertia, R)
     inv_mass = 1.0 / model.body_mass
     inv_mass[table.body_ground] = 0.0
     inv_inertia[table.body_ground] = 0.0
     return inv_mass, inv_inertia
 
 
-def _assemble(table: JointTable, ga: np.ndarray, gb: np.ndarray, bodies: int) -> np.ndarray:
+def rows_matrix_numpy(table: JointTable, ga: np.ndarray, gb: np.ndarray, bodies: int) -> np.ndarray:
     """G (R, 6 N): the rows against every body's (v, omega)."""
     G = np.zeros((ga.shape[0], 6 * bodies))
     for j in range(table.kind.shape[0]):
@@ -93,7 +97,8 @@ def _assemble(table: JointTable, ga: np.ndarray, gb: np.ndarray, bodies: int) ->
     return G
 
 
-def _block_w(inv_mass: np.ndarray, inv_inertia: np.ndarray) -> np.ndarray:
+def weight_matrix_numpy(inv_mass: np.ndarray, inv_inertia: np.ndarray) -> np.ndarray:
+    """W = blockdiag(I3 / M_b, R_b I0_b^-1 R_b^T) (6 N, 6 N)."""
     n = inv_mass.shape[0]
     W = np.zeros((6 * n, 6 * n))
     for b in range(n):
@@ -116,15 +121,15 @@ def joint_stages_numpy(model, table: JointTable, h: float, x, q, P, L, direction
     end configuration: the plain post-projection)."""
     n = x.shape[0]
     moving = ~table.body_ground
-    omega = np.einsum("bij,bj->bi", _weights(model, table._replace(body_ground=np.zeros(n, bool)), q)[1], L)
+    omega = np.einsum("bij,bj->bi", body_weights_numpy(model, table._replace(body_ground=np.zeros(n, bool)), q)[1], L)
     if direction == "mid":
         x_dir, q_dir = x - 0.5 * h * P / model.body_mass[:, None], _turn(q, -0.5 * h * omega)
     else:
         x_dir, q_dir = x.copy(), q.copy()
-    inv_mass, inv_inertia = _weights(model, table, q_dir)
+    inv_mass, inv_inertia = body_weights_numpy(model, table, q_dir)
     _, ga, gb = joint_rows_numpy(table, x_dir, q_dir)
-    G = _assemble(table, ga, gb, n)
-    W = _block_w(inv_mass, inv_inertia)
+    G = rows_matrix_numpy(table, ga, gb, n)
+    W = weight_matrix_numpy(inv_mass, inv_inertia)
     A = G @ W @ G.T
     total = np.zeros(G.shape[0])
     g = joint_rows_numpy(table, x, q)[0]
@@ -141,12 +146,12 @@ def joint_stages_numpy(model, table: JointTable, h: float, x, q, P, L, direction
         previous, g = np.abs(g).max(), joint_rows_numpy(table, x, q)[0]
         if np.abs(g).max() > 0.5 * previous:
             break
-    inv_mass, inv_inertia = _weights(model, table, q)
+    inv_mass, inv_inertia = body_weights_numpy(model, table, q)
     _, ga, gb = joint_rows_numpy(table, x, q)
-    G = _assemble(table, ga, gb, n)
-    W = _block_w(inv_mass, inv_inertia)
+    G = rows_matrix_numpy(table, ga, gb, n)
+    W = weight_matrix_numpy(inv_mass, inv_inertia)
     all_mass = 1.0 / model.body_mass
-    omega = np.einsum("bij,bj->bi", _weights(model, table._replace(body_ground=np.zeros(n, bool)), q)[1], L)
+    omega = np.einsum("bij,bj->bi", body_weights_numpy(model, table._replace(body_ground=np.zeros(n, bool)), q)[1], L)
     V = np.concatenate([all_mass[:, None] * P, omega], axis=1).reshape(-1)
     mu = np.linalg.solve(G @ W @ G.T, G @ V)
     d = (G.T @ mu).reshape(n, 6) * moving[:, None]
