@@ -1,5 +1,6 @@
 """Joints through the whole pipeline: `rbsim run` of scenes/joints/pendulum.yaml writes an .mcap and an
-.rrd that read back with the hinge held in every recorded frame; a checkpoint continues bitwise; a
+.rrd that read back with the hinge held in every recorded frame and the joint violations as per-frame
+invariants; a checkpoint continues bitwise; a
 scene without joints compiles no joint kernel (a fresh process with an empty cache, numba's own
 compile events), and its split2 loop's joint stages compile to nothing."""
 
@@ -40,6 +41,18 @@ def test_rbsim_run_of_a_pendulum_writes_a_recording_that_reads_back(tmp_path, ex
     tolerance = 1e-12 if extension == "mcap" else 1e-6
     assert np.abs(top - PIVOT).max() <= tolerance
     assert trajectory.x[-1, 0, 0] > trajectory.x[0, 0, 0] + 0.05  # it swung: from x = -0.104 towards 0
+    # the joints' violation per frame, evaluated afresh from each recorded (float64) state
+    for name in ("joint_position_violation", "joint_velocity_violation"):
+        values = trajectory.invariants[name]
+        assert values.shape == (51,) and np.all(values <= 1e-12), (name, values.max())
+
+
+def test_joint_violations_are_drifts_and_a_grounded_joint_changes_momentum():
+    from rbcli.physics.conservation import conserved_invariants
+
+    forces = load_scene(PENDULUM).compiled_model.forces
+    kept = conserved_invariants(forces, ["joint_position_violation", "momentum_x", "angular_momentum_z"])
+    assert kept == {"joint_position_violation": True, "momentum_x": False, "angular_momentum_z": False}
 
 
 def test_a_checkpoint_of_a_jointed_scene_continues_bitwise():

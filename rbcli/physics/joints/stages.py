@@ -212,7 +212,7 @@ def joint_velocity(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
         work.inv_mass,
         work.inv_inertia,
     )
-    _row_velocities(model, table, work, q, P, L)
+    row_velocities(model, table, work, q, P, L)
     solve_rows(
         table.graph,
         work.solver,
@@ -237,11 +237,11 @@ def joint_velocity(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
         L[b, 0] += d[3]
         L[b, 1] += d[4]
         L[b, 2] += d[5]
-    work.stats[STAT_VELOCITY] = _row_velocities(model, table, work, q, P, L)
+    work.stats[STAT_VELOCITY] = row_velocities(model, table, work, q, P, L)
 
 
 @numba.njit(cache=True)
-def _row_velocities(model, table, work, q, P, L) -> float:  # noqa: ANN001
+def row_velocities(model, table, work, q, P, L) -> float:  # noqa: ANN001
     """residual = G V (every body's own velocity, ground bodies' too); returns max |G V|."""
     worst = 0.0
     for j in range(table.kind.shape[0]):
