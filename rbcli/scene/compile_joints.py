@@ -6,7 +6,7 @@ given as one world point / world axis at the initial poses they become r = R0^T 
 for each end (R0 world-from-principal at t = 0). What only the compiled bodies show is refused here,
 located at the key at fault: anchors or axes that disagree with the initial poses (saying by how
 much), a joint whose both ends are static (or static and the world), and what this slice does not yet
-hold (limits, dampers, motors, joints together with contact: docs/joints.md says what is next).
+hold (limits, joints together with contact: docs/joints.md says what is next).
 """
 
 from __future__ import annotations
@@ -52,8 +52,9 @@ def compile_joints(
     index = {b.name: i for i, b in enumerate(bodies)}
     rows: dict[str, list] = {
         k: []
-        for k in ("kind", "body_a", "body_b", "anchor_a", "anchor_b", "axis_a", "normal_b", "relative_q", "length")
-    }
+        for k in ("kind", "body_a", "body_b", "anchor_a", "anchor_b", "axis_a", "normal_b", "relative_q", "length",
+                  "damping", "motor_speed", "motor_cap")
+    }  # fmt: skip
     issues = []
     for joint in joints:
         try:
@@ -69,13 +70,9 @@ def compile_joints(
 
 def _unsupported(joint: JointSpec) -> None:
     """Refuse what the joint stages do not hold yet, rather than ignore it (docs/joints.md, next)."""
-    later = "not supported yet (issue 27: limits, dampers and motors come with the next slice)"
     if joint.limits is not None:
+        later = "not supported yet (issue 27: limits come with the next slice)"
         raise _Invalid("limits", f"joint limits are {later}", "a joint without `limits`")
-    if joint.damping != 0.0:
-        raise _Invalid("damping", f"joint dampers are {later}", "damping: 0 or no `damping`")
-    if joint.motor is not None:
-        raise _Invalid("motor", f"joint motors are {later}", "a joint without `motor`")
 
 
 def _joint_row(
@@ -183,7 +180,11 @@ def _joint_row(
             )
     q_b = np.array([1.0, 0.0, 0.0, 0.0]) if b == WORLD else state.q[b]
     relative = quat_multiply(quat_conjugate(q_b), state.q[a])
+    motor = joint.motor
     return dict(
+        damping=joint.damping,
+        motor_speed=0.0 if motor is None else motor.speed,
+        motor_cap=0.0 if motor is None else motor.cap,
         kind=kind,
         body_a=a,
         body_b=b,

@@ -124,3 +124,33 @@ def test_a_scene_without_joints_compiles_no_joint_kernel(tmp_path):
         "rbcli.physics.joints.stages._joint_position_stage.<locals>.<lambda>",
         "rbcli.physics.joints.stages._joint_velocity_stage.<locals>.<lambda>",
     }, sorted(joint_kernels)
+
+
+def test_the_joint_stages_do_not_allocate_per_step():
+    """numba's allocation counters (NRT statistics, on in a fresh process) grow by the same amount over
+    10 and 10,000 steps of jointed scenes (a loop with dropped rows, a motor and a damper): the joint
+    stages' work lives in Data."""
+    code = (
+        "import rbcli\n"
+        "from numba.core.runtime import rtsys\n"
+        "from rbcli.scene.load import load_scene_text\n"
+        f"four_bar = {str(ROOT / 'scenes' / 'joints' / 'four_bar.yaml')!r}\n"
+        "driven = open(four_bar).read().replace('axis: [0, 1, 0]}', 'axis: [0, 1, 0], damping: 0.01, '\n"
+        "    'motor: {speed: 1.0, max_torque: 0.2}}', 1)\n"
+        "for name, scene in (('four_bar', rbcli.load_scene(four_bar)), ('driven', load_scene_text(driven))):\n"
+        "    sim = rbcli.Simulation(scene)\n"
+        "    sim.step(1)\n"
+        "    counts = []\n"
+        "    for n in (10, 10_000):\n"
+        "        before = rtsys.get_allocation_stats().alloc\n"
+        "        sim.step(n)\n"
+        "        counts.append(rtsys.get_allocation_stats().alloc - before)\n"
+        "    print(name, counts[0], counts[1], sim.forces.joint.motor_cap.max())\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
+                         env={**os.environ, "NUMBA_NRT_STATS": "1"}, timeout=600)  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    rows = [line.split() for line in out.stdout.splitlines()]
+    assert [row[0] for row in rows] == ["four_bar", "driven"] and float(rows[1][3]) == 0.2
+    for name, short, long, _ in rows:
+        assert int(short) == int(long), (name, short, long)

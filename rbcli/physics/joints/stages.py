@@ -44,7 +44,7 @@ from numba.extending import overload
 from rbcli.physics.integrators.kinematics import rotate, rotate_inverse
 from rbcli.physics.joints.dense import factor_rows, solve_rows
 from rbcli.physics.joints.rows import joint_rows
-from rbcli.physics.joints.tables import STAT_ITERATIONS, STAT_POSITION, STAT_REDUNDANT, STAT_VELOCITY
+from rbcli.physics.joints.tables import JOINT_HINGE, STAT_ITERATIONS, STAT_POSITION, STAT_REDUNDANT, STAT_VELOCITY
 from rbcli.physics.step import STEP_KERNEL
 
 # the Newton iteration stops when |g| falls by less than this factor in one iteration (round-off
@@ -237,7 +237,138 @@ def joint_velocity(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
         L[b, 0] += d[3]
         L[b, 1] += d[4]
         L[b, 2] += d[5]
+    for j in range(table.kind.shape[0]):
+        if table.motor_cap[j] > 0.0 or table.damping[j] > 0.0:
+            _drive(model, table, work, j, h, x, q, P, L)
     work.stats[STAT_VELOCITY] = row_velocities(model, table, work, q, P, L)
+
+
+@numba.njit(cache=True)
+def _drive(model, table, work, j, h, x, q, P, L) -> None:  # noqa: ANN001
+    """Joint j's motor and damper, acting on its rate r = J V within the joints' constraints.
+
+    The rate of a hinge is r = (omega_a - omega_b) . u (u = R_a u_a), of a slider r = d/dt ((p_a - p_b) . u)
+    (u = R_b u_b, the axis carried by body b). An impulse lambda along J, followed by the projection that
+    keeps every joint's G V = 0, changes r by k lambda, with k = J W J^T - (G W J^T)^T A^-1 (G W J^T) the
+    inverse effective inertia (or mass) of the rate inside the constraints. The motor takes the impulse
+    that brings r to its speed, capped at |lambda| <= cap h (the torque or force cap over the step); the
+    damper then makes r decay by the exact flow of dr/dt = -c k r over the step, r <- r exp(-c k h)
+    (a flywheel on a damped hinge decays at the analytic rate exp(-c t / I), to round-off). Both at the
+    velocity level, after the step's projection: first order in time for the motor's switching.
+    """
+    a, b = table.body_a[j], table.body_b[j]
+    aw, ax, ay, az = q[a, 0], q[a, 1], q[a, 2], q[a, 3]
+    if b >= 0:
+        bw, bx, by, bz = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
+    else:
+        bw, bx, by, bz = 1.0, 0.0, 0.0, 0.0
+    if table.kind[j] == JOINT_HINGE:
+        u0, u1, u2 = rotate(aw, ax, ay, az, table.axis_a[j, 0], table.axis_a[j, 1], table.axis_a[j, 2])
+        ja = (0.0, 0.0, 0.0, u0, u1, u2)
+        jb = (0.0, 0.0, 0.0, -u0, -u1, -u2)
+    else:  # slider: the axis is n_b1 x n_b2 in b's frame
+        n1, n2 = table.normal_b[j, 0], table.normal_b[j, 1]
+        c0, c1, c2 = n1[1] * n2[2] - n1[2] * n2[1], n1[2] * n2[0] - n1[0] * n2[2], n1[0] * n2[1] - n1[1] * n2[0]
+        u0, u1, u2 = rotate(bw, bx, by, bz, c0, c1, c2)
+        ra0, ra1, ra2 = rotate(aw, ax, ay, az, table.anchor_a[j, 0], table.anchor_a[j, 1], table.anchor_a[j, 2])
+        if b >= 0:
+            rb0, rb1, rb2 = rotate(bw, bx, by, bz, table.anchor_b[j, 0], table.anchor_b[j, 1], table.anchor_b[j, 2])
+            pb0, pb1, pb2 = x[b, 0] + rb0, x[b, 1] + rb1, x[b, 2] + rb2
+        else:
+            rb0, rb1, rb2 = 0.0, 0.0, 0.0
+            pb0, pb1, pb2 = table.anchor_b[j, 0], table.anchor_b[j, 1], table.anchor_b[j, 2]
+        d0, d1, d2 = x[a, 0] + ra0 - pb0, x[a, 1] + ra1 - pb1, x[a, 2] + ra2 - pb2
+        ja = (u0, u1, u2, ra1 * u2 - ra2 * u1, ra2 * u0 - ra0 * u2, ra0 * u1 - ra1 * u0)
+        jb = (
+            -u0,
+            -u1,
+            -u2,
+            -(rb1 * u2 - rb2 * u1) + (u1 * d2 - u2 * d1),
+            -(rb2 * u0 - rb0 * u2) + (u2 * d0 - u0 * d2),
+            -(rb0 * u1 - rb1 * u0) + (u0 * d1 - u1 * d0),
+        )
+    wa, wb = _weigh(work, a, ja), _weigh(work, b, jb)
+    # G W J^T per row (only rows on a or b couple), then y = A^-1 G W J^T with the end factor
+    for k in range(table.kind.shape[0]):
+        ak, bk = table.body_a[k], table.body_b[k]
+        for r in range(table.row_start[k], table.row_start[k] + table.row_count[k]):
+            total = 0.0
+            for c in range(6):
+                if ak == a:
+                    total += work.jac_a[r, c] * wa[c]
+                if b >= 0 and ak == b:
+                    total += work.jac_a[r, c] * wb[c]
+                if bk >= 0 and bk == a:
+                    total += work.jac_b[r, c] * wa[c]
+                if bk >= 0 and b >= 0 and bk == b:
+                    total += work.jac_b[r, c] * wb[c]
+            work.rhs[r] = total
+    solve_rows(table.graph, work.solver, table.row_start, table.row_count, table.body_a, table.body_b,
+               work.rhs, work.delta)  # fmt: skip
+    k_inv = 0.0
+    for c in range(6):
+        k_inv += ja[c] * wa[c] + jb[c] * wb[c]
+    for r in range(work.rhs.shape[0]):
+        k_inv -= work.rhs[r] * work.delta[r]
+    if not k_inv > 0.0:  # the rate cannot move (both ends fixed, or the constraints forbid it)
+        return
+    rate = _rate(model, q, P, L, x, a, b, ja, jb)
+    impulse = 0.0
+    if table.motor_cap[j] > 0.0:
+        cap = table.motor_cap[j] * h
+        impulse = min(max((table.motor_speed[j] - rate) / k_inv, -cap), cap)
+        rate += k_inv * impulse
+    if table.damping[j] > 0.0:
+        impulse += rate * (math.exp(-table.damping[j] * k_inv * h) - 1.0) / k_inv
+    # J^T lambda on the joint's bodies, then -G^T (y lambda) so every joint's G V stays 0
+    for r in range(work.delta.shape[0]):
+        work.delta[r] = -work.delta[r] * impulse
+        work.impulse[r] += work.delta[r]
+    _gather_impulses(table, work, work.delta)
+    for c in range(6):
+        work.impulse_body[a, c] += ja[c] * impulse
+        if b >= 0:
+            work.impulse_body[b, c] += jb[c] * impulse
+    for body in range(x.shape[0]):
+        if table.body_ground[body]:
+            continue
+        d = work.impulse_body[body]
+        P[body, 0] += d[0]
+        P[body, 1] += d[1]
+        P[body, 2] += d[2]
+        L[body, 0] += d[3]
+        L[body, 1] += d[4]
+        L[body, 2] += d[5]
+
+
+@numba.njit(cache=True, inline="always")
+def _weigh(work, body, jac):  # noqa: ANN001, ANN202
+    """W_body jac (a 6-tuple) for one end (zero for the world and ground bodies)."""
+    if body < 0:
+        return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    m = work.inv_mass[body]
+    W = work.inv_inertia[body]
+    return (
+        m * jac[0],
+        m * jac[1],
+        m * jac[2],
+        W[0, 0] * jac[3] + W[0, 1] * jac[4] + W[0, 2] * jac[5],
+        W[1, 0] * jac[3] + W[1, 1] * jac[4] + W[1, 2] * jac[5],
+        W[2, 0] * jac[3] + W[2, 1] * jac[4] + W[2, 2] * jac[5],
+    )
+
+
+@numba.njit(cache=True, inline="always")
+def _rate(model, q, P, L, x, a, b, ja, jb) -> float:  # noqa: ANN001
+    """J V: the drive's rate from the bodies' own velocities (a ground body's too)."""
+    inv = 1.0 / model.body_mass[a]
+    oa0, oa1, oa2 = _omega(model, q, L, a)
+    rate = inv * (ja[0] * P[a, 0] + ja[1] * P[a, 1] + ja[2] * P[a, 2]) + ja[3] * oa0 + ja[4] * oa1 + ja[5] * oa2
+    if b >= 0:
+        inv = 1.0 / model.body_mass[b]
+        ob0, ob1, ob2 = _omega(model, q, L, b)
+        rate += inv * (jb[0] * P[b, 0] + jb[1] * P[b, 1] + jb[2] * P[b, 2]) + jb[3] * ob0 + jb[4] * ob1 + jb[5] * ob2
+    return rate
 
 
 @numba.njit(cache=True)

@@ -57,6 +57,9 @@ class JointTable(NamedTuple):
     normal_b: np.ndarray  # [1] (J, 2, 3), two unit normals of the axis, principal frame of body_b (or world)
     relative_q: np.ndarray  # (J, 4) wxyz: c = q_b0^* q_a0, the initial relative rotation (fixed, slider)
     length: np.ndarray  # [m] (J,): distance joints' rod
+    damping: np.ndarray  # (J,): hinge [N m s/rad], slider [N s/m]; 0: no damper (stages.py: drives)
+    motor_speed: np.ndarray  # (J,): hinge [rad/s], slider [m/s]: the target rate of a velocity motor
+    motor_cap: np.ndarray  # (J,): hinge [N m], slider [N]: the motor's largest torque / force; 0: no motor
     row_start: np.ndarray  # int64 (J,)
     row_count: np.ndarray  # int64 (J,)
     body_ground: np.ndarray  # bool (N,): static or kinematic bodies, which act as the world
@@ -103,19 +106,25 @@ def joint_table(
     normal_b=(),
     relative_q=(),
     length=(),
+    damping=None,
+    motor_speed=None,
+    motor_cap=None,
     *,
     body_ground: np.ndarray,
 ) -> JointTable:  # noqa: ANN001
-    """A JointTable from per-joint sequences; rows numbered in joint order."""
+    """A JointTable from per-joint sequences (damping and motors default to none); rows numbered in
+    joint order."""
     kinds = _i(kind)
     count = _i([JOINT_ROWS[int(k)] for k in kinds])
     start = _i(np.concatenate([[0], np.cumsum(count)[:-1]]) if count.size else [])
     ground = np.ascontiguousarray(np.asarray(body_ground, dtype=np.bool_))
     ground.setflags(write=False)
     a, b = _i(body_a), _i(body_b)
+    zeros = np.zeros(kinds.shape[0])
+    drives = [_f(zeros if v is None else v) for v in (damping, motor_speed, motor_cap)]
     return JointTable(
         kinds, a, b, _f(anchor_a, 3), _f(anchor_b, 3), _f(axis_a, 3), _f(normal_b, 2, 3), _f(relative_q, 4),
-        _f(length), start, count, ground, joint_graph(a, b, ground, count),
+        _f(length), *drives, start, count, ground, joint_graph(a, b, ground, count),
     )  # fmt: skip
 
 
