@@ -53,7 +53,7 @@ def compile_joints(
     rows: dict[str, list] = {
         k: []
         for k in ("kind", "body_a", "body_b", "anchor_a", "anchor_b", "axis_a", "normal_b", "relative_q", "length",
-                  "damping", "motor_speed", "motor_cap")
+                  "damping", "motor_speed", "motor_cap", "limit_lower", "limit_upper", "reference_a", "travel0")
     }  # fmt: skip
     issues = []
     for joint in joints:
@@ -70,9 +70,9 @@ def compile_joints(
 
 def _unsupported(joint: JointSpec) -> None:
     """Refuse what the joint stages do not hold yet, rather than ignore it (docs/joints.md, next)."""
-    if joint.limits is not None:
-        later = "not supported yet (issue 27: limits come with the next slice)"
-        raise _Invalid("limits", f"joint limits are {later}", "a joint without `limits`")
+    if joint.kind == "hinge" and joint.limits is not None and not -np.pi < joint.limits[0] <= joint.limits[1] < np.pi:
+        raise _Invalid("limits", f"hinge limits {list(joint.limits)} rad reach past a half turn (the angle is "
+                       "measured in (-pi, pi))", "hinge limits strictly between -pi and pi")  # fmt: skip
 
 
 def _joint_row(
@@ -181,7 +181,18 @@ def _joint_row(
     q_b = np.array([1.0, 0.0, 0.0, 0.0]) if b == WORLD else state.q[b]
     relative = quat_multiply(quat_conjugate(q_b), state.q[a])
     motor = joint.motor
+    reference = np.zeros(3)
+    travel0 = 0.0
+    if joint.kind == "hinge":  # n_b1 at the initial poses, in a's frame: the angle's zero
+        reference = R[a].T @ world_vector(b, normals[0])
+    if joint.kind == "slider":
+        travel0 = float((p_a - p_b) @ world_vector(b, np.cross(normals[0], normals[1])))
+    lower, upper = joint.limits if joint.limits is not None else (-np.inf, np.inf)
     return dict(
+        limit_lower=lower,
+        limit_upper=upper,
+        reference_a=reference,
+        travel0=travel0,
         damping=joint.damping,
         motor_speed=0.0 if motor is None else motor.speed,
         motor_cap=0.0 if motor is None else motor.cap,

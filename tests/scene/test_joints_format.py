@@ -159,10 +159,10 @@ def test_limits_lower_above_upper():
     assert "lower limit 1 is above upper limit -1" in issue.message and at(issue) == (LINE, col(line, "[1, -1]"))
 
 
-def test_limits_are_refused_not_ignored_until_they_are_held():
-    line = "  - {type: hinge, bodies: [upper, world], anchor: [0, 0, 1], axis: [0, 1, 0], limits: [-1, 1]}\n"
-    issue = the_error(issues_of(line), "not supported yet")
-    assert at(issue) == (LINE, col(line, "[-1, 1]")) and "limits" in issue.expected
+def test_hinge_limits_past_a_half_turn():
+    line = "  - {type: hinge, bodies: [upper, world], anchor: [0, 0, 1], axis: [0, 1, 0], limits: [-1, 3.2]}\n"
+    issue = the_error(issues_of(line), "reach past a half turn")
+    assert at(issue) == (LINE, col(line, "[-1, 3.2]")) and "between -pi and pi" in issue.expected
 
 
 def test_dampers_and_motors_reach_the_table():
@@ -175,6 +175,7 @@ def test_dampers_and_motors_reach_the_table():
     table = spec.compiled_model.forces.joint
     assert table.damping.tolist() == [0.1, 0.0]
     assert table.motor_speed.tolist() == [-1.5, 0.2] and table.motor_cap.tolist() == [2.0, 7.0]
+    assert np.isinf(table.limit_lower).all() and np.isinf(table.limit_upper).all()  # no limits given
 
 
 def test_duplicate_joint_names():

@@ -3,6 +3,8 @@
 tables.py (numpy: the JointTable of the force tables, the JointWork of the run's Data), rows.py
 (the rows' residuals and Jacobians), dense.py + dense_layout.py (the dense fallback of the solver
 interface: factor_rows, solve_rows, joint_graph, make_solver_work), stages.py (the RATTLE-type position
-and velocity stages of split2's loop, with their dispatchers), reference.py (numpy twins for tests).
+and velocity stages of split2's loop, with their dispatchers), impulses.py (what the stages share),
+drives.py (motors, dampers and limits on a hinge's or slider's coordinate), violation.py (the per-frame
+joint invariants), reference.py (numpy twins: tests and the compile-time redundancy check).
 docs/joints.md has the scene format, the rows and the integration scheme.
 """

@@ -60,6 +60,10 @@ class JointTable(NamedTuple):
     damping: np.ndarray  # (J,): hinge [N m s/rad], slider [N s/m]; 0: no damper (stages.py: drives)
     motor_speed: np.ndarray  # (J,): hinge [rad/s], slider [m/s]: the target rate of a velocity motor
     motor_cap: np.ndarray  # (J,): hinge [N m], slider [N]: the motor's largest torque / force; 0: no motor
+    limit_lower: np.ndarray  # (J,): hinge [rad], slider [m] from the initial configuration; -inf: none
+    limit_upper: np.ndarray  # (J,): +inf: none
+    reference_a: np.ndarray  # [1] (J, 3), principal frame of body_a: n_b1 at the initial poses (hinge angle 0)
+    travel0: np.ndarray  # [m] (J,): a slider's initial (p_a - p_b) . u (its travel is measured from it)
     row_start: np.ndarray  # int64 (J,)
     row_count: np.ndarray  # int64 (J,)
     body_ground: np.ndarray  # bool (N,): static or kinematic bodies, which act as the world
@@ -80,6 +84,7 @@ class JointWork(NamedTuple):
     inv_mass: np.ndarray  # [1/kg] (N,): 0 for ground bodies
     inv_inertia: np.ndarray  # [1/(kg m^2)] (N, 3, 3), world frame: R I0^-1 R^T, 0 for ground bodies
     impulse_body: np.ndarray  # [N s, N m s] (N, 6): one solve's momentum change per body
+    limit_hit: np.ndarray  # (J,): 1 where this step's position stage pushed a coordinate back onto a limit
     stats: np.ndarray  # (STAT_COUNT,): see STAT_*
     solver: DenseWork
 
@@ -109,6 +114,10 @@ def joint_table(
     damping=None,
     motor_speed=None,
     motor_cap=None,
+    limit_lower=None,
+    limit_upper=None,
+    reference_a=None,
+    travel0=None,
     *,
     body_ground: np.ndarray,
 ) -> JointTable:  # noqa: ANN001
@@ -120,11 +129,15 @@ def joint_table(
     ground = np.ascontiguousarray(np.asarray(body_ground, dtype=np.bool_))
     ground.setflags(write=False)
     a, b = _i(body_a), _i(body_b)
-    zeros = np.zeros(kinds.shape[0])
+    zeros, rows = np.zeros(kinds.shape[0]), kinds.shape[0]
     drives = [_f(zeros if v is None else v) for v in (damping, motor_speed, motor_cap)]
+    lower = _f(np.full(rows, -np.inf) if limit_lower is None else limit_lower)
+    upper = _f(np.full(rows, np.inf) if limit_upper is None else limit_upper)
+    reference = _f(np.zeros((rows, 3)) if reference_a is None else reference_a, 3)
     return JointTable(
         kinds, a, b, _f(anchor_a, 3), _f(anchor_b, 3), _f(axis_a, 3), _f(normal_b, 2, 3), _f(relative_q, 4),
-        _f(length), *drives, start, count, ground, joint_graph(a, b, ground, count),
+        _f(length), *drives, lower, upper, reference, _f(zeros if travel0 is None else travel0), start, count,
+        ground, joint_graph(a, b, ground, count),
     )  # fmt: skip
 
 
@@ -138,5 +151,5 @@ def make_joint_work(table: JointTable) -> JointWork:
     return JointWork(
         np.zeros((rows, 6)), np.zeros((rows, 6)), np.zeros(rows), np.zeros(rows), np.zeros(rows), np.zeros(rows),
         np.zeros((bodies, 3)), np.zeros((bodies, 4)), np.zeros(bodies), np.zeros((bodies, 3, 3)),
-        np.zeros((bodies, 6)), np.zeros(STAT_COUNT), make_solver_work(table.graph),
+        np.zeros((bodies, 6)), np.zeros(table.kind.shape[0]), np.zeros(STAT_COUNT), make_solver_work(table.graph),
     )  # fmt: skip

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numba
 
+from rbcli.physics.joints.impulses import row_velocities
 from rbcli.physics.joints.rows import joint_rows
-from rbcli.physics.joints.stages import row_velocities
 
 
 @numba.njit(cache=True)
