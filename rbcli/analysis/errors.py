@@ -133,9 +133,10 @@ def fit_order(dt: np.ndarray, error: np.ndarray, floor: np.ndarray | float = 0.0
 
 
 def admits_exact_solution(compiled: CompiledScene) -> bool:
-    """True when every force term is uniform gravity: free flight plus torque-free rotation is exact."""
+    """True when every force term is uniform gravity and no joint holds a body: free flight plus
+    torque-free rotation is then exact (a jointed body's motion is not that)."""
     terms = set(force_terms_present(compiled.forces))
-    return terms <= EXACT_FORCE_TERMS and not compiled.spec.forces
+    return terms <= EXACT_FORCE_TERMS and not compiled.spec.forces and not compiled.spec.joints
 
 
 def conserved_quantities(compiled: CompiledScene) -> tuple[str, ...]:
