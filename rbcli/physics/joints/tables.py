@@ -130,14 +130,14 @@ def joint_table(
     ground.setflags(write=False)
     a, b = _i(body_a), _i(body_b)
     zeros, rows = np.zeros(kinds.shape[0]), kinds.shape[0]
-    drives = [_f(zeros if v is None else v) for v in (damping, motor_speed, motor_cap)]
+    damper, speed, cap = (_f(zeros if v is None else v) for v in (damping, motor_speed, motor_cap))
     lower = _f(np.full(rows, -np.inf) if limit_lower is None else limit_lower)
     upper = _f(np.full(rows, np.inf) if limit_upper is None else limit_upper)
     reference = _f(np.zeros((rows, 3)) if reference_a is None else reference_a, 3)
     return JointTable(
         kinds, a, b, _f(anchor_a, 3), _f(anchor_b, 3), _f(axis_a, 3), _f(normal_b, 2, 3), _f(relative_q, 4),
-        _f(length), *drives, lower, upper, reference, _f(zeros if travel0 is None else travel0), start, count,
-        ground, joint_graph(a, b, ground, count),
+        _f(length), damper, speed, cap, lower, upper, reference, _f(zeros if travel0 is None else travel0),
+        start, count, ground, joint_graph(a, b, ground, count),
     )  # fmt: skip
 
 
