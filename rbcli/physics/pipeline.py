@@ -3,6 +3,8 @@
 A step from grid index n (t = n dt) to n + 1 runs, in this order (STEP_STAGES):
 
     impulses        exact jumps P += J, L += r x J of the impulses due in [t, t + dt)  (forces/impulse.py)
+    joint_begin     (split2, scenes with joints) velocities that break the joints' rows (a kick, initial
+                    velocities given so) projected onto G V = 0: the exact impulsive reaction
     then data.substeps times (1 unless contact sub-stepping is on), over [ts, ts + h), h = dt / substeps:
       contact_begin   the contact springs' clock: the (sub-)step being taken            (contact/force.py)
       kinematic_begin kinematic bodies at their exact pose, at their mean velocity   (contact/kinematic.py)
@@ -81,6 +83,13 @@ STEP_STAGES: tuple[Stage, ...] = (
         "impulses: exact jumps of P and L at the start of the step that holds them",
         ("from rbcli.physics.forces.stages import impulse_stage",),
         "impulse_stage(model, forces, force_data, t, t + dt, x, q, P, L)",
+    ),
+    Stage(
+        "joint_begin",
+        "joint_begin: velocities that break the joints (a kick, or given so) projected: the exact impulsive reaction",
+        ("from rbcli.physics.joints.stages import joint_begin_stage",),
+        "joint_begin_stage(model, forces, force_data, x, q, P, L)",
+        integrators=("split2",),
     ),
     Stage(
         "contact_begin",

@@ -38,17 +38,19 @@ def test_committed_chunk_loops_are_generated_from_the_stage_list(name):
 
 
 def test_stage_list_is_impulses_contact_update_record():
-    names = ["impulses", "contact_begin", "kinematic_begin", "update", "kinematic_end", "joint_position",
-             "joint_velocity", "contact_commit", "materialise", "contact_record", "record"]  # fmt: skip
+    names = ["impulses", "joint_begin", "contact_begin", "kinematic_begin", "update", "kinematic_end",
+             "joint_position", "joint_velocity", "contact_commit", "materialise", "contact_record",
+             "record"]  # fmt: skip
     assert [stage.name for stage in STEP_STAGES] == names
     # materialise belongs to exact's loop alone (it writes the states exact defers), the joint stages to
     # split2's (the one integrator that holds joints: integrators.check_integrator)
     owned = {stage.name: stage.integrators for stage in STEP_STAGES if stage.integrators}
-    assert owned == {"materialise": ("exact",), "joint_position": ("split2",), "joint_velocity": ("split2",)}
+    joint_stages = {name: ("split2",) for name in ("joint_begin", "joint_position", "joint_velocity")}
+    assert owned == {"materialise": ("exact",), **joint_stages}
     assert "materialise(" in chunk_source("exact", "exact") and "materialise(" not in chunk_source("split2", "split2")
     assert "joint_position_stage(" in chunk_source("split2", "split2")
     assert "joint_position_stage(" not in chunk_source("split4", "split4")
-    assert [stage.name for stage in STEP_STAGES if stage.substep] == names[1:8]
+    assert [stage.name for stage in STEP_STAGES if stage.substep] == names[2:9]
 
 
 # A trivial stage, as a user of the pipeline would add one: a constant push on every body, applied as an

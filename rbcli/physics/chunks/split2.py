@@ -15,7 +15,7 @@ from rbcli.physics.forces.stages import (
 )
 from rbcli.physics.integrators.split2 import SCRATCH_WIDTH
 from rbcli.physics.integrators.split2 import step as integrator_step
-from rbcli.physics.joints.stages import joint_position_stage, joint_velocity_stage
+from rbcli.physics.joints.stages import joint_begin_stage, joint_position_stage, joint_velocity_stage
 from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, chunk_status, record_if_due
 
 __all__ = ["SCRATCH_WIDTH", "integrator_step", "run_chunk"]
@@ -40,6 +40,8 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
         t = index * dt
         # impulses: exact jumps of P and L at the start of the step that holds them
         impulse_stage(model, forces, force_data, t, t + dt, x, q, P, L)
+        # joint_begin: velocities that break the joints (a kick, or given so) projected: the exact impulsive reaction
+        joint_begin_stage(model, forces, force_data, x, q, P, L)
         for sub in range(substeps):
             ts = t + sub * h
             # contact_begin: the contact springs measure time from the start of this (sub-)step

@@ -146,15 +146,31 @@ def joint_stages_numpy(model, table: JointTable, h: float, x, q, P, L, direction
         previous, g = np.abs(g).max(), joint_rows_numpy(table, x, q)[0]
         if np.abs(g).max() > 0.5 * previous:
             break
+    return total - project_velocities_numpy(model, table, x, q, P, L)
+
+
+def _rates(model, table: JointTable, x, q, P, L):  # noqa: ANN001, ANN202
+    """(G (R, 6 N), W (6 N, 6 N), G V (R,)) at (x, q), V every body's own velocity (ground bodies' too)."""
+    n = x.shape[0]
     inv_mass, inv_inertia = body_weights_numpy(model, table, q)
     _, ga, gb = joint_rows_numpy(table, x, q)
     G = rows_matrix_numpy(table, ga, gb, n)
-    W = weight_matrix_numpy(inv_mass, inv_inertia)
-    all_mass = 1.0 / model.body_mass
     omega = np.einsum("bij,bj->bi", body_weights_numpy(model, table._replace(body_ground=np.zeros(n, bool)), q)[1], L)
-    V = np.concatenate([all_mass[:, None] * P, omega], axis=1).reshape(-1)
-    mu = np.linalg.solve(G @ W @ G.T, G @ V)
-    d = (G.T @ mu).reshape(n, 6) * moving[:, None]
+    V = np.concatenate([P / model.body_mass[:, None], omega], axis=1).reshape(-1)
+    return G, weight_matrix_numpy(inv_mass, inv_inertia), G @ V
+
+
+def project_velocities_numpy(model, table: JointTable, x, q, P, L) -> np.ndarray:  # noqa: ANN001
+    """(P, L) -= G^T mu with mu = (G W G^T)^-1 G V, in place (stages._project); returns mu."""
+    G, W, rate = _rates(model, table, x, q, P, L)
+    mu = np.linalg.solve(G @ W @ G.T, rate)
+    d = (G.T @ mu).reshape(x.shape[0], 6) * ~table.body_ground[:, None]
     P -= d[:, :3]
     L -= d[:, 3:]
-    return total - mu
+    return mu
+
+
+def joint_begin_numpy(model, table: JointTable, x, q, P, L) -> None:  # noqa: ANN001
+    """stages.joint_begin: the velocities projected when some row's rate exceeds 1e-12."""
+    if np.abs(_rates(model, table, x, q, P, L)[2]).max() > 1e-12:
+        project_velocities_numpy(model, table, x, q, P, L)

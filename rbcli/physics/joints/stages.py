@@ -61,6 +61,10 @@ NEWTON_ITERATIONS = 50
 # rounds of (limits onto their bounds, joints again) in one position stage: each round gains the
 # simplified Newton's factor ~ h |omega| on both, so a few reach round-off
 LIMIT_ROUNDS = 8
+# joint_begin projects the velocities when some row's rate |G V| exceeds this [m/s or rad/s]: the velocity
+# stage leaves ~1e-16 to 1e-14 (a loop with dropped rows and motors), a kick or a velocity given without
+# regard to the joints leaves orders of magnitude more
+VELOCITY_SLACK = 1e-12
 
 _OPTIONS: Any = STEP_KERNEL
 
@@ -123,6 +127,26 @@ def _newton(table, work, h, x, q, P, L):  # noqa: ANN001, ANN202
 def joint_velocity(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
     """The velocity stage: (P, L) -= G^T mu with G V = 0 after it, G at the end configuration; then the
     motors and dampers, then the limits that are reached (drives.py)."""
+    _project(model, table, work, x, q, P, L)
+    drive_velocities(model, table, work, h, x, q, P, L)
+    work.stats[STAT_VELOCITY] = row_velocities(model, table, work, q, P, L)
+
+
+@numba.njit(cache=True)
+def joint_begin(model, table, work, x, q, P, L) -> None:  # noqa: ANN001
+    """Before a step: velocities that break the joints' rows (initial velocities given without regard to
+    the joints, or an impulse just applied) are projected onto G V = 0 at the current configuration. For
+    ideal joints that projection is the exact impulsive reaction (the W-orthogonal projection of the
+    velocity onto the joints' tangent space: the momenta change only along G^T), so a kick on a jointed
+    body acts as the joints would take it. Otherwise (every step after the first) it checks G V only."""
+    joint_rows(table, x, q, work.jac_a, work.jac_b, work.residual, True)
+    if row_velocities(model, table, work, q, P, L) > VELOCITY_SLACK:
+        _project(model, table, work, x, q, P, L)
+
+
+@numba.njit(cache=True)
+def _project(model, table, work, x, q, P, L) -> None:  # noqa: ANN001
+    """(P, L) -= G^T mu, mu = A^-1 G V at (x, q): G V = 0 after it; mu is added to work.impulse."""
     body_weights(model, table, work, q)
     joint_rows(table, x, q, work.jac_a, work.jac_b, work.residual, True)
     factor_rows(table.graph, work.solver, table.row_start, table.row_count, table.body_a, table.body_b,
@@ -135,11 +159,25 @@ def joint_velocity(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
         work.impulse[r] += work.delta[r]
     gather_impulses(table, work, work.delta)
     apply_body_impulses(table, work, 0.0, x, q, P, L)
-    drive_velocities(model, table, work, h, x, q, P, L)
-    work.stats[STAT_VELOCITY] = row_velocities(model, table, work, q, P, L)
 
 
 # ---- the pipeline's dispatchers: compiled to nothing for a scene without joints ---------------------
+
+
+def joint_begin_stage(model, forces, force_data, x, q, P, L) -> None:  # noqa: ANN001
+    """`joint_begin` when the scene has joints (forces.joint is not None)."""
+    raise TypeError("a stage dispatcher runs in compiled kernels only (physics/joints/stages.py)")
+
+
+@overload(joint_begin_stage, jit_options=_OPTIONS)
+def _joint_begin_stage(model, forces, force_data, x, q, P, L):  # noqa: ANN001, ANN202
+    if _absent(_member(forces, "joint"), _member(force_data, "joint")):
+        return lambda model, forces, force_data, x, q, P, L: None
+
+    def run(model, forces, force_data, x, q, P, L):  # noqa: ANN001, ANN202
+        joint_begin(model, forces.joint, force_data.joint, x, q, P, L)
+
+    return run
 
 
 def _absent(*argument_types: types.Type) -> bool:
