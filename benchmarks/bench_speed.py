@@ -6,7 +6,7 @@ Body-steps per second (bodies x steps / wall second) for, all in one process, on
   free bodies N = 1, 100, 10,000 under gravity, no contact, 1,000 steps (fewer where one run would take
     longer than the time budget: the steps used are listed), for every registered integrator with a
     `run_chunk`: (a) the compiled chunk alone (`kernel.run_chunk`, record_every = steps: one frame
-    copied at the end) and (b) the runner path (`rbcli.runner.loop.run` into a SinkMemory plus
+    copied at the end) and (b) the runner path (`rbcli.runner.simulation.run` into a SinkMemory plus
     `trajectory()`, record_every = steps: frame 0 and the final frame, as `rbcli.simulate` does after
     compiling the scene); the numpy vectorised tutorial step (`euler_matrix.step_numpy`) as baseline;
   MuJoCo on the same bodies (same mass, principal inertia, initial state; a sphere geom with contype=0
@@ -60,8 +60,8 @@ from rbcli.physics.integrators.euler_matrix import step_numpy  # noqa: E402
 from rbcli.physics.rotation import quat_rotate, quat_rotate_inverse  # noqa: E402
 from rbcli.physics.step import STATUS_OK, empty_buffers  # noqa: E402
 from rbcli.record.memory_sink import SinkMemory  # noqa: E402
-from rbcli.runner.loop import run as runner_run  # noqa: E402
-from rbcli.runner.loop import warm_up  # noqa: E402
+from rbcli.runner.simulation import run as runner_run  # noqa: E402
+from rbcli.runner.simulation import warm_up  # noqa: E402
 from rbcli.scene.compile import CompiledScene, compile_scene  # noqa: E402
 from rbcli.scene.force_specs import BodyPoint, ForceSpring  # noqa: E402
 from rbcli.scene.spec import BodySpec, RecordSpec, SceneSpec, SimulationSpec  # noqa: E402
@@ -248,7 +248,7 @@ def dispatch_seconds(compiled: CompiledScene, integrator: str, calls: int = 200)
 
 
 def runner_runner(compiled: CompiledScene, integrator: str) -> Runner:
-    """`rbcli.runner.loop.run` into a SinkMemory plus `trajectory()`: `rbcli.simulate` minus compile_scene."""
+    """`rbcli.runner.simulation.run` into a SinkMemory plus `trajectory()`: `rbcli.simulate` minus compile_scene."""
 
     def make(steps: int) -> Callable[[], float]:
         case = with_settings(compiled, integrator=integrator, steps=steps, record_every=steps)

@@ -87,7 +87,7 @@ os._exit(0)
 """
 
 # Runs the real CLI (`rbcli.cli.app.main`, which may end the process itself) with wall-clock marks at
-# the entry and exit of the functions it calls (rbcli.api.prepare, rbcli.runner.loop.warm_up,
+# the entry and exit of the functions it calls (rbcli.api.prepare, rbcli.runner.simulation.warm_up,
 # rbcli.api.run_to_file); its first atexit handler, so the last to run, prints the marks as JSON on
 # stdout. It imports rbcli.api and rbcli.runner.loop itself before the CLI runs, to wrap them.
 DRIVER = """\

@@ -22,14 +22,15 @@ import numpy as np
 
 from rbcli.analysis.exact import free_flight, quat_geodesic_angle, torque_free
 from rbcli.api import prepare, simulate
-from rbcli.physics.adaptive import STATUS_STEP_TOO_SMALL, adaptive_work, run_adaptive_chunk
-from rbcli.physics.forces import WORLD, build_force_tables, make_force_data, spring_table
+from rbcli.physics.adaptive import STATUS_STEP_TOO_SMALL
+from rbcli.physics.data import make_data
+from rbcli.physics.forces import WORLD, build_force_tables, spring_table
 from rbcli.physics.frames import user_orientation
 from rbcli.physics.integrators import INTEGRATORS
 from rbcli.physics.rotation import quat_to_matrix
 from rbcli.physics.step import STATUS_DIVERGED, empty_buffers
 from rbcli.record.memory_sink import SinkMemory
-from rbcli.runner.loop import run
+from rbcli.runner.simulation import run
 from rbcli.scene.spec import BodySpec, RecordSpec, SceneSpec, SimulationSpec
 
 FLIP, GENERIC, ROD, FAST, STEADY = (
@@ -130,27 +131,31 @@ def torque_order(integrator: str, order: int, reference_q: np.ndarray) -> float:
 
 
 def adaptive_run(compiled, tolerance: float):  # noqa: ANN001, ANN201
-    """Drive run_adaptive_chunk as the runner would; returns (t, q_user (T, N, 4), x, counters)."""
+    """Drive the adaptive loop as the runner would; returns (t, q_user (T, N, 4), x, counters)."""
     model, settings = compiled.model, compiled.settings
     n, total, dt = model.body_count, settings.steps, settings.dt
-    state = compiled.initial_state.copy()
-    work = adaptive_work(n)
+    data = make_data(
+        compiled.initial_state, compiled.forces, 0, adaptive=True, tolerance=tolerance, duration=total * dt
+    )
+    state, run_chunk = data.state, INTEGRATORS["dopri5"].adaptive_chunk().run_chunk
     frames = empty_buffers(total + 1, n)
     frames.step[0], frames.x[0], frames.q[0], frames.P[0], frames.L[0] = 0, state.x, state.q, state.P, state.L
     filled, index = 1, 0
-    F, tau = np.zeros((n, 3)), np.zeros((n, 3))
     while index < total:
-        done, filled, status = run_adaptive_chunk(
-            model.kernel(), compiled.forces, make_force_data(compiled.forces), dt, index, total - index,
-            settings.record_every, tolerance, total * dt,
-            state.x, state.q, state.P, state.L, F, tau, work["work"], work["control"], work["counters"],
+        done, filled, status = run_chunk(
+            model.kernel(), compiled.forces, data.kernel(), dt, index, total - index, settings.record_every,
             frames, filled,
         )  # fmt: skip
         index += done
         if status in (STATUS_DIVERGED, STATUS_STEP_TOO_SMALL):
             raise RuntimeError(f"adaptive run stopped with status {status}")
     k = filled
-    return frames.step[:k] * dt, user_orientation(model, frames.q[:k]), frames.x[:k].copy(), work["counters"].copy()
+    return (
+        frames.step[:k] * dt,
+        user_orientation(model, frames.q[:k]),
+        frames.x[:k].copy(),
+        data.adaptive_counters.copy(),
+    )
 
 
 def transient_scene(integrator: str, dt: float, duration: float):  # noqa: ANN201

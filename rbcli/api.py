@@ -121,7 +121,7 @@ def run_to_file(compiled: CompiledScene, output: str | Path, *, progress=None) -
     Raises OutputError (a ValueError) before any work when the file cannot be written, another run is
     writing it, or the disk is too full for the estimated size.
     """
-    from rbcli.runner.loop import run
+    from rbcli.runner.simulation import run
 
     return _to_file(compiled, output, lambda sinks: run(compiled, sinks, progress=progress))
 

@@ -3,6 +3,7 @@ table, checked on every import statement of every file); physics is pure numeric
 stays light."""
 
 import ast
+import functools
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -26,7 +27,7 @@ ALLOWED_IMPORTS: dict[str, frozenset[str]] = {
     "analysis": frozenset({"physics", "scene", "record"}),
     "runner": frozenset({"_version", "physics", "scene", "record", "analysis"}),  # never api: api is above it
     "api": frozenset({"physics", "scene", "record", "runner"}),
-    "sweeps": frozenset({"scene", "record", "analysis", "runner"}),  # many runs of the public objects; not physics
+    "sweeps": frozenset({"_version", "scene", "record", "analysis", "runner"}),  # many runs of the public objects
     "cli": frozenset({"_version", "api", "runner", "scene", "record", "sweeps"}),  # not physics: it is in api
     "__init__": frozenset({"_version", "api", "record", "sweeps"}),
     "__main__": frozenset({"cli"}),
@@ -116,6 +117,83 @@ def test_cli_does_not_import_physics_directly():
     assert {source for source, target, _ in _imports_between_parts() if target == "cli"} == {"__main__"}
 
 
+def _module_name(path: Path) -> str:
+    parts = path.relative_to(ROOT).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _type_checking_only(tree: ast.Module) -> set[int]:
+    """ids of the nodes under `if TYPE_CHECKING:` (never run: they serve the annotations)."""
+    inside: set[int] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            inside.update(id(n) for statement in node.body for n in ast.walk(statement))
+    return inside
+
+
+@functools.cache
+def _module_imports() -> dict[str, dict[str, str]]:
+    """module -> {imported rbcli module: file:line} for every import of one rbcli module by another that
+    runs: at module level or inside a function (a lazy import between two rbcli modules that need each
+    other is still a circle, whichever loads first; the house defers heavy third-party libraries that
+    way, never its own order), but not under TYPE_CHECKING. `from a.b import c` names the module a.b.c
+    when there is one, else a.b. A module's own packages are left out: Python has run them before it."""
+    paths = {_module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
+
+    def module_of(name: str) -> str | None:
+        while name and name not in paths:
+            name = name.rpartition(".")[0]
+        return name or None
+
+    graph: dict[str, dict[str, str]] = {}
+    for module, path in paths.items():
+        tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+        skipped = _type_checking_only(tree)
+        edges = graph.setdefault(module, {})
+        for node in ast.walk(tree):
+            if id(node) in skipped or not isinstance(node, ast.Import | ast.ImportFrom):
+                continue
+            for name, line in _imported_names_of(node, path):
+                target = module_of(name)
+                if target is not None and target != module and not module.startswith(f"{target}."):
+                    edges.setdefault(target, f"{path.relative_to(ROOT)}:{line}")
+    return graph
+
+
+def _imported_names_of(node: ast.Import | ast.ImportFrom, path: Path) -> Iterator[tuple[str, int]]:
+    if isinstance(node, ast.Import):
+        for alias in node.names:
+            yield alias.name, node.lineno
+        return
+    package = path.relative_to(ROOT).with_suffix("").parts[:-1]
+    base = node.module or ""
+    if node.level:
+        base = ".".join([*package[: len(package) - node.level + 1], *filter(None, [node.module])])
+    for alias in node.names:
+        yield (base if alias.name == "*" else f"{base}.{alias.name}"), node.lineno
+
+
+def test_no_import_circles_between_modules():
+    """Every import inside rbcli runs one way: no module imports (directly or through others) a module
+    that imports it. Circles hide order bugs (a name used before its module has finished) and make two
+    modules one."""
+    graph = _module_imports()
+    try:
+        list(TopologicalSorter({m: set(edges) for m, edges in graph.items()}).static_order())
+    except CycleError as exc:
+        circle = exc.args[1][::-1]  # graphlib lists it against the edges' direction
+        steps = [f"{a} imports {b} ({graph[a][b]})" for a, b in zip(circle, circle[1:], strict=False)]
+        pytest.fail("an import circle: " + "; ".join(steps))
+
+
+def test_the_circle_test_sees_lazy_imports():
+    """The finder sees imports inside functions and skips TYPE_CHECKING ones (on this very tree)."""
+    graph = _module_imports()
+    assert "rbcli.runner.loop" in graph["rbcli.runner.simulation"]  # inside Simulation.run
+    assert "rbcli.scene.checks" in graph["rbcli.scene.compile"]  # inside CompiledScene.warnings
+    assert "rbcli.scene.compile" not in graph["rbcli.scene.checks"]  # under TYPE_CHECKING only
+
+
 def _modules_after(code: str) -> set[str]:
     out = subprocess.run(
         [sys.executable, "-c", code + "\nimport sys; print('\\n'.join(sys.modules))"],
@@ -135,6 +213,29 @@ def test_physics_imports_only_numpy_and_numba():
     # (yaml and scipy are not on the list: numba itself imports them when they are installed)
     for banned in ("rerun", "mcap", "typer", "rich", "jsonschema", "google.protobuf"):
         assert banned not in loaded, f"rbcli.physics imported {banned}"
+
+
+# what physics/contact/ may import besides itself: the one-body rotation kernels, the kernel options and
+# the kernel cache's guard (it imports nothing of rbcli), nothing that uses contact (forces, integrators,
+# the pipeline) and no kinematic bodies (physics/kinematic.py)
+CONTACT_MAY_IMPORT = (
+    "rbcli.physics.rotation",
+    "rbcli.physics.rotation_kernels",
+    "rbcli.physics.step",
+    "rbcli.physics.kernel_cache",
+)
+
+
+def test_contact_imports_nothing_above_it():
+    wrong = [
+        f"{path.relative_to(ROOT)}:{line}: {name}"
+        for path in sorted((PACKAGE / "physics" / "contact").glob("*.py"))
+        for name, line in _imported_names(path)
+        if name.startswith("rbcli.")
+        and not name.startswith("rbcli.physics.contact.")
+        and not any(name == allowed or name.startswith(allowed + ".") for allowed in CONTACT_MAY_IMPORT)
+    ]
+    assert not wrong, "\n".join(wrong)
 
 
 @pytest.mark.parametrize("heavy", ["numba", "rerun", "mcap"])

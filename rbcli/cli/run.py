@@ -235,6 +235,13 @@ def _run_and_report(compiled, target: Path, quiet: bool, stops: _Stops, run=None
             )
             + (f"; {compiled.contact.describe(settings.substeps)}" if compiled.contact is not None else "")
         )
+    if summary.contact_history_overflow:
+        messages.warning(
+            f"contact: body '{summary.contact_overflow_body}' had a contact sphere with more contacts at once than "
+            f"its history slots hold ({summary.contact_history_overflow} contact evaluations over the run, all "
+            "bodies): their friction restarted each step without its tangential spring (docs/contact.md)",
+            expected="contact spheres of similar sizes, so that none touches more than 12 others",
+        )
     if summary.status == "diverged":
         messages.error(f"{summary.message}; the log up to that point is complete: {target}")
         raise typer.Exit(ExitCode.DIVERGED)
@@ -325,7 +332,7 @@ def _stop_signals() -> Iterator[_Stops]:
 
 def _warm_up_kernels(compiled, quiet: bool) -> None:  # noqa: ANN001
     """Compile (or load from cache) the step kernels, saying so if it takes noticeable time."""
-    from rbcli.runner.loop import warm_up
+    from rbcli.runner.simulation import warm_up
 
     timer = threading.Timer(0.5, lambda: messages.status("compiling kernels (first run only)…") if not quiet else None)
     timer.start()

@@ -1,8 +1,11 @@
 """`rbsim sweep SWEEP.yaml`: run every variant of a sweep on Dask and gather one Parquet table.
 
-Exit status (cli/exit_codes.py): 0 when every variant has a row (variants that diverged or failed are
-rows too, with their status and message), 1 for an invalid sweep file, an output folder that cannot take
-it or a scheduler that cannot be reached, 128 + the signal when stopped (130 Ctrl-C, 143 SIGTERM, 129
+Exit status (cli/exit_codes.py): 0 when every variant has its own result (variants that diverged, that
+the loader rejected or that raised are rows too, with their status and message), 4 when some have none:
+lost to the cluster more often than it retries, or taking their worker down on every try (run the same
+command again: it retries the lost ones, with --retry-failed every variant that did not complete), 1 for
+an invalid sweep file, an output folder that cannot take it, a scheduler that cannot be reached or
+workers of another rbsim or numba version, 128 + the signal when stopped (130 Ctrl-C, 143 SIGTERM, 129
 SIGHUP; the finished batches are kept: run the same command again to resume).
 """
 
@@ -43,6 +46,12 @@ def sweep(
         None, "--output", "-o", metavar="FOLDER", help="Results folder [default: outputs/<sweep name>]"
     ),
     fresh: bool = typer.Option(False, "--fresh", help="Discard the folder's earlier results instead of resuming"),
+    retry_failed: bool = typer.Option(
+        False, "--retry-failed", help="On resuming, run again every variant that did not complete, not only lost ones"
+    ),
+    host: str | None = typer.Option(
+        None, "--host", metavar="HOST", help="Interface the local cluster listens on [default: 127.0.0.1]"
+    ),
     logs: bool | None = typer.Option(
         None,
         "--logs/--no-logs",
@@ -51,6 +60,7 @@ def sweep(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar"),
 ) -> None:
     """Run a sweep (a base scene over a grid, a list or random samples of its values); resumes by default."""
+    from rbcli.sweeps.dask_runner import ClusterRefused  # (it imports Dask only inside its functions)
     from rbcli.sweeps.load import analyse_sweep
     from rbcli.sweeps.run import SERIAL, SweepOutputError, run_sweep
 
@@ -78,8 +88,10 @@ def sweep(
                 logs=logs,
                 on_start=progress.start,
                 on_rows=progress.advance,
+                retry_failed=retry_failed,
+                host=host,
             )
-    except SweepOutputError as exc:
+    except (SweepOutputError, ClusterRefused) as exc:
         progress.stop()
         raise messages.fail(str(exc)) from None
     except (OSError, TimeoutError) as exc:  # no scheduler at that address, or no workers joined it
@@ -91,10 +103,8 @@ def sweep(
         ) from None
     except KeyboardInterrupt:
         progress.stop()
-        messages.status(
-            f"interrupted: {progress.finished} of {progress.total} variants finished and kept; "
-            "run the same command again to resume"
-        )
+        done = f"{progress.finished} of {progress.total} variants finished and kept" if progress.started else ""
+        messages.status(f"interrupted: {done or 'before any variant ran'}; run the same command again to resume")
         raise typer.Exit(signal_exit(received[0]) if received else ExitCode.SIGINT) from None
     progress.stop()
     from rbcli.sweeps.report import failures, status_counts
@@ -108,6 +118,13 @@ def sweep(
     )
     for line in failures(result.table, limit=5):
         messages.status(f"  {line}")
+    if not result.all_finished:
+        messages.status(
+            f"{result.unfinished + result.crashed} of {result.variants} variants have no result of their own "
+            "(lost to the cluster, or crashing their worker); run the same command again to retry the lost ones"
+            + (", with --retry-failed the crashed ones" if result.crashed else "")
+        )
+        raise typer.Exit(ExitCode.INCOMPLETE)
 
 
 class _Progress:
@@ -120,9 +137,10 @@ class _Progress:
         self.total = 0
         self.finished = 0
         self.failed = 0
+        self.started = False  # the workers are ready, the variants running
 
     def start(self, total: int, done: int, cluster: Any) -> None:
-        self.total, self.finished = total, done
+        self.total, self.finished, self.started = total, done, True
         if cluster is not None:
             dashboard = f"; dashboard: {cluster.dashboard}" if cluster.dashboard else ""
             messages.status(

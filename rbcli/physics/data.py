@@ -15,7 +15,8 @@ writes lives here, so kernels never allocate and a run's memory is known when it
     substeps     integrator steps per grid step (contact sub-stepping; 1 otherwise), a run setting
     adaptive     error-controlled runs only (physics/adaptive.py): stage work (body_count, dopri5
                  width), controller state `control` (2,) and step `counters` int64 (2,) that persist
-                 between chunks
+                 between chunks, and two run settings: the error budget `tolerance` of a run
+                 `duration` [s] long (the scene's duration, whatever a call runs)
 
 Frame buffers are the recorder's (runner/recorder.py): they are handed between threads, so they are
 passed to a chunk beside the Data rather than owned by it.
@@ -32,8 +33,19 @@ from rbcli.physics.forces.tables import ForceData, ForceTables, KernelForceTable
 from rbcli.physics.state import State
 
 
+class KernelAdaptive(NamedTuple):
+    """What the adaptive loop (chunks/dopri5_adaptive.py) reads besides the state: see Data."""
+
+    work: np.ndarray
+    control: np.ndarray
+    counters: np.ndarray
+    tolerance: float
+    duration: float
+
+
 class KernelData(NamedTuple):
-    """The arrays of a Data as compiled chunk loops take them (numba-friendly named tuple)."""
+    """The arrays of a Data as compiled chunk loops take them (numba-friendly named tuple); `adaptive` is
+    None in fixed-step runs (numba types it NoneType: the fixed-step loops never read it)."""
 
     x: np.ndarray
     q: np.ndarray
@@ -44,6 +56,7 @@ class KernelData(NamedTuple):
     scratch: np.ndarray
     force: ForceData
     substeps: int
+    adaptive: KernelAdaptive | None = None
 
 
 @dataclass
@@ -59,10 +72,21 @@ class Data:
     adaptive_work: np.ndarray | None = None
     adaptive_control: np.ndarray | None = None
     adaptive_counters: np.ndarray | None = None
+    adaptive_tolerance: float = 0.0
+    adaptive_duration: float = 0.0
 
     def kernel(self) -> KernelData:
         s = self.state
-        return KernelData(s.x, s.q, s.P, s.L, self.F, self.tau, self.scratch, self.force, int(self.substeps))
+        adaptive = None
+        if self.adaptive_work is not None:
+            assert self.adaptive_control is not None and self.adaptive_counters is not None
+            adaptive = KernelAdaptive(
+                self.adaptive_work, self.adaptive_control, self.adaptive_counters,
+                float(self.adaptive_tolerance), float(self.adaptive_duration),
+            )  # fmt: skip
+        return KernelData(
+            s.x, s.q, s.P, s.L, self.F, self.tau, self.scratch, self.force, int(self.substeps), adaptive
+        )  # fmt: skip
 
     def carried(self) -> dict[str, np.ndarray]:
         """Every array a step reads that an earlier step wrote, by name: what an exact continuation
@@ -121,10 +145,12 @@ def make_data(
     *,
     adaptive: bool = False,
     substeps: int = 1,
+    tolerance: float = 0.0,
+    duration: float = 0.0,
 ) -> Data:
     """A Data for `initial` (copied) and the force tables `forces`: zeroed accumulators, scratch and
-    force data; the adaptive chunk's arrays (physics/adaptive.py: adaptive_work, their one
-    definition) when asked."""
+    force data; with `adaptive`, the adaptive loop's arrays (physics/adaptive.py: adaptive_work, their
+    one definition) and its error budget `tolerance` for a run `duration` [s] long."""
     n = initial.x.shape[0]
     state = initial.copy()
     if substeps < 1:
@@ -138,4 +164,7 @@ def make_data(
         data.adaptive_work = work["work"]
         data.adaptive_control = work["control"]
         data.adaptive_counters = work["counters"]
+        if not (tolerance > 0.0 and duration > 0.0):
+            raise ValueError(f"an adaptive run needs tolerance > 0 and duration > 0, got {tolerance}, {duration}")
+        data.adaptive_tolerance, data.adaptive_duration = float(tolerance), float(duration)
     return data

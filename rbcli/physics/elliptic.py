@@ -36,6 +36,10 @@ import math
 import numba
 import numpy as np
 
+from rbcli.physics import kernel_cache
+
+kernel_cache.install()  # before this module's kernels first run: their cache is keyed on the physics sources
+
 # Carlson's series are truncated after degree 5 (R_F, R_J) or 7 (R_C); the iteration stops when the
 # neglected terms are below about this relative size (Carlson 1995 eq. 2.2: error < r / (4 (1 - r))).
 _CARLSON_TOL = 1.0e-16

@@ -29,10 +29,11 @@ INVARIANT_NAMES = (
     "quaternion_norm_defect",
 )
 
-# added for scenes with contact: contacts at the step, the deepest overlap [m], the energy stored in the
-# contact springs [J] (also counted in energy_potential and energy_total, so a bounce does not look like
-# a loss of energy while the springs hold it)
-CONTACT_INVARIANT_NAMES = ("contact_count", "contact_max_overlap", "contact_energy")
+# added for scenes with contact, of the recorded state (physics/contact/state.py): its contacts, the
+# deepest overlap [m], the energy stored in the contact springs [J] (also counted in energy_potential
+# and energy_total, so a bounce does not look like a loss of energy while the springs hold it), and the
+# contacts so far whose tangential history found no free slot (cumulative; their friction restarted)
+CONTACT_INVARIANT_NAMES = ("contact_count", "contact_max_overlap", "contact_energy", "contact_history_overflow")
 
 # added for scenes with joints: the largest constraint violation over every joint row of the frame's
 # state, in position |g| [m or rad] and velocity |G V| [m/s or rad/s] (physics/joints/violation.py)

@@ -59,6 +59,7 @@ import math
 import numba
 import numpy as np
 
+from rbcli.physics import kernel_cache
 from rbcli.physics.elliptic import (
     JACOBI_WORK_SIZE,
     ellipj_mc_work,
@@ -67,6 +68,8 @@ from rbcli.physics.elliptic import (
     ellippi_sc,
     elliprf,
 )
+
+kernel_cache.install()  # before this module's kernels first run: their cache is keyed on the physics sources
 
 
 @numba.njit(cache=True, inline="always")

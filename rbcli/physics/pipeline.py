@@ -1,4 +1,5 @@
-"""What a step is: the one list of stages, and the chunk loop generated from it for each integrator.
+"""What a step is: the one list of stages, and the chunk loops generated from it: one per integrator, and
+the error-controlled loop of adaptive runs.
 
 A step from grid index n (t = n dt) to n + 1 runs, in this order (STEP_STAGES):
 
@@ -7,16 +8,18 @@ A step from grid index n (t = n dt) to n + 1 runs, in this order (STEP_STAGES):
                     velocities given so) projected onto G V = 0: the exact impulsive reaction
     then data.substeps times (1 unless contact sub-stepping is on), over [ts, ts + h), h = dt / substeps:
       contact_begin   the contact springs' clock: the (sub-)step being taken            (contact/force.py)
-      kinematic_begin kinematic bodies at their exact pose, at their mean velocity   (contact/kinematic.py)
+      kinematic_begin kinematic bodies at their exact pose, at their mean velocity  (physics/kinematic.py)
       update          the integrator's maths (integrators/<name>.py `step`); every force evaluation it
-                      needs is the force pass `forces/wrench.accumulate_wrench`, itself a list of force
-                      stages (gravity, fields, point forces, torques, springs, drag, contact), each
-                      present only when the scene has rows for it
+                      needs is the force pass `forces/wrench.accumulate_wrench`, generated from its own
+                      list of force stages (forces/stage_list.py FORCE_STAGES: gravity, fields, point
+                      forces, torques, springs, drag, contact), each present only when the scene has it
+    materialise     exact's loop only: the torque-free bodies it defers, written when due
       kinematic_end   kinematic bodies at their exact state at the end of the (sub-)step
       joint_position  (split2, scenes with joints) the joints' impulse at the kick, by Newton, so the
                       end configuration satisfies the joints to round-off               (joints/stages.py)
       joint_velocity  (split2, scenes with joints) momenta projected onto the joints' velocity rows
       contact_commit  the last evaluation's contacts and tangential springs become the history
+    contact_record  on recording steps: the step's contact statistics into the next frame
     record          on recording steps: the divergence check, then the state copied into the next frame
 
 Each optional stage is present only when the scene needs it, decided when numba compiles the loop, not
@@ -42,31 +45,50 @@ committed files differ from the template, and regenerates them with
     python tests/physics/test_pipeline.py --regenerate
 
 Adding a stage: one entry in STEP_STAGES (this file), the stage's own module (with a dispatcher in
-forces/stages.py when only some scenes have it), and the regeneration.
-Adaptive runs (a tolerance instead of dt) step between output times under error control: their loop is
-`physics/adaptive.py` (dopri5 only), which runs the same update and record stages;
-`runner/simulation.py` applies impulses between its chunks.
+forces/stages.py when only some scenes have it), and the regeneration. The entry says which loops have
+it (`loops`: FIXED, ADAPTIVE or BOTH, the default; `integrators`: the integrator modules, default all)
+and, for the adaptive loop, what Stage's docstring lists (`lands_at`, `restarts`, `prepares_evaluation`).
+Adaptive runs (a tolerance instead of dt) step between output times under error control: their loop
+`physics/chunks/<module>_adaptive.py` (dopri5 only; `adaptive_source`) is generated from the same list,
+takes the same arguments, and runs every stage where its structure puts it (Stage's docstring); the
+method is physics/adaptive.py. Impulses are its stage too: it lands on the grid steps that hold them.
 """
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
+
+FIXED = "fixed"  # the fixed-step chunk loops, one per integrator: physics/chunks/<module>.py
+ADAPTIVE = "adaptive"  # the error-controlled loop of an adaptive integrator: physics/chunks/<module>_adaptive.py
+BOTH = (FIXED, ADAPTIVE)
+UPDATE = "update"  # the integrator's own stage: a step in FIXED loops, an error-controlled attempt in ADAPTIVE
 
 
 @dataclass(frozen=True)
 class Stage:
-    """One stage of a step, as code inside the chunk loop.
+    """One stage of a step, as code inside the chunk loops.
 
     Names the code may use: model, forces, data (KernelData), x, q, P, L, F, tau, scratch (data's
     arrays), force_data (data.force), contact and contact_work (forces.contact and force_data.contact,
-    None without contact), dt, index (the grid step being taken), t = index * dt, k (steps done in this
-    chunk), frames, filled, record_every; `integrator_step` is the integrator's update. Use the names,
-    not `data.F` or `data.force`: the loop takes them out of their tuples once, before it starts (each
-    `data.force` inside the loop increfs and decrefs every array the tuple holds, every step).
-    Consecutive sub-step stages form one loop run data.substeps times (contact sub-stepping, 1
-    otherwise), where ts and h are the sub-step's start time and length. A stage that ends the chunk
-    returns (k + 1, filled, status). A stage that only some scenes have calls a dispatcher
-    (forces/stages.py) that compiles to nothing without it.
+    None without contact), dt, index (the grid step being taken), t = index * dt, frames, filled,
+    record_every, status; `integrator_step` is the integrator's update. Use the names, not `data.F` or
+    `data.force`: the loop takes them out of their tuples once, before it starts (each `data.force`
+    inside the loop increfs and decrefs every array the tuple holds, every step). Consecutive sub-step
+    stages form one loop run data.substeps times (contact sub-stepping, 1 otherwise), where ts and h are
+    the sub-step's start time and length. Placeholders, filled per loop: `{te}` the sub-step's end
+    time (ts + h; in the adaptive loop exactly the grid time it lands on), `{reached}` the grid index a
+    step-end stage follows (index + 1; in the adaptive loop the index it landed on), `{recording}`
+    whether that index is a recording step, `{due}` (fixed loops' materialise only). A stage that
+    only some scenes have calls a dispatcher (forces/stages.py) that compiles to nothing without it.
+
+    Which loops have it, in one place: `loops` (FIXED, ADAPTIVE or BOTH) and `integrators` (the modules
+    whose loops have it; empty: every one). In the ADAPTIVE loop (physics/adaptive.py has the method)
+    a stage runs where that loop's structure puts it: sub-step stages before UPDATE run before each
+    attempt (ts = t, h = the attempt's length), those after it only after an accepted attempt;
+    step-end stages at every grid index the loop lands on (its recording times, the chunk's end, and
+    the `lands_at` indices); step-start stages at the chunk's start and at each `lands_at` index, after
+    which the loop evaluates dopri5's first stage k_1 afresh (a stage there may change the state).
     """
 
     name: str
@@ -75,14 +97,27 @@ class Stage:
     code: str  # lines of the loop body, without indentation
     substep: bool = False  # runs data.substeps times per step, at ts = t + sub h, h = dt / data.substeps
     integrators: tuple[str, ...] = ()  # the integrator modules whose loops have it (empty: every one)
+    loops: tuple[str, ...] = BOTH  # FIXED, ADAPTIVE or both
+    # ADAPTIVE, a step-start stage: an expression of (forces, dt, index), the next grid index > index at
+    # which it has work; the loop lands there. Empty: "index + 1", a landing at every grid step.
+    lands_at: str = ""
+    # ADAPTIVE, a sub-step stage: its code is one call returning True when it changed the state, so the
+    # first-same-as-last rates k_1 are evaluated again before the next attempt
+    restarts: bool = False
+    # ADAPTIVE, a sub-step stage before UPDATE that prepares force evaluations at (ts, h): it also runs,
+    # with h = 0, before each evaluation of k_1 at the chunk's start and after a step-start stage
+    prepares_evaluation: bool = False
+    # the code sets `status`; the chunk ends when it is not STATUS_OK
+    ends_chunk: bool = False
 
 
 STEP_STAGES: tuple[Stage, ...] = (
     Stage(
         "impulses",
         "impulses: exact jumps of P and L at the start of the step that holds them",
-        ("from rbcli.physics.forces.stages import impulse_stage",),
+        ("from rbcli.physics.forces.stages import impulse_stage, next_impulse_step_stage",),
         "impulse_stage(model, forces, force_data, t, t + dt, x, q, P, L)",
+        lands_at="next_impulse_step_stage(forces, dt, index)",
     ),
     Stage(
         "joint_begin",
@@ -90,6 +125,7 @@ STEP_STAGES: tuple[Stage, ...] = (
         ("from rbcli.physics.joints.stages import joint_begin_stage",),
         "joint_begin_stage(model, forces, force_data, x, q, P, L)",
         integrators=("split2",),
+        loops=(FIXED,),  # joints refuse a tolerance (integrators.check_integrator)
     ),
     Stage(
         "contact_begin",
@@ -97,6 +133,7 @@ STEP_STAGES: tuple[Stage, ...] = (
         ("from rbcli.physics.forces.stages import contact_begin_stage",),
         "contact_begin_stage(contact, contact_work, ts, h)",
         substep=True,
+        prepares_evaluation=True,
     ),
     Stage(
         "kinematic_begin",
@@ -104,9 +141,10 @@ STEP_STAGES: tuple[Stage, ...] = (
         ("from rbcli.physics.forces.stages import kinematic_begin_stage",),
         "kinematic_begin_stage(model, forces, ts, h, x, q, P, L)",
         substep=True,
+        restarts=True,
     ),
     Stage(
-        "update",
+        UPDATE,
         "update: the integrator's maths, its force evaluations through forces.wrench.accumulate_wrench",
         (),
         "integrator_step(model, forces, force_data, ts, h, x, q, P, L, F, tau, scratch)",
@@ -116,7 +154,7 @@ STEP_STAGES: tuple[Stage, ...] = (
         "kinematic_end",
         "kinematic_end: kinematic bodies at their exact state at the end of the (sub-)step (closed form)",
         ("from rbcli.physics.forces.stages import kinematic_end_stage",),
-        "kinematic_end_stage(model, forces, ts + h, x, q, P, L)",
+        "kinematic_end_stage(model, forces, {te}, x, q, P, L)",
         substep=True,
     ),
     Stage(
@@ -126,6 +164,7 @@ STEP_STAGES: tuple[Stage, ...] = (
         "joint_position_stage(model, forces, force_data, h, x, q, P, L)",
         substep=True,
         integrators=("split2",),
+        loops=(FIXED,),  # joints refuse a tolerance (integrators.check_integrator)
     ),
     Stage(
         "joint_velocity",
@@ -134,6 +173,7 @@ STEP_STAGES: tuple[Stage, ...] = (
         "joint_velocity_stage(model, forces, force_data, h, x, q, P, L)",
         substep=True,
         integrators=("split2",),
+        loops=(FIXED,),  # joints refuse a tolerance (integrators.check_integrator)
     ),
     Stage(
         "contact_commit",
@@ -148,20 +188,20 @@ STEP_STAGES: tuple[Stage, ...] = (
         ("from rbcli.physics.integrators.exact import materialise",),
         "materialise(model, forces, t, dt, x, q, P, L, scratch, {due})",
         integrators=("exact",),
+        loops=(FIXED,),
     ),
     Stage(
         "contact_record",
-        "contact_record: on recording steps, the step's contact count, deepest overlap and energy",
+        "contact_record: on recording steps, the state's contact count, deepest overlap and energy",
         ("from rbcli.physics.forces.stages import contact_record_stage",),
-        "contact_record_stage(contact_work, frames, filled, (index + 1) % record_every == 0)",
+        "contact_record_stage(contact, contact_work, x, q, frames, filled, {recording})",
     ),
     Stage(
         "record",
         "record: on recording steps, the divergence check and the state copied into the next frame",
         ("from rbcli.physics.step import STATUS_OK, record_if_due",),
-        "filled, status = record_if_due(index + 1, record_every, x, q, P, L, frames, filled)\n"
-        "if status != STATUS_OK:\n"
-        "    return k + 1, filled, status",
+        "filled, status = record_if_due({reached}, record_every, x, q, P, L, frames, filled)",
+        ends_chunk=True,
     ),
 )
 
@@ -199,21 +239,143 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
 _FOOTER = """    return n_steps, filled, chunk_status(x, q, P, L)
 """
 
+_ADAPTIVE_HEADER = '''"""Adaptive loop of `{name}`, generated by rbcli.physics.pipeline from STEP_STAGES: do not edit.
+
+The method (error per unit step, the controller, contact's step limit and floor) is physics/adaptive.py.
+Regenerate with `python tests/physics/test_pipeline.py --regenerate` after changing the stages.
+"""
+
+import numba
+import numpy as np
+
+{imports}
+
+__all__ = ["run_chunk"]
+
+
+@numba.njit(**CHUNK_KERNEL)
+def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, filled):  # noqa: ANN001, ANN201
+    """Advance from grid index step0 (t = step0 dt) to step0 + n_steps with error-controlled steps.
+
+    data.adaptive (KernelAdaptive) holds the error budget `tolerance` of the whole run, `duration` [s]
+    long, and the work, control and counters that persist between calls (counters: accepted and
+    rejected attempts). Lands exactly on every grid index that is a multiple of record_every (recorded
+    into `frames` as the fixed-step run_chunk does), on each index a step-start stage lands at (the
+    steps that hold impulses) and on step0 + n_steps, so the state always ends on the grid. Returns
+    (grid steps done, frames filled, status): STATUS_OK, STATUS_FULL (flush and call again),
+    STATUS_DIVERGED or STATUS_STEP_TOO_SMALL (both end the run).
+    """
+    # taken out of their tuples once, as in the fixed-step loops
+    x, q, P, L, F, tau = data.x, data.q, data.P, data.L, data.F, data.tau
+    force_data, contact = data.force, forces.contact
+    contact_work = force_data.contact
+    adaptive = data.adaptive
+    work, control, counters, tolerance = adaptive.work, adaptive.control, adaptive.counters, adaptive.tolerance
+    index = step0
+    end = step0 + n_steps
+    land = end  # the next grid index a step-start stage needs the loop to stand on
+    t = step0 * dt
+    h_max = contact_step_limit(forces)  # inf without contact
+    h_floor = CONTACT_STEP_FLOOR * h_max if h_max < np.inf else 0.0
+    h_next = control[CONTROL_STEP]  # the step the controller proposes for the next attempt
+    rejected_last = control[CONTROL_REJECTED_LAST] > 0.0
+    per_time = tolerance / max(adaptive.duration, dt)  # error budget per second of simulated time
+    status = STATUS_OK
+    restart = True  # run the step-start stages and evaluate k_1: at the start and where a stage landed
+    moved = False  # a stage changed the state since k_1 was evaluated
+    while index < end and status == STATUS_OK:
+        if restart:
+            restart, moved = False, False
+            land = end
+{start}            ts, h = t, 0.0  # k_1's evaluation: offset 0 into a step
+{prepare}            begin(model, forces, force_data, t, x, q, P, L, F, tau, work)  # y0 and k_1
+            if h_next <= 0.0:
+                h_next = initial_step(x, q, P, L, work, tolerance, record_every * dt)
+            h_next = min(h_next, h_max)
+        target = min(land, (index // record_every + 1) * record_every)  # the next grid point to land on
+        remaining = target * dt - t
+        landing = h_next >= remaining * (1.0 - 1e-12)  # a sliver short of the target counts as landing
+        ts = t
+        h = remaining if landing else h_next
+        te = target * dt if landing else t + h
+{before}        if moved:  # the state changed since k_1 was evaluated: evaluate it again
+            moved = False
+            begin(model, forces, force_data, t, x, q, P, L, F, tau, work)
+        # update: one attempt over [ts, ts + h), its 4th-order error estimate against the budget per step
+        advance(model, forces, force_data, t, h, x, q, P, L, F, tau, work)
+        err = error_norm(model, forces, force_data, t, h, per_time * max(h, h_floor), x, q, P, L, F, tau, work)
+        if err <= 1.0:
+            counters[COUNT_ACCEPTED] += 1
+            accept(x, q, P, L, work)
+{after}            factor = FAC_MAX if err == 0.0 else min(FAC_MAX, max(FAC_MIN, SAFETY * err**-0.25))
+            if rejected_last:
+                factor = min(factor, 1.0)
+            rejected_last = False
+            if not landing:
+                h_next = min(h_max, h * factor)
+                t += h
+                continue
+            # a landing step is usually shorter than the controller asked for: keep its proposal
+            h_next = min(h_max, max(h_next, h * factor))
+            t = target * dt
+            index = target
+{end}            if index == land and index < end and status == STATUS_OK:
+                status = chunk_status(x, q, P, L)  # the check a chunk ending here makes
+                restart = True
+        else:
+            counters[COUNT_REJECTED] += 1
+            restore(x, q, P, L, work)
+            rejected_last = True
+            shrink = SAFETY * err**-0.25 if err < 1e300 else FAC_MIN  # also NaN or overflow: shrink hard
+            h_next = h * max(FAC_MIN, shrink)
+            if h_next < STEP_MIN_RELATIVE * max(1.0, abs(t)):
+                status = STATUS_STEP_TOO_SMALL
+    control[CONTROL_STEP] = h_next
+    control[CONTROL_REJECTED_LAST] = 1.0 if rejected_last else 0.0
+    if status == STATUS_OK:
+        status = chunk_status(x, q, P, L)
+    return index - step0, filled, status
+'''
+
+# what the adaptive loop's own code imports, besides its stages' imports
+_ADAPTIVE_IMPORTS = {
+    "rbcli.physics.adaptive": {
+        "CONTACT_STEP_FLOOR", "CONTROL_REJECTED_LAST", "CONTROL_STEP", "COUNT_ACCEPTED", "COUNT_REJECTED",
+        "FAC_MAX", "FAC_MIN", "SAFETY", "STATUS_STEP_TOO_SMALL", "STEP_MIN_RELATIVE", "initial_step",
+    },
+    "rbcli.physics.forces.stages": {"contact_step_limit"},
+    "rbcli.physics.step": {"CHUNK_KERNEL", "STATUS_OK", "chunk_status"},
+}  # fmt: skip
+_ADAPTIVE_METHOD = ("accept", "advance", "begin", "error_norm", "restore")  # the integrator module's kernels
+
 
 def _indent(code: str, depth: int) -> str:
     return "".join(" " * depth + line + "\n" for line in code.splitlines())
 
 
-def _import_lines(module: str, stages: tuple[Stage, ...]) -> str:
-    """The stages' imports merged per module and sorted as ruff's isort rules want them."""
-    names: dict[str, set[str]] = {"rbcli.physics.step": {"CHUNK_KERNEL", "chunk_status"}}
+def _fill(stage: Stage, te: str, reached: str, recording: str, due: str | None = None) -> str:
+    """A stage's code with its placeholders filled (str.replace: the code may hold braces of its own)."""
+    if due is None and "{due}" in stage.code:
+        raise ValueError(f"stage {stage.name!r} uses {{due}}, which only the fixed-step loops define")
+    code = stage.code.replace("{te}", te).replace("{reached}", reached).replace("{recording}", recording)
+    return code.replace("{due}", due or "")
+
+
+def _import_lines(names: dict[str, set[str]], stages: tuple[Stage, ...], body: str, own: str | None = None) -> str:
+    """The loop's own imports `names` and those of its stages' that `body` uses (a stage's import may
+    serve only one loop: `lands_at`), merged per module and sorted as ruff's isort rules want them;
+    `own`: the integrator module, whose `step` is imported as integrator_step."""
+    names = {source: set(found) for source, found in names.items()}
+    used = set(re.findall(r"\w+", body))
     for line in (line for stage in stages for line in stage.imports):
         source, _, imported = line.removeprefix("from ").partition(" import ")
-        names.setdefault(source, set()).update(name.strip() for name in imported.split(","))
-    integrator = f"rbcli.physics.integrators.{module}"
-    own = sorted({"SCRATCH_WIDTH"} | names.pop(integrator, set()))  # a stage of the integrator's own module
-    lines = [(integrator, f"from {integrator} import {', '.join(own)}"),
-             (integrator, f"from {integrator} import step as integrator_step")]  # fmt: skip
+        found = {name.strip() for name in imported.split(",")} & used
+        if found:
+            names.setdefault(source, set()).update(found)
+    lines = []
+    if own is not None:
+        lines.append((own, f"from {own} import {', '.join(sorted(names.pop(own)))}"))
+        lines.append((own, f"from {own} import step as integrator_step"))
     for source, found in names.items():
         line = f"from {source} import {', '.join(sorted(found))}"
         if len(line) > 120:  # ruff's line length: one name per line in parentheses, as ruff's isort writes it
@@ -231,18 +393,65 @@ def _state_due(later: tuple[Stage, ...]) -> str:
     return "True"
 
 
+def loop_stages(module: str, loop: str, stages: tuple[Stage, ...] = STEP_STAGES) -> tuple[Stage, ...]:
+    """The stages of `loop` (FIXED or ADAPTIVE) of integrator module `module`, in list order."""
+    return tuple(s for s in stages if loop in s.loops and (not s.integrators or module in s.integrators))
+
+
 def chunk_source(module: str, name: str, stages: tuple[Stage, ...] = STEP_STAGES) -> str:
-    """The Python source of the chunk loop of integrator module `module` (registry name `name`)."""
+    """The Python source of the fixed-step chunk loop of integrator module `module` (registry name `name`)."""
     body = []
     in_substeps = False
-    stages = tuple(stage for stage in stages if not stage.integrators or module in stage.integrators)
+    stages = loop_stages(module, FIXED, stages)
     for i, stage in enumerate(stages):
         if stage.substep and not in_substeps:
             # h = dt / 1 and ts = t + 0 * h are exactly dt and t: one sub-step is bitwise the plain step
             body.append(_indent("for sub in range(substeps):\n    ts = t + sub * h", 8))
         in_substeps = stage.substep
         depth = 12 if stage.substep else 8
+        code = _fill(stage, "ts + h", "index + 1", "(index + 1) % record_every == 0", _state_due(stages[i + 1 :]))
+        if stage.ends_chunk:
+            code += "\nif status != STATUS_OK:\n    return k + 1, filled, status"
         body.append(_indent(f"# {stage.why}", depth))
-        body.append(_indent(stage.code.replace("{due}", _state_due(stages[i + 1 :])), depth))
-    head = _HEADER.format(name=name, imports=_import_lines(module, stages))
+        body.append(_indent(code, depth))
+    own = f"rbcli.physics.integrators.{module}"
+    names = {"rbcli.physics.step": {"CHUNK_KERNEL", "chunk_status"}, own: {"SCRATCH_WIDTH"}}
+    head = _HEADER.format(name=name, imports=_import_lines(names, stages, "".join(body), own))
     return head + "".join(body) + _FOOTER
+
+
+def adaptive_source(module: str, name: str, stages: tuple[Stage, ...] = STEP_STAGES) -> str:
+    """The Python source of the error-controlled loop of adaptive integrator module `module` (which
+    provides begin, advance, error_norm, accept and restore: integrators/dopri5.py) from the same stage
+    list; where each stage runs in it: Stage's docstring."""
+    stages = loop_stages(module, ADAPTIVE, stages)
+    sub = [i for i, stage in enumerate(stages) if stage.substep]
+    update = [i for i, stage in enumerate(stages) if stage.name == UPDATE]
+    if len(update) != 1 or not sub or sub != list(range(sub[0], sub[-1] + 1)) or not sub[0] <= update[0] <= sub[-1]:
+        raise ValueError("the adaptive loop needs one run of sub-step stages with the update stage among them")
+    start, before = stages[: sub[0]], stages[sub[0] : update[0]]
+    after, step_end = stages[update[0] + 1 : sub[-1] + 1], stages[sub[-1] + 1 :]
+
+    def render(group: tuple[Stage, ...], depth: int) -> str:
+        out = []
+        for i, stage in enumerate(group):
+            code = _fill(stage, "te", "index", "index % record_every == 0")
+            if stage.restarts:
+                code = f"if {code}:\n    moved = True"
+            if group is start:  # the loop lands where the stage next has work
+                code += f"\nland = min(land, {stage.lands_at or 'index + 1'})"
+            if stage.ends_chunk and i + 1 < len(group):
+                code += "\nif status != STATUS_OK:\n    continue"
+            out.append(_indent(f"# {stage.why}", depth) + _indent(code, depth))
+        return "".join(out)
+
+    parts = {"start": render(start, 12), "before": render(before, 8), "after": render(after, 12)}
+    parts["end"] = render(step_end, 12)
+    parts["prepare"] = "".join(
+        _indent(_fill(stage, "te", "index", "index % record_every == 0"), 12)
+        for stage in before
+        if stage.prepares_evaluation
+    )
+    own = f"rbcli.physics.integrators.{module}"
+    imports = _import_lines({**_ADAPTIVE_IMPORTS, own: set(_ADAPTIVE_METHOD)}, stages, "".join(parts.values()))
+    return _ADAPTIVE_HEADER.format(name=name, imports=imports, **parts)

@@ -5,6 +5,10 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from rbcli.physics import kernel_cache
+
+kernel_cache.install()  # before this module's kernels first run: their cache is keyed on the physics sources
+
 
 @numba.njit(cache=True, inline="always")
 def quat_to_matrix_nb(q: np.ndarray, R: np.ndarray) -> None:
@@ -47,3 +51,29 @@ def matrix_to_quat_nb(R: np.ndarray, q: np.ndarray) -> None:
     q[1] = x / n
     q[2] = y / n
     q[3] = z / n
+
+
+@numba.njit(cache=True)
+def rotate_inverse(w, x, y, z, vx, vy, vz):  # noqa: ANN001, ANN201 - numba scalars
+    """R(q)^T v for a unit quaternion q = (w, x, y, z): v - w t + u x t with t = 2 u x v, u = (x, y, z)."""
+    tx = 2.0 * (y * vz - z * vy)
+    ty = 2.0 * (z * vx - x * vz)
+    tz = 2.0 * (x * vy - y * vx)
+    return (
+        vx - w * tx + (y * tz - z * ty),
+        vy - w * ty + (z * tx - x * tz),
+        vz - w * tz + (x * ty - y * tx),
+    )
+
+
+@numba.njit(cache=True)
+def rotate(w, x, y, z, vx, vy, vz):  # noqa: ANN001, ANN201
+    """R(q) v for a unit quaternion q = (w, x, y, z): v + w t + u x t with t = 2 u x v (Rodrigues)."""
+    tx = 2.0 * (y * vz - z * vy)
+    ty = 2.0 * (z * vx - x * vz)
+    tz = 2.0 * (x * vy - y * vx)
+    return (
+        vx + w * tx + (y * tz - z * ty),
+        vy + w * ty + (z * tx - x * tz),
+        vz + w * tz + (x * ty - y * tx),
+    )

@@ -18,8 +18,8 @@ from rbcli.physics import kernel_cache
 
 kernel_cache.install()  # loads of the kernels skip numba's registry build (kernel_cache.py)
 
-# columns of FrameBuffers.contact (physics/contact/tables.py STAT_COUNT; step.py imports no contact code)
-CONTACT_STATS = 3
+# columns of FrameBuffers.contact (physics/contact/tables.py FRAME_STAT_COUNT; step.py imports no contact code)
+CONTACT_STATS = 4
 
 # |value| above this counts as a blow-up: far beyond any physical scene in SI units, far below
 # overflow, so a divergence is caught while the state is still printable.
@@ -50,8 +50,9 @@ CHUNK_KERNEL: dict[str, Any] = {"cache": True, "nogil": True, "error_model": "nu
 
 class FrameBuffers(NamedTuple):
     """Preallocated recorded frames: step (K,) int64, x (K,N,3), q (K,N,4), P (K,N,3), L (K,N,3), and
-    contact (K, CONTACT_STATS): the contact stage's statistics of each recorded step (zeros without
-    contact; contact/tables.py STAT_*: contacts, deepest overlap [m], energy in the contact springs [J])."""
+    contact (K, CONTACT_STATS): the contact statistics of each recorded state (zeros without contact;
+    contact/tables.py STAT_*, contact/state.py: contacts, deepest overlap [m], energy in the contact
+    springs [J], and the run's contact history overflows so far)."""
 
     step: np.ndarray
     x: np.ndarray

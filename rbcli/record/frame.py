@@ -125,6 +125,10 @@ class RunSummary:
     message: str = ""
     steps_accepted: int | None = None  # adaptive runs: error-controlled steps taken ...
     steps_rejected: int | None = None  # ... and attempts rejected (None for fixed-step runs)
+    # scenes with contact: contacts whose tangential history found no free slot (docs/contact.md), and
+    # the body of the first of them ("" when none)
+    contact_history_overflow: int | None = None
+    contact_overflow_body: str = ""
 
     def fields(self, frames_written: int) -> dict[str, str]:
         """How the run ended, as strings for a file's summary record (t_end as repr, so it reads back

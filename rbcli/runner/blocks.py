@@ -21,7 +21,7 @@ def make_block(
     contact: np.ndarray | None = None,
 ) -> FrameBlock:
     """A FrameBlock of K frames from raw (K, N, ...) arrays; copies, so buffers can be reused. contact:
-    (K, 3) the contact statistics of each frame (FrameBuffers.contact), for scenes with contact."""
+    (K, 4) the contact statistics of each frame (FrameBuffers.contact), for scenes with contact."""
     model, settings = compiled.model, compiled.settings
     q_user, v, omega = np.empty_like(q), np.empty_like(P), np.empty_like(L)
     totals = np.empty((q.shape[0], TOTALS_WIDTH))
@@ -39,7 +39,7 @@ def make_block(
     if "invariants" in settings.streams:
         block.invariants = invariants_from_totals(model, compiled.forces, x, q, totals)
         if compiled.contact is not None:
-            stats = np.zeros((q.shape[0], 3)) if contact is None else contact
+            stats = np.zeros((q.shape[0], len(CONTACT_INVARIANT_NAMES))) if contact is None else contact
             for k, name in enumerate(CONTACT_INVARIANT_NAMES):
                 block.invariants[name] = np.ascontiguousarray(stats[:, k], dtype=np.float64)
             for name in ("energy_potential", "energy_total"):  # the contact springs' energy is potential

@@ -100,33 +100,6 @@ class _InterruptFlag:
             signal.signal(signal.SIGINT, self._previous)
 
 
-def warm_up(compiled: CompiledScene) -> None:
-    """Compile or load from cache the chunk kernel for this scene's integrator and force types."""
-    from rbcli.runner.simulation import Simulation, SimulationDiverged
-
-    try:
-        Simulation(compiled).step(0)
-    except SimulationDiverged:
-        # step(0) checks the initial state: one out of bounds (a Simulation built in code) is the run's to
-        # report, as divergence at step 0 (exit 3); here it escaped `rbsim run` as a traceback
-        pass
-
-
-def run(
-    compiled: CompiledScene,
-    sinks: Sequence[Sink],
-    *,
-    progress: ProgressCallback | None = None,
-    threaded: bool = True,
-) -> RunSummary:
-    """Integrate the compiled scene from its initial state, streaming frames to every sink; always
-    closes the sinks. threaded: write the recorded blocks in a background thread (runner.recorder),
-    overlapping the integration; False writes them in this thread. The files are the same either way."""
-    from rbcli.runner.simulation import Simulation
-
-    return Simulation(compiled).run(sinks=sinks, progress=progress, threaded=threaded)
-
-
 def run_simulation(
     sim: Simulation,
     sinks: Sequence[Sink],
@@ -166,7 +139,12 @@ def run_simulation(
         for key in ("x", "q", "P", "L"):
             getattr(buf, key)[frames] = getattr(state, key)
         contact = sim.data.force.contact
-        buf.contact[frames] = contact.stats if contact is not None else 0.0  # the last evaluation's (0 at start)
+        if contact is None:
+            buf.contact[frames] = 0.0
+        else:  # the current state's (as the chunks' contact_record stage writes them)
+            from rbcli.physics.contact.state import record_contact_state
+
+            record_contact_state(sim.forces.contact, contact, state.x, state.q, buf.contact, frames)
         return frames + 1
 
     handed_at = checkpointed_at = time.perf_counter()
@@ -276,10 +254,25 @@ def run_simulation(
         raise
     counts = sim.data.adaptive_counters
     end = state.step if stopped_at is None else stopped_at
+    overflow, overflow_body = contact_overflow(sim)
     summary = RunSummary(
         status, end, recorder.frames_written, end * settings.dt, message,
         steps_accepted=None if counts is None else int(counts[0]),
         steps_rejected=None if counts is None else int(counts[1]),
+        contact_history_overflow=overflow, contact_overflow_body=overflow_body,
     )  # fmt: skip
     recorder.close(summary)
     return summary
+
+
+def contact_overflow(sim) -> tuple[int | None, str]:  # noqa: ANN001 - a Simulation
+    """(contacts so far whose tangential history found no free slot, the body of the first of them);
+    (None, "") without contact."""
+    from rbcli.physics.contact.tables import COUNT_OVERFLOW
+
+    work = sim.data.force.contact
+    if work is None:
+        return None, ""
+    sphere = int(work.overflow_sphere[0])
+    body = sim.model.body_names[int(sim.forces.contact.sphere_body[sphere])] if sphere >= 0 else ""
+    return int(work.counters[COUNT_OVERFLOW]), body

@@ -99,10 +99,14 @@ class Simulation:
         self.forces = compiled.forces
         self.settings = compiled.settings
         info = get_integrator(self.settings.integrator)
-        self.adaptive = self.settings.tolerance is not None
-        if self.adaptive:
-            self._chunk = None
-            self.data = make_data(compiled.initial_state, self.forces, 0, adaptive=True)
+        tolerance = self.settings.tolerance
+        self.adaptive = tolerance is not None
+        if tolerance is not None:  # the error-controlled loop, generated from the same stages (physics/adaptive.py)
+            self._chunk = info.adaptive_chunk().run_chunk
+            self.data = make_data(
+                compiled.initial_state, self.forces, 0, adaptive=True, tolerance=tolerance,
+                duration=self.settings.steps * self.settings.dt,
+            )  # fmt: skip
         else:
             chunk = info.chunk()
             self._chunk = chunk.run_chunk
@@ -115,10 +119,6 @@ class Simulation:
         from rbcli.physics.step import empty_buffers
 
         self._no_frames = empty_buffers(1, self.model.body_count)  # never written: nothing is due
-        if self.adaptive:
-            from rbcli.physics.forces.impulse import impulse_step_indices
-
-            self._impulse_at = impulse_step_indices(self.forces, self.settings.dt)
 
     # ---- time -------------------------------------------------------------------------------------
 
@@ -172,39 +172,10 @@ class Simulation:
         The caller adds the steps done to `data.state.step` (the runner does, between chunks)."""
         if frames is None:
             frames, record_every = self._no_frames, NEVER
-        step0 = self.data.state.step
-        if self._chunk is not None:
-            return self._chunk(
-                self._kmodel, self._kforces, self._kdata, self.settings.dt, step0, n_steps, record_every, frames, filled
-            )
-        return self._advance_adaptive(step0, n_steps, record_every, frames, filled)
-
-    def _advance_adaptive(self, step0: int, n_steps: int, every: int, frames, filled: int) -> tuple[int, int, int]:  # noqa: ANN001
-        """The adaptive chunk, split at the steps that hold impulses (applied exactly between steps)."""
-        from rbcli.physics.adaptive import run_adaptive_chunk
-        from rbcli.physics.forces.impulse import apply_impulses
-        from rbcli.physics.step import STATUS_OK
-
-        d, st, s = self.data, self.settings, self.data.state
-        assert d.adaptive_work is not None and d.adaptive_control is not None and d.adaptive_counters is not None
-        done, status = 0, STATUS_OK
-        while done < n_steps and status == STATUS_OK:
-            index = step0 + done
-            todo = n_steps - done
-            if self._impulse_at.size:
-                if index in self._impulse_at:
-                    t0 = index * st.dt
-                    apply_impulses(self._kmodel, self._kforces, d.force, t0, t0 + st.dt, s.x, s.q, s.P, s.L)
-                later = self._impulse_at[self._impulse_at > index]
-                if later.size:
-                    todo = min(todo, int(later[0]) - index)
-            steps, filled, status = run_adaptive_chunk(
-                self._kmodel, self._kforces, d.force, st.dt, index, todo, every, st.tolerance, st.steps * st.dt,
-                s.x, s.q, s.P, s.L, d.F, d.tau, d.adaptive_work, d.adaptive_control, d.adaptive_counters,
-                frames, filled,
-            )  # fmt: skip
-            done += int(steps)
-        return done, filled, status
+        return self._chunk(
+            self._kmodel, self._kforces, self._kdata, self.settings.dt, self.data.state.step, n_steps,
+            record_every, frames, filled,
+        )  # fmt: skip
 
     # ---- state ------------------------------------------------------------------------------------
 
@@ -325,6 +296,29 @@ class Simulation:
         if every < 1:
             raise ValueError(f"record_every must be >= 1, got {every}")
         return run_simulation(self, sinks, steps=steps, record_every=every, progress=progress, threaded=threaded)
+
+
+def warm_up(compiled: CompiledScene) -> None:
+    """Compile or load from cache the chunk kernel for this scene's integrator and force types."""
+    try:
+        Simulation(compiled).step(0)
+    except SimulationDiverged:
+        # step(0) checks the initial state: one out of bounds (a Simulation built in code) is the run's to
+        # report, as divergence at step 0 (exit 3); here it escaped `rbsim run` as a traceback
+        pass
+
+
+def run(
+    compiled: CompiledScene,
+    sinks: Sequence[Sink],
+    *,
+    progress: ProgressCallback | None = None,
+    threaded: bool = True,
+) -> RunSummary:
+    """Integrate the compiled scene from its initial state, streaming frames to every sink; always
+    closes the sinks. threaded: write the recorded blocks in a background thread (runner.recorder),
+    overlapping the integration; False writes them in this thread. The files are the same either way."""
+    return Simulation(compiled).run(sinks=sinks, progress=progress, threaded=threaded)
 
 
 def _steps_for(duration: float, dt: float) -> int:

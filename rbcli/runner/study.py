@@ -347,7 +347,7 @@ def _study_spec(scene: SceneSpec) -> SceneSpec:
 
 def _simulate(compiled: CompiledScene) -> Trajectory:
     from rbcli.record.memory_sink import SinkMemory
-    from rbcli.runner.loop import run
+    from rbcli.runner.simulation import run
 
     memory = SinkMemory()
     run(compiled, [memory])
@@ -357,7 +357,7 @@ def _simulate(compiled: CompiledScene) -> Trajectory:
 def time_run(compiled: CompiledScene, min_time: float) -> KernelTiming:
     """Per-step time of the compiled scene's chunk loop (`kernel_timing.time_kernel`): one Simulation
     reused across repeats, recording at the scene's cadence into reused buffers, no sink. The kernel
-    must be compiled already (`runner.loop.warm_up`) or the first untimed run compiles it."""
+    must be compiled already (`runner.simulation.warm_up`) or the first untimed run compiles it."""
     from rbcli.runner.simulation import Simulation
 
     sim = Simulation(compiled)
@@ -424,8 +424,8 @@ def study(
     under uniform gravity; True: raise ValueError if mujoco is not installed; False: never).
     progress(done, total, label) is called as points complete (units: points).
     """
-    from rbcli.runner.loop import warm_up
     from rbcli.runner.mujoco_twin import MUJOCO_METHODS, mujoco_version, refusal
+    from rbcli.runner.simulation import warm_up
 
     if not (min_time >= 0 and math.isfinite(min_time)):
         raise ValueError(f"the minimum timing must be >= 0 s, got {min_time}")

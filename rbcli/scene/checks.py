@@ -11,11 +11,15 @@ Stormer-Verlet), and resolve the motion only well below it (~10 steps per period
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
-from rbcli.scene.compile import CompiledScene
 from rbcli.scene.force_specs import BodyPoint, ForceSpring
 from rbcli.scene.spec import SceneIssue
+
+if TYPE_CHECKING:  # for the annotations only: compile.py runs these checks (CompiledScene.warnings)
+    from rbcli.scene.compile import CompiledScene
 
 
 def _inverse_effective_mass(compiled: CompiledScene, end: BodyPoint) -> float:

@@ -27,10 +27,10 @@ from rbcli.physics.contact.parameters import (
     stable_step,
     support_count,
 )
-from rbcli.physics.contact.reference import kinematic_state_numpy
 from rbcli.physics.contact.tables import ContactTable, contact_table
 from rbcli.physics.forces import ForceTables
 from rbcli.physics.forces.tables import schedule_values_numpy
+from rbcli.physics.kinematic_reference import kinematic_state_numpy
 from rbcli.physics.model import Model
 from rbcli.physics.rotation import quat_to_matrix
 from rbcli.physics.state import State
@@ -206,7 +206,7 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
 
 
 def kinematic_rows(spec: SceneSpec, model: Model, state: State) -> list[KinematicRow]:
-    """The prescribed motion of each kinematic body (physics/contact/kinematic.py) from its spec and
+    """The prescribed motion of each kinematic body (physics/kinematic.py) from its spec and
     initial state: `kinematic: true` keeps its initial velocity and angular velocity (v0 = P / M,
     w0 = L / I: isotropic) about its centre of mass; `kinematic: {...}` gives v0, w0, a pivot and a schedule."""
     rows = []

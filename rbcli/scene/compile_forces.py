@@ -15,13 +15,14 @@ from typing import Any
 
 import numpy as np
 
-from rbcli.physics.contact.tables import ContactTable, kinematic_table
+from rbcli.physics.contact.tables import ContactTable
 from rbcli.physics.forces import NO_SCHEDULE, WORLD, ForceTables, build_force_tables
 from rbcli.physics.forces.tables import (
     SCHEDULE_KINDS,
     drag_table,
     field_table,
     impulse_table,
+    kinematic_table,
     point_force_table,
     schedule_table,
     spring_table,

@@ -224,14 +224,20 @@ def _body_size(model: Model, body: int) -> float:
     return float(np.max(np.linalg.norm(offsets, axis=1))) if count else 0.0
 
 
+# the dense check of loops builds A = G W G^T densely (R^2 floats, R^3 flops): 3,000 rows is 72 MB, ~1 s
+_DENSE_CHECK_ROWS = 3000
+
+
 def redundant_row_warnings(joints: Sequence[JointSpec], table: JointTable | None, model: Model,
                            state: State) -> list[SceneIssue]:  # fmt: skip
     """A warning per joint that has rows repeating constraints of earlier joints (a loop that holds a
     direction twice, as a planar four-bar of spatial hinges does: 3 rows), found as the solver finds them
     (the zero pivots of A = G W G^T at the initial poses, rows in joint order): they are dropped with
     multiplier 0 each step, and the loop still closes."""
-    if table is None:
-        return []
+    if table is None or not np.any(table.graph.joint_node < 0):
+        return []  # no loop: a tree's rows are independent (each joint's own rows are, by construction)
+    if int(table.row_count.sum()) > _DENSE_CHECK_ROWS:
+        return []  # too many rows for the dense check; the solver still drops redundant rows each step
     from rbcli.physics.joints.dense_layout import redundant_rows_numpy
     from rbcli.physics.joints.reference import (
         body_weights_numpy,

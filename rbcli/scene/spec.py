@@ -111,7 +111,7 @@ class PlaneSpec:
 @dataclass(frozen=True)
 class KinematicSpec:
     """A kinematic body's prescribed motion (`kinematic: {velocity, angular_velocity, pivot, schedule}`,
-    physics/contact/kinematic.py): it moves at s(t) velocity [m/s] and turns at s(t) angular_velocity
+    physics/kinematic.py): it moves at s(t) velocity [m/s] and turns at s(t) angular_velocity
     [rad/s] (both world frame) about `pivot` [m] (a world point at t = 0 that moves with the body's
     translation; None: its centre of mass), s(t) the schedule (force_specs.Schedule; None: s = 1)."""
 

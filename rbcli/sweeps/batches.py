@@ -60,6 +60,15 @@ class Batcher(Generic[T]):
         self.sizes: list[int] = []  # every group's size, in the order handed out
 
     @property
+    def slots(self) -> int:
+        """The parallel slots the later groups are sized for; set it as workers join or leave."""
+        return self._slots
+
+    @slots.setter
+    def slots(self, value: int) -> None:
+        self._slots = max(1, value)
+
+    @property
     def remaining(self) -> int:
         return len(self._pending) - self._next
 

@@ -2,28 +2,51 @@
 
 By default a `LocalCluster` sized to the machine: one single-threaded worker process per CPU this process
 may use (the step kernels are serial and hold one core each; processes, not threads, so that the Python
-around the kernels runs in parallel too). With a scheduler address (`--scheduler tcp://host:8786`) the
-same batches go to an existing cluster, whose workers must have rbcli installed and see the base scene's
-folder (mesh files) and, for logs, the output folder at the same paths.
+around the kernels runs in parallel too), every endpoint on 127.0.0.1 unless another host is asked for.
+With a scheduler address (`--scheduler tcp://host:8786`) the same batches go to an existing cluster,
+whose workers must run the same rbsim and numba (checked: a mismatched worker stops the sweep with one
+line naming both versions); mesh files travel with the job (execute.py), so no shared file system is
+needed.
 
-Dask's own guarantees carry the "nothing lost" promise: a task of a worker that dies is run again on
-another worker (the scheduler's `allowed-failures`, default 3, then KilledWorker: that batch's variants
-become rows with status "error" and the message). Rows come back to the client, which writes each batch's
-part as it arrives (table.write_part): a part is never written by a worker.
+Nothing is lost when workers die:
+- The job (the base scene's data, the axes, the mesh files' bytes) is a task, not scattered data: when
+  every worker holding it dies, the scheduler computes it again from the task it keeps.
+- A batch whose task was cancelled, or whose data was lost with its worker, is submitted again (up to
+  LOST_TRIES times; then its variants are rows with status "lost", which resuming runs again): never the
+  variant's own failure.
+- A task that took down worker after worker (Dask's KilledWorker, after the scheduler's
+  `allowed-failures` + 1 deaths, 4 with Dask's default) is split: its variants run one per task, and a
+  variant that takes its worker down on each of its own allowed-failures + 1 tries is a row with status
+  "crashed" (out of memory, a crash in compiled code) while the others complete. So a variant is tried at
+  most 2 x (allowed-failures + 1) times (8 by default), once alone.
+Rows come back to the client, which writes each batch's part as it arrives (table.write_part): a part is
+never written by a worker.
 """
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import logging
 import os
+import signal
+import threading
 import time
-from collections.abc import Callable
+import uuid
+from collections import deque
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
 from rbcli.sweeps.batches import Batcher
-from rbcli.sweeps.execute import STATUS_ERROR, SweepJob, run_batch, warm_up
+from rbcli.sweeps.execute import (
+    STATUS_CRASHED,
+    STATUS_LOST,
+    SweepJob,
+    run_batch,
+    runtime_versions,
+    warm_up,
+)
 
 Variant = tuple[int, tuple[Any, ...]]
 # Dask's own periodic work, turned down for the local cluster: a sweep's task is one long compiled loop,
@@ -39,17 +62,32 @@ LOCAL_CLUSTER_CONFIG: dict[str, Any] = {
     "distributed.admin.system-monitor.interval": "2s",
     "distributed.worker.memory.monitor-interval": "1s",
 }
+# Where the local cluster's scheduler, workers and dashboard listen unless asked otherwise: this machine
+# only (Dask's dashboard default, ":8787", is every interface).
+LOCAL_HOST = "127.0.0.1"
 # Tasks submitted per slot at a time: the one running and the next, queued on the worker (Dask's scheduler
 # keeps it there, worker-saturation 1.1 rounding up), so a worker starts its next task without a round trip.
 IN_FLIGHT_PER_SLOT = 2
+# Times a batch is submitted again after the cluster lost it for its own reasons (cancelled, its data lost
+# with a worker, a lost connection) before its variants are recorded "lost": several, since a pre-emptible
+# cluster can lose the same task more than once, but bounded, so a cluster that loses everything ends.
+LOST_TRIES = 5
+# How often the client asks the scheduler for its workers (those that joined resize the batches and are
+# version-checked): a round trip of a few milliseconds, small beside tasks of up to a second.
+WORKERS_POLL_SECONDS = 0.5
 Rows = list[dict[str, Any]]
+
+
+class ClusterRefused(RuntimeError):
+    """A worker that cannot give this process's rows (another rbsim or numba, or no rbcli at all)."""
 
 
 @dataclass
 class ClusterInfo:
     """What the sweep ran on: workers (processes), slots (threads in all), the dashboard (None without
     bokeh), the seconds to start or reach the cluster, to warm every worker's kernels and to close the
-    client and cluster at the end, the largest task's variants and the number of tasks."""
+    client and cluster at the end, the largest task's variants, the number of tasks, how many were
+    submitted again after the cluster lost them, and the workers that joined after the start."""
 
     workers: int
     slots: int
@@ -59,6 +97,8 @@ class ClusterInfo:
     batch: int = 0  # the largest task's variants
     tasks: int = 0
     shutdown_s: float = 0.0
+    resubmitted: int = 0
+    joined: int = 0
 
 
 def default_workers() -> int:
@@ -78,36 +118,32 @@ def run_on_dask(
     workers: int | None = None,
     batch: int | None = None,
     on_ready: Callable[[ClusterInfo], None] | None = None,
+    host: str | None = None,
 ) -> ClusterInfo:
     """Run every pending variant in batches; `on_rows` gets each batch's rows as it finishes (in the
-    client's thread). scheduler: None (a LocalCluster of `workers`), an address, or a distributed.Client."""
-    from distributed import Client, LocalCluster
+    client's thread). scheduler: None (a LocalCluster of `workers` listening on `host`, default
+    127.0.0.1), an address, or a distributed.Client. Raises ClusterRefused for a mismatched worker."""
+    from distributed import Client
 
     started = time.perf_counter()
     cluster = None
-    client: Any
-    if isinstance(scheduler, Client):
-        client, own_client = scheduler, False
-    elif scheduler:
-        client, own_client = Client(scheduler, timeout="30s"), True
-    else:
-        import dask
-
-        with dask.config.set(LOCAL_CLUSTER_CONFIG):  # the nannies hand it on to the worker processes
-            cluster = LocalCluster(
-                n_workers=workers or default_workers(),
-                threads_per_worker=1,
-                processes=True,
-                dashboard_address=":0",  # any free port: 8787 may be another cluster's (the dashboard needs bokeh)
-                silence_logs=logging.ERROR,
-            )
-            client, own_client = Client(cluster), True
+    client: Any = None
+    own_client = not isinstance(scheduler, Client)
     futures: list[Any] = []
     info: ClusterInfo | None = None
+    interrupts = contextlib.ExitStack()
     try:
+        if not own_client:
+            client = scheduler
+        elif scheduler:
+            client = Client(scheduler, timeout="30s")
+        else:
+            interrupts.enter_context(_workers_ignore_interrupts())  # until the cluster is closed
+            cluster, client = _start_local_cluster(workers or default_workers(), host or LOCAL_HOST)
         if cluster is None:
             client.wait_for_workers(1, timeout=60)
         slots_by_worker = client.nthreads()
+        _check_versions(client, list(slots_by_worker))
         info = ClusterInfo(
             workers=len(slots_by_worker),
             slots=sum(slots_by_worker.values()),
@@ -118,24 +154,128 @@ def run_on_dask(
         shared = None
         if pending:
             warming = time.perf_counter()
-            shared = client.scatter(job, broadcast=True)  # sent once per worker, not once per task
-            _warm_workers(client, shared, pending[0][1], list(slots_by_worker))
+            shared = _ClusterJob(client, job)
+            _warm_workers(client, shared.future, pending[0][1], list(slots_by_worker))
             info.warmup_s = time.perf_counter() - warming
         if on_ready is not None:
             on_ready(info)
         if shared is not None:
-            _run_batches(client, shared, pending, on_rows, info, batch, futures)
+            _Batches(client, shared, pending, on_rows, info, batch, futures, set(slots_by_worker)).run()
         return info
     finally:
         closing = time.perf_counter()
-        if futures:
-            client.cancel(futures)
-        if own_client:
-            client.close()
-        if cluster is not None:
-            cluster.close()
+        with _signals_deferred():  # a second Ctrl-C must not cut the close short (workers left behind)
+            if client is not None and futures:
+                client.cancel(futures)
+            if client is not None and own_client:
+                client.close()
+            if cluster is not None:
+                cluster.close()
+            interrupts.close()
         if info is not None:  # the shut-down is reported apart, as the start-up is
             info.shutdown_s = time.perf_counter() - closing
+
+
+def _start_local_cluster(workers: int, host: str) -> tuple[Any, Any]:
+    """A LocalCluster and its client. A stop signal that arrives while it starts is held until both
+    exist and then raised (KeyboardInterrupt), so the caller always has a cluster to close: a signal
+    landing inside Dask's start-up would leave its processes and coroutines to die with tracebacks."""
+    import dask
+    from distributed import Client, LocalCluster
+
+    with _signals_deferred(), dask.config.set(LOCAL_CLUSTER_CONFIG):  # the nannies hand it on to the workers
+        cluster = LocalCluster(
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            host=host,
+            dashboard_address=f"{host}:0",  # any free port: 8787 may be another cluster's (the dashboard needs bokeh)
+            silence_logs=logging.ERROR,
+        )
+        try:
+            client = Client(cluster)
+        except BaseException:
+            cluster.close()
+            raise
+    return cluster, client
+
+
+@contextlib.contextmanager
+def _signals_deferred() -> Iterator[None]:
+    """Hold SIGINT, SIGTERM and SIGHUP (main thread only) until the block ends, then deliver the first
+    that arrived to the handler that was there before (the CLI's: a KeyboardInterrupt and its exit status)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    arrived: list[int] = []
+    previous: dict[int, Any] = {}
+
+    def hold(signum: int, frame: Any) -> None:
+        arrived.append(signum)
+
+    for name in ("SIGINT", "SIGTERM", "SIGHUP"):
+        if hasattr(signal, name):
+            number = getattr(signal, name)
+            previous[number] = signal.signal(number, hold)
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+        if arrived:
+            signal.raise_signal(arrived[0])
+
+
+@contextlib.contextmanager
+def _workers_ignore_interrupts() -> Iterator[None]:
+    """Worker processes spawned meanwhile (at the start, or when a nanny restarts one) ignore SIGINT.
+
+    A terminal's Ctrl-C goes to the whole process group: the workers of the local cluster got it too and
+    printed KeyboardInterrupt tracebacks (interrupted in their imports, or in a task), while this process,
+    which owns them, stops the sweep and closes them anyway. A handler cannot be inherited, but an ignored
+    signal is, across exec: multiprocessing starts the workers through a two-line shell script that
+    ignores SIGINT and executes the same Python (`multiprocessing.set_executable`, restored after)."""
+    import multiprocessing.spawn as spawn
+    import shlex
+    import shutil
+    import tempfile
+
+    shell = shutil.which("sh")
+    if os.name != "posix" or shell is None:  # pragma: no cover - the workers keep Python's own handler
+        yield
+        return
+    python = spawn.get_executable()
+    folder = tempfile.mkdtemp(prefix="rbsim-workers-")
+    wrapper = os.path.join(folder, "python")
+    with open(wrapper, "w", encoding="utf-8") as handle:
+        handle.write(f"#!{shell}\ntrap '' INT\nexec {shlex.quote(os.fsdecode(python))} \"$@\"\n")
+    os.chmod(wrapper, 0o755)
+    spawn.set_executable(wrapper)
+    try:
+        yield
+    finally:
+        spawn.set_executable(python)
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def _check_versions(client: Any, addresses: list[str]) -> None:
+    """Refuse workers whose rbsim or numba differ from this process's (one line naming both)."""
+    if not addresses:
+        return
+    mine = runtime_versions()
+    try:
+        theirs = client.run(runtime_versions, workers=addresses, on_error="return")
+    except Exception as exc:  # noqa: BLE001 - told as the refusal it is
+        raise ClusterRefused(f"cannot ask the workers for their versions: {type(exc).__name__}: {exc}") from None
+    for address in sorted(theirs):
+        got = theirs[address]
+        if isinstance(got, BaseException):
+            raise ClusterRefused(f"worker {address} cannot run rbsim {mine[0]}'s variants: {type(got).__name__}: {got}")
+        if tuple(got) != mine:
+            raise ClusterRefused(
+                f"worker {address} runs rbsim {got[0]} with numba {got[1]}, this rbsim is {mine[0]} with numba "
+                f"{mine[1]}: install the same versions on every worker"
+            )
 
 
 def _dashboard(client: Any) -> str | None:
@@ -147,9 +287,33 @@ def _dashboard(client: Any) -> str | None:
         return None
 
 
+def job_value(job: SweepJob) -> SweepJob:
+    """The job as a task's result: the scheduler keeps the task (with the job in it), so it can compute
+    the job again on another worker when every worker holding it has died, which scattered data cannot."""
+    return job
+
+
+class _ClusterJob:
+    """The job's future on the cluster, submitted again should the cluster forget it altogether."""
+
+    def __init__(self, client: Any, job: SweepJob) -> None:
+        self._client = client
+        self._job = job
+        self.future = self._submit()
+
+    def _submit(self) -> Any:
+        return self._client.submit(job_value, self._job, key=f"rbsim-sweep-job-{uuid.uuid4().hex}", pure=False)
+
+    def current(self) -> Any:
+        """The job's future, resubmitted when cancelled or failed (a lost one the scheduler recomputes)."""
+        if self.future.status in ("cancelled", "error"):
+            self.future = self._submit()
+        return self.future
+
+
 def _warm_workers(client: Any, shared: Any, values: tuple[Any, ...], addresses: list[str]) -> None:
     """Load the first variant's kernels on every worker (in parallel), so no timed batch pays for it; the
-    scattered job is unpickled there on the way, once per worker."""
+    job is fetched and unpickled there on the way, once per worker."""
     warm = [
         client.submit(warm_up, shared, values, workers=[address], allow_other_workers=False, pure=False)
         for address in addresses
@@ -157,48 +321,129 @@ def _warm_workers(client: Any, shared: Any, values: tuple[Any, ...], addresses: 
     client.gather(warm, errors="skip")
 
 
-def _run_batches(
-    client: Any,
-    shared: Any,
-    pending: list[Variant],
-    on_rows: Callable[[Rows], None],
-    info: ClusterInfo,
-    batch: int | None,
-    futures: list[Any],
-) -> None:
+@dataclass
+class SweepTask:
+    """A task's variants and how often the cluster lost it; `alone`: split out of a task that killed
+    its workers."""
+
+    group: list[Variant]
+    lost: int = 0  # times the cluster lost this group's task so far
+    alone: bool = False  # split out of a task that killed its workers
+
+
+class _Batches:
     """Keep IN_FLIGHT_PER_SLOT tasks per slot submitted, each sized when it is submitted from the time of
     every row back so far (batches.Batcher): a worker always has its next task queued, so it never waits
-    for the client, and the last tasks are the short ones."""
-    from distributed import as_completed
+    for the client, and the last tasks are the short ones. Workers that join are counted in (and checked)
+    as they come; a task the cluster lost is submitted again before any new one."""
 
-    groups: dict[Any, list[Variant]] = {}  # each task's variants, for the failed rows should it fail
-    batcher = Batcher(pending, info.slots, fixed=batch)
+    def __init__(
+        self,
+        client: Any,
+        job: _ClusterJob,
+        pending: list[Variant],
+        on_rows: Callable[[Rows], None],
+        info: ClusterInfo,
+        batch: int | None,
+        futures: list[Any],
+        known: set[str],
+    ) -> None:
+        self.client, self.job, self.on_rows, self.info, self.futures = client, job, on_rows, info, futures
+        self.batcher = Batcher(pending, info.slots, fixed=batch)
+        self.tasks: dict[Any, SweepTask] = {}
+        self.again: deque[SweepTask] = deque()  # lost or split tasks, submitted before new groups
+        self.known = known
+        self.polled = time.monotonic()
 
-    def submit() -> list[Any]:
-        group = batcher.next_group()
-        if not group:
-            return []
-        future = client.submit(run_batch, shared, group, pure=False, retries=1)
-        groups[future.key] = group
-        futures.append(future)
+    def run(self) -> None:
+        from distributed import as_completed
+
+        queue = as_completed([f for _ in range(IN_FLIGHT_PER_SLOT * self.info.slots) for f in self.submit()])
+        for future in queue:
+            task = self.tasks.pop(future.key)
+            self.futures.remove(future)
+            rows = self.outcome(task, future)
+            future.release()  # the scheduler may forget it: a worker lost later must not run it again
+            self.poll_workers()
+            while len(self.futures) < IN_FLIGHT_PER_SLOT * max(1, self.info.slots) and (new := self.submit()):
+                queue.update(new)  # before the rows are handed on: the part's write does not delay it
+            if rows:
+                self.batcher.measured(rows)
+                self.on_rows(rows)
+        self.info.batch = max(self.batcher.sizes, default=0)
+        self.info.tasks = len(self.batcher.sizes)
+
+    def submit(self) -> list[Any]:
+        task = self.again.popleft() if self.again else None
+        if task is None:
+            group = self.batcher.next_group()
+            if not group:
+                return []
+            task = SweepTask(group)
+        future = self.client.submit(run_batch, self.job.current(), task.group, pure=False)
+        self.tasks[future.key] = task
+        self.futures.append(future)
         return [future]
 
-    queue = as_completed([f for _ in range(IN_FLIGHT_PER_SLOT * info.slots) for f in submit()])
-    for future in queue:
-        rows = _rows_of(future, groups.pop(future.key))
-        futures.remove(future)
-        batcher.measured(rows)
-        queue.update(submit())  # before the rows are handed on: the part's write does not delay it
-        on_rows(rows)
-    info.batch = max(batcher.sizes, default=0)
-    info.tasks = len(batcher.sizes)
+    def outcome(self, task: SweepTask, future: Any) -> Rows:
+        """The task's rows; or [] with the task queued to run again (lost by the cluster, or split after
+        killing its workers); or, out of tries, a row per variant saying what happened."""
+        try:
+            return list(future.result())
+        except Exception as exc:  # noqa: BLE001 - never the sweep's end: run again, or rows that say why
+            rows, again = settle_failure(task, exc)
+            self.again.extend(again)
+            self.info.resubmitted += sum(len(t.group) for t in again)
+            return rows
+
+    def poll_workers(self) -> None:
+        """Take in workers that joined: count their slots (the batches and the tasks in flight follow) and
+        check their versions; forget those that left."""
+        now = time.monotonic()
+        if now - self.polled < WORKERS_POLL_SECONDS:
+            return
+        self.polled = now
+        slots_by_worker = self.client.nthreads()
+        joined = [address for address in slots_by_worker if address not in self.known]
+        _check_versions(self.client, joined)
+        self.info.joined += len(joined)
+        self.known = set(slots_by_worker)
+        self.info.slots = max(1, sum(slots_by_worker.values()))
+        self.info.workers = len(slots_by_worker)
+        self.batcher.slots = self.info.slots
 
 
-def _rows_of(future: Any, group: list[Variant]) -> Rows:
-    """The batch's rows, or for a task that failed outright (KilledWorker: it took several workers down
-    with it), a failed row per variant saying so."""
-    try:
-        return list(future.result())
-    except Exception as exc:  # noqa: BLE001 - never the sweep's end: these variants are reported failed
-        message = f"the task failed on the cluster: {type(exc).__name__}: {exc}"
-        return [{"variant": index, "status": STATUS_ERROR, "message": message} for index, _ in group]
+def settle_failure(task: SweepTask, exc: BaseException) -> tuple[Rows, list[SweepTask]]:
+    """What follows a task that gave no rows: (rows, tasks to submit again). A task the scheduler gave up
+    on after it killed allowed-failures + 1 workers (KilledWorker) is split into one task per variant, and a single
+    variant's is a "crashed" row; anything else (cancelled, data lost with a worker, a connection) is the
+    cluster's doing: the task runs again, up to LOST_TRIES times, then its variants are "lost" rows."""
+    from distributed import KilledWorker
+
+    if isinstance(exc, KilledWorker):
+        if len(task.group) > 1:  # one variant (or more) kills its worker: find which, one per task
+            return [], [SweepTask([variant], alone=True) for variant in task.group]
+        return failed_rows(task.group, STATUS_CRASHED, _crash_message(exc, int(exc.allowed_failures) + 1)), []
+    task.lost += 1
+    if task.lost < LOST_TRIES:
+        return [], [task]
+    return failed_rows(task.group, STATUS_LOST, _lost_message(exc, task.lost)), []
+
+
+def failed_rows(group: list[Variant], status: str, message: str) -> Rows:
+    """A row per variant of a task that gave none (status "crashed" or "lost")."""
+    return [{"variant": index, "status": status, "message": message} for index, _ in group]
+
+
+def _crash_message(exc: BaseException, tries: int) -> str:
+    return (
+        f"the variant took down its worker on each of its {tries} tries (out of memory, or a crash); "
+        f"{type(exc).__name__}: {exc}"
+    )
+
+
+def _lost_message(exc: BaseException, tries: int) -> str:
+    return (
+        f"the cluster lost this variant's task {tries} times (cancelled, or its data lost with a worker); "
+        f"run the sweep again to retry it; {type(exc).__name__}: {exc}"
+    )

@@ -15,6 +15,7 @@ import contextlib
 import functools
 import os
 import re
+import socket
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -22,14 +23,23 @@ from typing import Any
 
 import numpy as np
 
-from rbcli.sweeps.paths import ScenePath
+from rbcli.sweeps.meshes import MeshFile, local_scene_dir
+from rbcli.sweeps.paths import ScenePath, variant_text
 
 # Row statuses: a run's own ("completed", "diverged"), a variant the scene loader rejects, and any other
-# exception while building or running it.
+# exception while building or running it; on a cluster, a variant that took its worker down on every try
+# (out of memory, a crash: its own fault after a bounded number of tries, dask_runner.py) and one whose
+# task the cluster lost too often for its own reasons (cancelled, data lost with a worker): no result yet,
+# so resuming runs it again.
 STATUS_COMPLETED = "completed"
 STATUS_DIVERGED = "diverged"
 STATUS_INVALID = "invalid"
 STATUS_ERROR = "error"
+STATUS_CRASHED = "crashed"
+STATUS_LOST = "lost"
+# The message of a row that an older rbsim recorded as "error" when the cluster lost its task: resuming
+# treats it as lost, not as the variant's own failure.
+LEGACY_LOST_MESSAGE = "the task failed on the cluster: "
 # The row of a variant: (column, type) in table order; "vectors" is a list per body of 3 or 4 floats.
 RESULT_COLUMNS = (
     ("variant", "int64"),
@@ -67,10 +77,12 @@ class SweepJob:
     """What every variant of a sweep needs, sent to each worker once.
 
     scene_data: the base scene's parsed YAML, scene_text its text; scene_file and scene_dir: where it came
-    from (messages, the recorded scene path; mesh files resolve against scene_dir, which must exist on every
-    worker).
+    from (messages, the recorded scene path; mesh files resolve against scene_dir).
     paths: each axis's scene path. frames: recorded frames per variant (None: the scene's cadence).
     log_dir: where each variant writes variant-<n>.mcap (None: no logs), as seen by the workers.
+    mesh_files: the bytes of every mesh file a variant may load (meshes.py), so a worker that does not
+    see scene_dir loads the same bytes from a folder of its own. client_host: the machine the sweep runs
+    on; a log written on another machine is named `host:path` in its row.
     """
 
     scene_data: dict[str, Any]
@@ -80,30 +92,51 @@ class SweepJob:
     paths: tuple[ScenePath, ...]
     frames: int | None = 101
     log_dir: str | None = None
+    mesh_files: tuple[MeshFile, ...] = ()
+    client_host: str = ""
+
+
+def lost_to_the_cluster(status: str | None, message: str | None) -> bool:
+    """Whether a row is a failure of the cluster rather than the variant's own (resuming retries it)."""
+    return status == STATUS_LOST or (status == STATUS_ERROR and (message or "").startswith(LEGACY_LOST_MESSAGE))
+
+
+def runtime_versions() -> tuple[str, str]:
+    """(rbsim, numba) versions of this process: a worker must match the client's, since a row is bitwise
+    the same only from the same code compiled by the same numba."""
+    import numba
+
+    from rbcli._version import __version__
+
+    return __version__, str(numba.__version__)
 
 
 def run_batch(job: SweepJob, variants: list[tuple[int, tuple[Any, ...]]]) -> list[dict[str, Any]]:
     """The rows of a batch of (variant number, axis values), in order. The Dask task."""
+    job = _on_this_machine(job)
     return [run_variant(job, index, values) for index, values in variants]
+
+
+def _on_this_machine(job: SweepJob) -> SweepJob:
+    """The job with scene_dir where this process finds its mesh files (meshes.local_scene_dir)."""
+    scene_dir = local_scene_dir(job.scene_dir, job.mesh_files)
+    return job if scene_dir == job.scene_dir else replace(job, scene_dir=scene_dir)
 
 
 def warm_up(job: SweepJob, values: tuple[Any, ...]) -> float:
     """Load (or compile) every kernel a variant needs in this process (the steps', the recorder's, the
     exact solution's) by running it for two steps without a log; returns the seconds it took (reported
     apart from the sweep, as the cluster's start-up is)."""
-    from rbcli.sweeps.load import variant_text
-
     started = time.perf_counter()
     with contextlib.suppress(Exception):  # the variant's own row will say what is wrong with it
         text = variant_text(job.scene_data, tuple(zip(job.paths, values, strict=True)))
-        _run(replace(job, log_dir=None), -1, text, steps=2)
+        _run(replace(_on_this_machine(job), log_dir=None), -1, text, steps=2)
     return time.perf_counter() - started
 
 
 def run_variant(job: SweepJob, index: int, values: tuple[Any, ...]) -> dict[str, Any]:
     """Build, load and run one variant; its row (see `table.RESULT_SCHEMA` for the columns)."""
     from rbcli.scene.spec import SceneError
-    from rbcli.sweeps.load import variant_text
 
     started = time.perf_counter()
     row: dict[str, Any] = {"variant": index, "status": STATUS_ERROR, "message": ""}
@@ -118,6 +151,8 @@ def run_variant(job: SweepJob, index: int, values: tuple[Any, ...]) -> dict[str,
         row.update(status=STATUS_ERROR, message=f"{type(exc).__name__}: {exc}")
     if row["message"] and job.scene_file in row["message"]:
         row["message"] = _relocated(row["message"], job, text)
+    if row.get("log") and job.client_host and socket.gethostname() != job.client_host:
+        row["log"] = f"{socket.gethostname()}:{row['log']}"  # on this worker's disk, not the client's
     row["wall_s"] = time.perf_counter() - started
     return row
 
@@ -182,7 +217,10 @@ def _run(job: SweepJob, index: int, text: str, steps: int | None = None) -> dict
     traj = memory.trajectory()
     inv = traj.invariants
     energy, momentum, angular = invariant_drifts(traj, conserved_quantities(compiled))
-    state = sim.state
+    # the final state as the recording holds it (the run always records its last state): the recorder's
+    # compiled outputs give v = P / M and omega = R I^-1 R^T L rounded as the log's frames are, 1-2 ulp from
+    # `Simulation.state`'s numpy expressions, and a row must read the same as its recording
+    final = {name: getattr(traj, name)[-1] for name in ("x", "q", "v", "omega", "L")}
     row: dict[str, Any] = {
         "status": summary.status,
         "message": summary.message,
@@ -197,11 +235,11 @@ def _run(job: SweepJob, index: int, text: str, steps: int | None = None) -> dict
         "momentum_drift": momentum,
         "angular_momentum_drift": angular,
         "quaternion_norm_defect_max": float(np.max(inv["quaternion_norm_defect"])),
-        "x_final": state.x.tolist(),
-        "q_final": state.q.tolist(),
-        "v_final": state.v.tolist(),
-        "omega_final": state.omega.tolist(),
-        "L_final": state.L.tolist(),
+        "x_final": final["x"].tolist(),
+        "q_final": final["q"].tolist(),
+        "v_final": final["v"].tolist(),
+        "omega_final": final["omega"].tolist(),
+        "L_final": final["L"].tolist(),
         "log": log,
     }
     if admits_exact_solution(compiled) and traj.t.size:

@@ -17,7 +17,6 @@ the loader's message when the sweep runs.
 
 from __future__ import annotations
 
-import copy
 import json
 import math
 import os
@@ -42,7 +41,14 @@ from rbcli.scene.yaml_located import (
     parse_located_yaml,
     top_level_keys,
 )
-from rbcli.sweeps.paths import PathError, ScenePath, check_in_data, known_in_schema, overlapping, parse_path, set_at
+from rbcli.sweeps.paths import (
+    PathError,
+    check_in_data,
+    known_in_schema,
+    overlapping,
+    parse_path,
+    variant_text,
+)
 from rbcli.sweeps.spec import MAX_VARIANTS, Axis, SweepSpec, grid_values, random_values
 
 SWEEP_SCHEMA_FILE_NAME = "sweep.schema.json"
@@ -356,15 +362,6 @@ class _Analysis:
                 self.issues.error(probe.location, message, issue.expected)
             else:
                 self.issues.warning(probe.location, f"{shown} at {axis.column}: {issue.message}", issue.expected)
-
-
-def variant_text(base: dict[str, Any], settings: tuple[tuple[ScenePath, Any], ...]) -> str:
-    """The scene text of a variant: the base scene's parsed data with each (path, value) set, as YAML
-    (floats written as repr, so every number reads back exactly)."""
-    data = copy.deepcopy(base)
-    for path, value in settings:
-        set_at(data, path, copy.deepcopy(value))
-    return yaml.safe_dump(data, sort_keys=False, allow_unicode=True)
 
 
 def _value_probes(values: tuple[Any, ...]) -> list[int]:

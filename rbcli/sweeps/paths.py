@@ -13,6 +13,8 @@ import re
 from collections.abc import Iterable, Iterator
 from typing import Any
 
+import yaml
+
 from rbcli.scene.issues import did_you_mean, format_path
 
 ScenePath = tuple[str | int, ...]
@@ -161,3 +163,12 @@ def _kind(value: Any) -> str:
     if isinstance(value, dict):
         return "a mapping"
     return f"a value ({value!r})"
+
+
+def variant_text(base: dict[str, Any], settings: tuple[tuple[ScenePath, Any], ...]) -> str:
+    """The scene text of a variant: the base scene's parsed data with each (path, value) set, as YAML
+    (floats written as repr, so every number reads back exactly)."""
+    data = copy.deepcopy(base)
+    for path, value in settings:
+        set_at(data, path, copy.deepcopy(value))
+    return yaml.safe_dump(data, sort_keys=False, allow_unicode=True)

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 import pyarrow as pa
+import pyarrow.compute as pc  # a submodule: `import pyarrow` alone does not load it
 import pyarrow.parquet as pq
 
 from rbcli.sweeps.table import RESULT_SCHEMA, sweep_metadata
@@ -37,7 +38,7 @@ def failures(table: pa.Table, limit: int = SHOWN_FAILURES) -> list[str]:
     """`variant n (params): status: message` for the first failed variants."""
     axes = [a["column"] for a in sweep_metadata(table).get("axes", []) if a.get("column") in table.column_names]
     lines = []
-    for row in table.filter(pa.compute.not_equal(table.column("status"), "completed")).slice(0, limit).to_pylist():
+    for row in table.filter(pc.not_equal(table.column("status"), "completed")).slice(0, limit).to_pylist():
         params = ", ".join(f"{name} = {_short(row[name])}" for name in axes)
         lines.append(f"variant {row['variant']} ({params}): {row['status']}: {row['message']}")
     return lines
@@ -64,7 +65,7 @@ def describe(table: pa.Table, path: str | Path | None = None) -> str:
             lines.append(f"axis:       {column} ({axis.get('kind')}): {_axis_values(table.column(column))}")
     counts = status_counts(table)
     lines.append("status:     " + ", ".join(f"{n} {status}" for status, n in counts.most_common()))
-    completed = table.filter(pa.compute.equal(table.column("status"), "completed"))
+    completed = table.filter(pc.equal(table.column("status"), "completed"))
     width = max(len(label) for _, label in SUMMARY_METRICS) + 1
     metrics = []
     for column, label in SUMMARY_METRICS:

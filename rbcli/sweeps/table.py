@@ -12,7 +12,7 @@ Columns, in order:
 - `rotation_error_max`, `rotation_error_final` [rad], `position_error_max`, `position_error_final` [m]
   against the exact solution (null where the scene has none);
 - `x_final`, `q_final` (w, x, y, z), `v_final`, `omega_final`, `L_final`: the final state of every body
-  in the user's frames (body_count lists of 3 or 4);
+  in the user's frames (body_count lists of 3 or 4): the run's last recorded frame, bitwise its log's;
 - `wall_s` [s]: the variant's wall time (load, run, metrics), the one column that differs between runs;
 - `log`: the variant's recording, when logs are on.
 
@@ -21,8 +21,11 @@ metadata under `rbsim_sweep` (JSON).
 
 Parts: the client writes each finished batch as `parts/part-<first>-<n>-<token>.parquet`, written to a
 temporary name and renamed into place, so a part is complete or absent whatever stops the sweep. The
-finished variants are those in the parts; `merge` joins them (one row per variant: a variant found twice,
-after a worker was lost while its batch's part was being written, keeps its first row).
+finished variants are those with a row in the parts that is the variant's own result: a row "lost" to
+the cluster (or an older rbsim's "error" row saying the cluster failed the task) is not, and resuming
+runs that variant again; with `retry_failed` only "completed" rows count. A variant can so have several
+rows (also after a worker was lost while its batch's part was being written); `merge` keeps one: the
+best (completed, then the variant's own failures, then lost), and of equals the last written.
 """
 
 from __future__ import annotations
@@ -37,7 +40,7 @@ from typing import Any
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from rbcli.sweeps.execute import RESULT_COLUMNS
+from rbcli.sweeps.execute import RESULT_COLUMNS, STATUS_COMPLETED, lost_to_the_cluster
 from rbcli.sweeps.spec import SweepSpec
 
 RESULTS_FILE = "results.parquet"
@@ -88,25 +91,50 @@ def write_part(folder: Path, rows: Sequence[dict[str, Any]]) -> Path:
 
 
 def read_parts(folder: Path) -> pa.Table:
-    """Every finished row in the folder's parts (unsorted; may hold a variant twice, see the docstring)."""
-    files = sorted((folder / PARTS_DIR).glob("part-*.parquet")) if (folder / PARTS_DIR).is_dir() else []
+    """Every row in the folder's parts, in the order the parts were written (may hold a variant more than
+    once, see the docstring)."""
+    files = list((folder / PARTS_DIR).glob("part-*.parquet")) if (folder / PARTS_DIR).is_dir() else []
+    files.sort(key=lambda f: (f.stat().st_mtime_ns, f.name))  # a retried variant's later row comes later
     tables = [pq.read_table(f, schema=RESULT_SCHEMA) for f in files]
     return pa.concat_tables(tables) if tables else RESULT_SCHEMA.empty_table()
 
 
-def finished_variants(folder: Path) -> set[int]:
-    """The variants that have a row in the folder's parts."""
-    return set(read_parts(folder).column("variant").to_pylist())
+def row_rank(status: str | None, message: str | None) -> int:
+    """0 completed, 1 the variant's own failure (diverged, invalid, error, crashed), 2 lost to the cluster."""
+    if status == STATUS_COMPLETED:
+        return 0
+    return 2 if lost_to_the_cluster(status, message) else 1
+
+
+def finished_variants(folder: Path, *, retry_failed: bool = False) -> set[int]:
+    """The variants that have their own result in the folder's parts (any row but a lost one; with
+    `retry_failed`, a completed row): resuming skips them."""
+    rows = read_parts(folder).select(["variant", "status", "message"]).to_pylist()
+    worst = 0 if retry_failed else 1
+    return {int(r["variant"]) for r in rows if row_rank(r["status"], r["message"]) <= worst}
+
+
+def unfinished_count(table: pa.Table, variants: int) -> int:
+    """Of variants 0 .. variants - 1, those without their own result in a table of rows (parts or merged):
+    no row, or only rows lost to the cluster."""
+    rows = table.select(["variant", "status", "message"]).to_pylist()
+    own = {int(r["variant"]) for r in rows if row_rank(r["status"], r["message"]) < 2}
+    return variants - len(own & set(range(variants)))
 
 
 def merge(spec: SweepSpec, results: pa.Table, *, complete: bool) -> pa.Table:
-    """Parameters joined to results, one row per variant, in variant order; the sweep in the metadata."""
+    """Parameters joined to results, one row per variant (the best, of equals the last: see the module
+    docstring), in variant order; the sweep in the metadata."""
     variants = results.column("variant").to_pylist()
-    first: dict[int, int] = {}
+    ranks = [row_rank(s, m) for s, m in zip(results.column("status").to_pylist(),
+                                            results.column("message").to_pylist(), strict=True)]  # fmt: skip
+    chosen: dict[int, int] = {}
     for position, variant in enumerate(variants):
-        first.setdefault(int(variant), position)
-    order = sorted(first)
-    results = results.take(pa.array([first[v] for v in order], pa.int64()))
+        held = chosen.get(int(variant))
+        if held is None or ranks[position] <= ranks[held]:
+            chosen[int(variant)] = position
+    order = sorted(chosen)
+    results = results.take(pa.array([chosen[v] for v in order], pa.int64()))
     params = parameter_table(spec, order)
     table = params
     for name in RESULT_SCHEMA.names[1:]:

@@ -23,7 +23,7 @@ from rbcli.analysis.exact import quat_geodesic_angle
 from rbcli.api import Simulation, load_scene, prepare
 from rbcli.physics.forces import WORLD, build_force_tables, drag_table, spring_table
 from rbcli.record.memory_sink import SinkMemory
-from rbcli.runner.loop import run
+from rbcli.runner.simulation import run
 from rbcli.scene.compile import compile_scene
 
 SCENE = "scenes/forces/spring_chain.yaml"

@@ -12,7 +12,7 @@ import pytest
 from conftest import HANDLE_POSITIONS, make_body, make_scene
 
 from rbcli.api import prepare, simulate
-from rbcli.physics.forces.impulse import apply_impulses, impulse_step_indices
+from rbcli.physics.forces.impulse import NO_IMPULSE_STEP, apply_impulses, impulse_step_indices, next_impulse_step
 from rbcli.physics.forces.tables import make_force_data
 from rbcli.physics.forces.wrench import accumulate_wrench
 from rbcli.physics.integrators import get_integrator
@@ -123,7 +123,8 @@ def test_impulse_lands_in_the_step_containing_its_time_for_any_integrator(integr
 
 def test_impulse_step_indices_follow_apply_impulses_rule():
     """The steps a runner stops at are exactly those in which apply_impulses applies something, for
-    impulse times on the grid (with n * dt round-off), just off it, and between grid points."""
+    impulse times on the grid (with n * dt round-off), just off it, and between grid points; and
+    next_impulse_step (where the adaptive loop lands) finds them from any grid index."""
     times = [0.0, 0.1, 0.3, 0.7, 0.3 - 1e-12, 0.3 + 1e-12, 0.35, 1.0, 2.05, -0.1]
     specs = [ForceImpulse(at=BodyPoint(body="h"), time=T, vector=np.ones(3)) for T in times]
     compiled = prepare(with_forces(make_scene([make_body("h")]), *specs))
@@ -134,6 +135,36 @@ def test_impulse_step_indices_follow_apply_impulses_rule():
     assert impulse_step_indices(forces, dt).tolist() == [n for n, count in applied.items() if count]
     assert sum(applied.values()) == len(times) - 1  # all but the one before t = 0
     assert applied[3] == 4 and applied[2] == 0  # 0.3, 0.3 +- 1e-12 and 0.35 land in the step from 3 * 0.1
+    # the compiled search the adaptive loop lands by gives, from every grid index, the next of these steps
+    steps = impulse_step_indices(forces, dt).tolist()
+    found = [next_impulse_step(forces, dt, index) for index in range(-1, 30)]
+    assert found == [min([n for n in steps if n > index], default=NO_IMPULSE_STEP) for index in range(-1, 30)]
+    assert NO_IMPULSE_STEP in found and found[0] == 0  # after the last impulse; the one at t = 0
+
+
+def test_adaptive_loop_lands_on_impulse_steps_and_applies_them_there():
+    """The adaptive loop applies impulses itself (its step-start stage, landing on each step that holds
+    one): a free body (no forces, so dopri5 leaves P as it is, exactly) keeps P0 until grid step 30 and
+    has P0 + J after the step-30 impulse, P0 + 2J after step 33's, exactly; and one call over 50 steps
+    gives the bits of calls split at 30 and 33, where the runner used to split its chunks to apply
+    them from Python (a landing and a restart there is the same computation)."""
+    from rbcli.runner.simulation import Simulation
+
+    J = np.array([0.0, 2.0, 0.0])
+    body = make_body("h", velocity=np.array([1.0, 0.0, 0.5]), angular_momentum=np.array([0.01, 0.0, 0.02]))
+    specs = [
+        ForceImpulse(at=BodyPoint(body="h", point=np.array([0.1, 0.0, 0.0])), time=T, vector=J) for T in (0.3, 0.33)
+    ]
+    scene = with_forces(make_scene([body], dt=0.01, duration=0.5, integrator="dopri5"), *specs)
+    whole, split = Simulation(scene, tolerance=1e-8), Simulation(scene, tolerance=1e-8)
+    P0 = whole.data.state.P.copy()
+    whole.step(50)
+    for n, P in ((30, P0), (3, P0 + J), (17, P0 + J + J)):  # the state at steps 30, 33, 50
+        split.step(n)
+        assert np.array_equal(split.data.state.P, P)
+    for name in "xqPL":
+        assert np.array_equal(getattr(whole.data.state, name), getattr(split.data.state, name)), name
+    assert whole.data.adaptive_counters.tolist() == split.data.adaptive_counters.tolist()
 
 
 def test_chunk_loop_applies_impulses_whatever_the_chunking():

@@ -9,7 +9,7 @@ import pytest
 from conftest import make_scene, random_bodies
 
 from rbcli.api import prepare
-from rbcli.physics.adaptive import adaptive_work, run_adaptive_chunk
+from rbcli.physics.data import make_data
 from rbcli.physics.forces import build_force_tables, make_force_data, spring_table, terms_with_torque
 from rbcli.physics.forces.wrench import accumulate_wrench, wrench_numpy
 from rbcli.physics.integrators import INTEGRATORS, get_integrator
@@ -215,14 +215,13 @@ def test_adaptive_dopri5_per_body_torque_path_is_bitwise_the_all_bodies_path():
     tables = compiled.forces.kernel()
     all_bodies = tables._replace(torque_body=np.ones(5, dtype=np.bool_))
     results = []
+    run_chunk = get_integrator("dopri5").adaptive_chunk().run_chunk
     for forces in (tables, all_bodies, tables._replace(has_torque=False)):
-        s = compiled.initial_state.copy()
-        F, tau, extra = np.zeros((5, 3)), np.zeros((5, 3)), adaptive_work(5)
-        done, _, status = run_adaptive_chunk(
-            compiled.model.kernel(), forces, make_force_data(forces), 0.01, 0, 200, 50, 1e-8, 2.0,
-            s.x, s.q, s.P, s.L, F, tau, extra["work"], extra["control"], extra["counters"], empty_buffers(8, 5), 0,
-        )  # fmt: skip
+        data = make_data(compiled.initial_state, forces, 0, adaptive=True, tolerance=1e-8, duration=2.0)
+        done, _, status = run_chunk(
+            compiled.model.kernel(), forces, data.kernel(), 0.01, 0, 200, 50, empty_buffers(8, 5), 0
+        )
         assert (done, status) == (200, STATUS_OK)
-        results.append((_bits(s), extra["counters"].tolist()))
+        results.append((_bits(data.state), data.adaptive_counters.tolist()))
     assert np.array_equal(results[0][0], results[1][0]) and results[0][1] == results[1][1]
     assert not np.array_equal(results[0][0], results[2][0])

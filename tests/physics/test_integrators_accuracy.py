@@ -19,7 +19,7 @@ from rbcli.physics.integrators import INTEGRATORS
 from rbcli.physics.model import mass_properties
 from rbcli.physics.rotation import quat_to_matrix
 from rbcli.record.memory_sink import SinkMemory
-from rbcli.runner.loop import run
+from rbcli.runner.simulation import run
 
 FLIP = ((1.0, 2.0, 3.0), (0.01, 5.0, 0.0))  # near the separatrix: the Dzhanibekov flip
 GENERIC = ((1.0, 2.0, 3.0), (1.0, 1.0, 2.0))

@@ -1,7 +1,7 @@
 """Adaptive dopri5 (`rbcli.physics.adaptive`): tolerance reached, uniform output, fewer steps on a transient.
 
-`run_adaptive` below drives `run_adaptive_chunk` the way the runner does (chunks, frame buffers),
-until the runner itself takes `simulation.tolerance`.
+`run_adaptive` below drives the generated adaptive loop (chunks/dopri5_adaptive.py) the way the runner
+does (chunks, frame buffers), on a Data of its own.
 """
 
 import dataclasses
@@ -11,12 +11,14 @@ from conftest import make_body, make_scene
 
 from rbcli.analysis.exact import quat_geodesic_angle, torque_free
 from rbcli.api import prepare
-from rbcli.physics.adaptive import STATUS_STEP_TOO_SMALL, adaptive_work, run_adaptive_chunk
-from rbcli.physics.forces import WORLD, build_force_tables, make_force_data, spring_table
+from rbcli.physics.adaptive import STATUS_STEP_TOO_SMALL
+from rbcli.physics.data import make_data
+from rbcli.physics.forces import WORLD, build_force_tables, spring_table
 from rbcli.physics.frames import user_orientation
+from rbcli.physics.integrators import get_integrator
 from rbcli.physics.step import STATUS_FULL, STATUS_OK, empty_buffers
 from rbcli.record.memory_sink import SinkMemory
-from rbcli.runner.loop import run
+from rbcli.runner.simulation import run
 
 FLIP = ((1.0, 2.0, 3.0), (0.01, 5.0, 0.0))
 GENERIC = ((1.0, 2.0, 3.0), (1.0, 1.0, 2.0))
@@ -40,23 +42,21 @@ def run_adaptive(compiled, tolerance, chunk_steps=None):
     """
     model, settings = compiled.model, compiled.settings
     n, total, dt, every = model.body_count, settings.steps, settings.dt, settings.record_every
-    state = compiled.initial_state.copy()
-    work = adaptive_work(n)
+    data = make_data(
+        compiled.initial_state, compiled.forces, 0, adaptive=True, tolerance=tolerance, duration=total * dt
+    )
+    state, run_chunk = data.state, get_integrator("dopri5").adaptive_chunk().run_chunk
     frames = empty_buffers(total // every + 2, n)
     frames.step[0], frames.x[0], frames.q[0] = 0, state.x, state.q
     filled, index, status = 1, 0, STATUS_OK
-    F, tau = np.zeros((n, 3)), np.zeros((n, 3))
     while index < total and status in (STATUS_OK, STATUS_FULL):
         todo = total - index if chunk_steps is None else min(chunk_steps, total - index)
-        done, filled, status = run_adaptive_chunk(
-            model.kernel(), compiled.forces, make_force_data(compiled.forces), dt, index, todo, every, tolerance,
-            total * dt,
-            state.x, state.q, state.P, state.L, F, tau, work["work"], work["control"], work["counters"],
-            frames, filled,
-        )  # fmt: skip
+        done, filled, status = run_chunk(
+            model.kernel(), compiled.forces, data.kernel(), dt, index, todo, every, frames, filled
+        )
         index += done
     k = filled
-    return frames.step[:k] * dt, user_orientation(model, frames.q[:k]), frames.x[:k], work["counters"], status
+    return frames.step[:k] * dt, user_orientation(model, frames.q[:k]), frames.x[:k], data.adaptive_counters, status
 
 
 def _flip_error(t, q):

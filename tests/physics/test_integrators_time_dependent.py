@@ -28,7 +28,7 @@ from rbcli.physics.forces import build_force_tables
 from rbcli.physics.forces.tables import SCHEDULE_SINE, point_force_table, schedule_table, torque_table
 from rbcli.physics.integrators import INTEGRATORS
 from rbcli.record.memory_sink import SinkMemory
-from rbcli.runner.loop import run
+from rbcli.runner.simulation import run
 
 INERTIA = (1.0, 2.0, 3.0)
 OMEGA0 = 2.0  # [rad/s] about the principal z axis

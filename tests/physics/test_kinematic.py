@@ -1,7 +1,7 @@
 """Kinematic bodies on a schedule (issue 18): the prescribed motion is exact, and contact feels it.
 
 x(t) = p(t) + R(t) (x0 - p0), p(t) = p0 + v0 S(t), R(t) a turn by |w0| S(t), S(t) = integral of the
-schedule s from 0 (physics/contact/kinematic.py). Checks: S(t) against numerical quadrature; the pose,
+schedule s from 0 (physics/kinematic.py). Checks: S(t) against numerical quadrature; the pose,
 P and L of scheduled paddles against the numpy closed form at every recorded step; a ball on a plate
 shaken at peak acceleration Gamma g leaves it (and gains energy from it) iff Gamma > 1, the classic
 bouncing-ball threshold; a kinematic hammer moving at V sends a free ball off at (1 + e) V.
@@ -16,9 +16,9 @@ import pytest
 from scipy.integrate import quad
 
 import rbcli
-from rbcli.physics.contact.reference import kinematic_state_numpy
 from rbcli.physics.forces.schedule import schedule_integral
 from rbcli.physics.forces.tables import NO_SCHEDULE, schedule_table, schedule_values_numpy
+from rbcli.physics.kinematic_reference import kinematic_state_numpy
 from rbcli.scene.load import load_scene_text
 from rbcli.scene.spec import SceneError
 

@@ -1,10 +1,13 @@
-"""Determinism guard: every integrator on every verification and force scene gives bitwise the
+"""Determinism guard: every integrator on every verification and force scene (and two contact scenes) gives bitwise the
 trajectories stored in trajectory_hashes.json (Box2D's determinism hash, one per scene and integrator).
 
 Why: a refactor of the step (stages, Model/Data, chunk loops) must not change a single bit of any
 result. A later change to an integrator's numerics regenerates the file in its own commit, saying why:
 
     python tests/physics/test_trajectory_hashes.py --regenerate
+
+and a new case adds its hash (and final state) alone, leaving every stored one as it is, with
+`--add-missing`.
 
 Bitwise equality only holds for the same machine code, so hashes are keyed by platform and by numpy /
 numba versions. On a key with no stored hashes the test still runs: it compares the final states
@@ -38,6 +41,12 @@ SCENES = (
     "forces/spring_chain.yaml",  # damped springs
     "forces/projectile_drag.yaml",  # velocity-dependent drag
 )
+# contact (issue 30): a falling pile (64 balls reaching the floor at 0.23 s and each other soon after)
+# and the spinning brick's bounce, with the integrators whose contact paths differ: split2 (the default,
+# a mid-step evaluation), semi-implicit (at the step's start), rk4 (the last stage at its end: nothing
+# left to advance in the commit) and adaptive dopri5 on the brick (rejected attempts, the step limit)
+CONTACT_SCENES = {"verification/contact_pile.yaml": 400, "contact/box_drop.yaml": 400}  # scene: steps
+CONTACT_INTEGRATORS = ("split2", "semi-implicit", "rk4")
 FIXED = ("euler-matrix", "euler-quat", "semi-implicit", "semi-implicit-gyro", "rk4", "split2", "split4", "exact",
          "exact4", "dopri5")  # fmt: skip
 STEPS = 600  # enough to pass the impulse (t = 0.5 s at dt = 1 ms); short enough for the suite
@@ -46,6 +55,8 @@ RECORD_EVERY = 20
 CASES = [(scene, name, None) for scene in SCENES for name in FIXED] + [
     (scene, "dopri5", 1e-8) for scene in ("verification/intermediate_axis.yaml", "forces/pushed_box.yaml")
 ]
+CASES += [(scene, name, None) for scene in CONTACT_SCENES for name in CONTACT_INTEGRATORS]
+CASES += [("contact/box_drop.yaml", "dopri5", 1e-6)]
 
 
 def platform_key() -> str:
@@ -60,9 +71,9 @@ def run_case(scene: str, integrator: str, tolerance: float | None):  # noqa: ANN
     from rbcli.api import load_scene, simulate
 
     spec = load_scene(ROOT / "scenes" / scene)
-    dt = spec.simulation.dt
+    duration = CONTACT_SCENES.get(scene, STEPS) * spec.simulation.dt
     return simulate(
-        spec, integrator=integrator, duration=STEPS * dt, record_every=RECORD_EVERY, tolerance=tolerance,
+        spec, integrator=integrator, duration=duration, record_every=RECORD_EVERY, tolerance=tolerance,
         on_diverge="return",
     )  # fmt: skip
 
@@ -95,11 +106,14 @@ def test_trajectory_is_bitwise_unchanged(store, scene, integrator, tolerance):
         np.testing.assert_allclose(final_state(traj), expected, rtol=1e-9, atol=1e-9 * np.abs(expected).max())
 
 
-def regenerate() -> None:
-    """Rewrite this platform's hashes (and the final states when none are stored yet)."""
+def regenerate(missing_only: bool = False) -> None:
+    """Rewrite this platform's hashes (and the final states when none are stored yet); with
+    missing_only, compute only the cases this platform has no hash for (new cases) and keep the rest."""
     store = json.loads(STORE.read_text()) if STORE.exists() else {"hashes": {}, "final_state": {}}
-    hashes, finals = {}, store["final_state"]
+    hashes, finals = dict(store["hashes"].get(platform_key(), {})) if missing_only else {}, store["final_state"]
     for case in CASES:
+        if case_id(*case) in hashes:
+            continue
         traj = run_case(*case)
         hashes[case_id(*case)] = trajectory_hash(traj)
         finals[case_id(*case)] = final_state(traj)
@@ -111,5 +125,7 @@ def regenerate() -> None:
 if __name__ == "__main__":
     if "--regenerate" in sys.argv:
         regenerate()
+    elif "--add-missing" in sys.argv:
+        regenerate(missing_only=True)
     else:
         print(__doc__)

@@ -104,13 +104,14 @@ def test_energy_guard_stops_at_the_same_step_however_the_chunks_fall(monkeypatch
     kinetic energy has grown 1e6-fold above 1e6 J/kg; the step is on the guard's fixed grid, whatever the
     (wall-clock-sized) chunks, and the log ends just before it."""
     import rbcli.runner.loop as loop
+    import rbcli.runner.simulation as simulation
     from rbcli.record.memory_sink import SinkMemory
 
     results = []
     for chunk_seconds in (3e-4, 10.0):  # chunks of a few hundred steps vs everything in a few chunks
         monkeypatch.setattr(loop, "CHUNK_SECONDS", chunk_seconds)
         sink = SinkMemory()
-        summary = loop.run(rbcli.prepare(load_scene_text(RUNAWAY)), [sink])
+        summary = simulation.run(rbcli.prepare(load_scene_text(RUNAWAY)), [sink])
         trajectory = sink.trajectory()
         results.append((summary.status, summary.steps, trajectory.step[-1], summary.message))
     assert results[0] == results[1], results

@@ -8,6 +8,7 @@ import pytest
 from conftest import make_body, make_scene, random_bodies
 
 import rbcli.runner.loop as loop
+import rbcli.runner.simulation as simulation
 from rbcli.api import SimulationDiverged, prepare, simulate
 from rbcli.record.memory_sink import SinkMemory
 
@@ -54,7 +55,7 @@ def test_interrupt_between_chunks_keeps_a_complete_log(monkeypatch):
         if len(calls) == 3:
             os.kill(os.getpid(), signal.SIGINT)  # what Ctrl-C does
 
-    summary = loop.run(compiled, [memory], progress=progress)
+    summary = simulation.run(compiled, [memory], progress=progress)
     traj = memory.trajectory()
     assert summary.status == "interrupted"
     assert 0 < summary.steps < compiled.settings.steps
@@ -70,7 +71,7 @@ class _FailingSink(SinkMemory):
 def test_a_failing_sink_still_closes_the_others():
     good, bad = SinkMemory(), _FailingSink()
     with pytest.raises(OSError, match="disk full"):
-        loop.run(prepare(make_scene(random_bodies(1))), [good, bad])
+        simulation.run(prepare(make_scene(random_bodies(1))), [good, bad])
     assert good.summary is not None and good.summary.status == "error"
 
 

@@ -10,6 +10,7 @@ from conftest import make_scene, random_bodies
 
 import rbcli.runner.loop as loop
 import rbcli.runner.recorder as recorder_module
+import rbcli.runner.simulation as simulation
 from rbcli.api import prepare
 from rbcli.physics.integrators import INTEGRATORS
 from rbcli.record.mcap_sink import SinkMcap
@@ -28,7 +29,7 @@ def test_threaded_and_inline_recording_write_the_same_bytes(tmp_path, monkeypatc
     digests = []
     for threaded in (True, False):
         path = tmp_path / f"run-{threaded}.mcap"
-        summary = loop.run(compiled, [SinkMcap(path)], threaded=threaded)
+        summary = simulation.run(compiled, [SinkMcap(path)], threaded=threaded)
         assert summary.frames == 101
         digests.append(hashlib.sha256(path.read_bytes()).hexdigest())
     assert digests[0] == digests[1]
@@ -53,13 +54,13 @@ def test_a_slow_sink_holds_the_run_back_instead_of_growing_memory(monkeypatch):
     real = recorder_module.empty_buffers
     monkeypatch.setattr(recorder_module, "empty_buffers", lambda k, n: made.append(k) or real(k, n))
     sink = _SlowSink()
-    summary = loop.run(prepare(_scene()), [sink])
+    summary = simulation.run(prepare(_scene()), [sink])
     traj = sink.trajectory()
     assert len(made) == recorder_module.POOL_BUFFERS  # every block reused one of a fixed pool
     assert sink.threads == {"rbsim-recorder"}
     assert summary.frames == len(traj.t) == 101 and traj.step.tolist() == list(range(101))
     inline = SinkMemory()
-    loop.run(prepare(_scene()), [inline], threaded=False)
+    simulation.run(prepare(_scene()), [inline], threaded=False)
     for name in ("x", "q", "v", "omega", "P", "L"):
         assert np.array_equal(getattr(traj, name), getattr(inline.trajectory(), name)), name
 
@@ -77,7 +78,7 @@ def test_a_sink_failing_mid_run_stops_it_and_every_sink_keeps_what_was_written(m
     good, bad = SinkMemory(), _FailsOnThirdBlock()
     started = time.perf_counter()
     with pytest.raises(OSError, match="disk full"):
-        loop.run(prepare(_scene(duration=1000.0)), [good, bad], threaded=threaded)
+        simulation.run(prepare(_scene(duration=1000.0)), [good, bad], threaded=threaded)
     assert time.perf_counter() - started < 30  # stopped, not run to the end (100,000 steps)
     for sink in (good, bad):
         assert sink.summary is not None and sink.summary.status == "error"
@@ -90,17 +91,17 @@ def test_a_sink_failing_mid_run_stops_it_and_every_sink_keeps_what_was_written(m
 
 def test_every_chunk_kernel_releases_the_gil():
     """The recording thread only overlaps the integration if the compiled chunk drops the GIL."""
-    from rbcli.physics.adaptive import run_adaptive_chunk
-
     kernels = {name: info.chunk().run_chunk for name, info in INTEGRATORS.items()}
-    kernels["adaptive"] = run_adaptive_chunk
+    kernels.update(
+        {f"{name} adaptive": info.adaptive_chunk().run_chunk for name, info in INTEGRATORS.items() if info.adaptive}
+    )
     assert {name: k.targetoptions.get("nogil") for name, k in kernels.items()} == dict.fromkeys(kernels, True)
 
 
 def test_a_run_that_fits_one_buffer_starts_no_thread():
     sink = _SlowSink()
     before = threading.active_count()
-    loop.run(prepare(_scene(duration=0.1)), [sink])  # 11 frames: one buffer
+    simulation.run(prepare(_scene(duration=0.1)), [sink])  # 11 frames: one buffer
     assert sink.threads == {threading.current_thread().name} and threading.active_count() == before
 
 
@@ -124,13 +125,13 @@ def test_an_interrupted_threaded_recording_is_complete_and_readable(tmp_path, mo
             os.kill(os.getpid(), signal.SIGINT)
 
     path = tmp_path / f"cut{suffix}"
-    summary = loop.run(compiled, [open_file_sink(path)], progress=progress)
+    summary = simulation.run(compiled, [open_file_sink(path)], progress=progress)
     assert summary.status == "interrupted" and 0 < summary.steps < compiled.settings.steps
     recorded = (read_mcap if suffix == ".mcap" else read_rrd)(path)
     assert recorded.summary["status"] == "interrupted"
     assert recorded.step.tolist() == list(range(summary.steps + 1)) == list(range(summary.frames))
     inline = SinkMemory()
     cut = prepare(make_scene(random_bodies(3), dt=1e-4, duration=summary.steps * 1e-4, every=1, gravity=G))
-    loop.run(cut, [inline], threaded=False)
+    simulation.run(cut, [inline], threaded=False)
     tolerance = 0 if suffix == ".mcap" else 1e-6  # .rrd transforms are float32
     np.testing.assert_allclose(recorded.x, inline.trajectory().x, rtol=tolerance, atol=tolerance)

@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 import rbcli
 from rbcli.cli.app import app
 from rbcli.record.memory_sink import SinkMemory
-from rbcli.runner.loop import run, warm_up
+from rbcli.runner.simulation import run, warm_up
 from rbcli.scene.load import analyse_scene_text
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")

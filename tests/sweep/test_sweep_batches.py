@@ -4,6 +4,8 @@ slots finish together, and sized from every measured row rather than the first."
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import pytest
 
 from rbcli.sweeps.batches import TAIL_SECONDS, TASK_SECONDS, Batcher, batch_size
@@ -64,3 +66,29 @@ def test_the_estimate_is_the_mean_of_every_row_not_the_first():
 
 def test_a_fixed_batch_is_kept():
     assert [len(g) for g in hand_out(10, 2, 0.5, fixed=3)] == [3, 3, 3, 1]
+
+
+def test_a_failed_task_is_run_again_or_recorded_never_dropped():
+    """What follows a Dask task that gave no rows (dask_runner.settle_failure): every variant of it either
+    runs again or gets a row saying why; a KilledWorker splits a batch into single variants and makes a
+    single variant "crashed"; any other failure (the cluster's) runs the task again LOST_TRIES - 1 times,
+    then its variants are "lost" rows."""
+    from distributed import KilledWorker
+    from distributed.client import FutureCancelledError
+
+    from rbcli.sweeps.dask_runner import LOST_TRIES, SweepTask, settle_failure
+
+    killed = KilledWorker("run_batch-1", SimpleNamespace(address="tcp://127.0.0.1:1"), 3)  # allowed-failures 3
+    rows, again = settle_failure(SweepTask([(4, (1.0,)), (5, (2.0,))]), killed)
+    assert rows == [] and [t.group for t in again] == [[(4, (1.0,))], [(5, (2.0,))]] and all(t.alone for t in again)
+    rows, again = settle_failure(again[0], killed)
+    assert again == [] and [(r["variant"], r["status"]) for r in rows] == [(4, "crashed")]
+    assert "on each of its 4 tries" in rows[0]["message"]
+    task = SweepTask([(7, ()), (8, ())])
+    cancelled = FutureCancelledError("run_batch-2", "scheduler-connection-lost")
+    for _ in range(LOST_TRIES - 1):
+        rows, again = settle_failure(task, cancelled)
+        assert rows == [] and again == [task]
+    rows, again = settle_failure(task, cancelled)
+    assert again == [] and [(r["variant"], r["status"]) for r in rows] == [(7, "lost"), (8, "lost")]
+    assert "FutureCancelledError" in rows[0]["message"] and f"{LOST_TRIES} times" in rows[0]["message"]

@@ -15,8 +15,10 @@ import pyarrow.parquet as pq
 import pytest
 from sweep_cases import rows_without_wall_time, spring_sweep_fixture  # noqa: F401 - a fixture
 
+from rbcli.sweeps.dask_runner import failed_rows
 from rbcli.sweeps.load import load_sweep
 from rbcli.sweeps.run import SweepOutputError, run_sweep
+from rbcli.sweeps.table import write_part
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -49,6 +51,42 @@ def test_resume_runs_only_the_variants_without_a_part(spring_sweep, tmp_path):
     assert rows_without_wall_time(table) == rows_without_wall_time(whole.table)
     # and once complete, a run again has nothing left to do
     assert run_sweep(spec, scheduler="serial", output=out).ran == 0
+
+
+def test_resume_runs_exactly_the_variants_the_cluster_lost_and_retry_failed_the_failed_ones(spring_sweep, tmp_path):
+    """A folder where the cluster lost variants 2 and 3 (rows "lost", as dask_runner records a task lost
+    more often than it retries) and an older rbsim recorded variant 0's lost task as an "error" row:
+    resuming runs exactly those three, the table ends equal to an uninterrupted run; the diverged and
+    failed variants 4 and 5 are their own results and run again only with retry_failed."""
+    spec = load_sweep(spring_sweep)
+    whole = run_sweep(spec, scheduler="serial", output=tmp_path / "whole", batch=2)
+    out = tmp_path / "out"
+    run_sweep(spec, scheduler="serial", output=out, batch=2)
+    parts = _part_variants(out)
+    for part, variants in parts.items():
+        if variants == [2, 3]:
+            part.unlink()
+            write_part(out, failed_rows([(2, ()), (3, ())], "lost", "the cluster lost this variant's task 5 times"))
+        if variants == [0, 1]:
+            rows = pq.read_table(part).to_pylist()
+            rows[0].update(status="error", message="the task failed on the cluster: FutureCancelledError: forgotten")
+            part.unlink()
+            write_part(out, rows)
+    ran: list[int] = []
+
+    def note(rows: list[dict]) -> None:
+        ran.extend(row["variant"] for row in rows)
+
+    again = run_sweep(spec, scheduler="serial", output=out, batch=1, on_rows=note)
+    assert sorted(ran) == [0, 2, 3] and again.resumed == 3
+    assert again.complete and again.all_finished
+    table = pq.read_table(out / "results.parquet")
+    assert table.column("variant").to_pylist() == list(range(6))  # one row each: the new ones won
+    assert rows_without_wall_time(table) == rows_without_wall_time(whole.table)
+    ran.clear()
+    retried = run_sweep(spec, scheduler="serial", output=out, batch=1, retry_failed=True, on_rows=note)
+    assert sorted(ran) == [4, 5] and retried.resumed == 4  # the diverged / failed k = 1e6 pair
+    assert rows_without_wall_time(retried.table) == rows_without_wall_time(whole.table)
 
 
 def test_a_folder_of_another_sweep_is_refused_unless_fresh(spring_sweep, tmp_path):

@@ -51,8 +51,8 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
             kinematic_end_stage(model, forces, ts + h, x, q, P, L)
             # contact_commit: the (sub-)step is complete: its last evaluation's contacts become the history
             contact_commit_stage(model, contact, contact_work, x, q, P, L)
-        # contact_record: on recording steps, the step's contact count, deepest overlap and energy
-        contact_record_stage(contact_work, frames, filled, (index + 1) % record_every == 0)
+        # contact_record: on recording steps, the state's contact count, deepest overlap and energy
+        contact_record_stage(contact, contact_work, x, q, frames, filled, (index + 1) % record_every == 0)
         # record: on recording steps, the divergence check and the state copied into the next frame
         filled, status = record_if_due(index + 1, record_every, x, q, P, L, frames, filled)
         if status != STATUS_OK:

@@ -53,8 +53,8 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
             contact_commit_stage(model, contact, contact_work, x, q, P, L)
         # materialise: exact defers torque-free bodies under constant forces; write them when due
         materialise(model, forces, t, dt, x, q, P, L, scratch, (index + 1) % record_every == 0 or k + 1 == n_steps)
-        # contact_record: on recording steps, the step's contact count, deepest overlap and energy
-        contact_record_stage(contact_work, frames, filled, (index + 1) % record_every == 0)
+        # contact_record: on recording steps, the state's contact count, deepest overlap and energy
+        contact_record_stage(contact, contact_work, x, q, frames, filled, (index + 1) % record_every == 0)
         # record: on recording steps, the divergence check and the state copied into the next frame
         filled, status = record_if_due(index + 1, record_every, x, q, P, L, frames, filled)
         if status != STATUS_OK:

@@ -24,6 +24,10 @@ import math
 import numba
 import numpy as np
 
+from rbcli.physics import kernel_cache
+
+kernel_cache.install()  # before this module's kernels first run: their cache is keyed on the physics sources
+
 # the 13 neighbour cells (dx, dy, dz) of the half shell: the lexicographically positive offsets
 HALF_SHELL = np.array(
     [(dx, dy, dz) for dz in (-1, 0, 1) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if (dz, dy, dx) > (0, 0, 0)],
@@ -98,10 +102,3 @@ def build_grid(contact, work):  # noqa: ANN001, ANN201
         sp[a, 0], sp[a, 1], sp[a, 2], sp[a, 3] = pos[i, 0], pos[i, 1], pos[i, 2], radius[i]
         sc[a, 0], sc[a, 1], sc[a, 2] = cell[i, 0], cell[i, 1], cell[i, 2]
     return grid
-
-
-def candidate_pairs_numpy(position: np.ndarray, cell_size: float) -> set[tuple[int, int]]:
-    """Reference: every pair (i < j) closer than cell_size, by brute force O(n^2) (tests)."""
-    d = np.linalg.norm(position[:, None, :] - position[None, :, :], axis=-1)
-    i, j = np.nonzero(np.triu(d < cell_size, k=1))
-    return set(zip(i.tolist(), j.tolist(), strict=True))

@@ -16,33 +16,58 @@ The owner (the lower sphere index of a pair, or the sphere of a plane contact) g
 c, the partner -f. xi is the tangential spring's elongation, the contact's history: it starts at 0
 when the contact forms, is turned into the current tangent plane at each evaluation (its component
 along n removed, its length kept), and grows by v_t times the time into the step. A force evaluation
-at offset s into a step of length h uses xi_0 + s v_t (xi_0: the history at the start of the step) and
-proposes xi_0 + h v_t for the end of the step, so the spring is integrated by the same quadrature as
-the step (split2's single midpoint evaluation: the midpoint rule); the pipeline's contact_commit
-stage keeps the last evaluation's proposal once the step is complete. A tangential spring with a
-Coulomb cap lets a body rest on a slope without creeping (a viscous tangential law creeps), which is
-why it is used; see docs/contact.md.
+at offset s into a step of length h uses u = xi_0 + s v_t (xi_0: the history at the start of the step)
+and writes u to the trial arrays; once the step is complete, the pipeline's contact_commit stage
+advances the last evaluation's u to the end of the step, xi = u + (h - s) v_t with the end-of-step
+velocities (`commit_contacts`). A tangential spring with a Coulomb cap lets a body rest on a slope
+without creeping (a viscous tangential law creeps), which is why it is used; see docs/contact.md.
+
+Where the pieces are: the contacts come from the one contact search (search.py: planes, the grid walk,
+the mixed materials), the formulas from law.py; this module is the stage that applies them (the force
+sink of the search), and the stages around the update (the clock, the commit, static bodies held).
 """
 
 from __future__ import annotations
 
 import math
+from typing import Any, NamedTuple
 
 import numba
+import numpy as np
+from numba.core import types
+from numba.extending import overload
 
-from rbcli.physics.contact.broad_phase import HALF_SHELL, bucket_of, build_grid
+from rbcli.physics.contact.law import (
+    body_velocities,
+    normal_force,
+    push,
+    relative_velocity,
+    tangential_force,
+    velocity_at,
+)
+from rbcli.physics.contact.search import contact_found, find_contacts, sphere_positions
 from rbcli.physics.contact.tables import (
     COUNT_CANDIDATES,
     COUNT_CONTACTS,
     COUNT_EVALUATIONS,
     COUNT_OVERFLOW,
-    PLANE_PARTNER_BASE,
     STAT_CONTACTS,
     STAT_ENERGY,
     STAT_MAX_PENETRATION,
 )
-from rbcli.physics.integrators.kinematics import rotate, rotate_inverse
 from rbcli.physics.step import STEP_KERNEL
+
+_OPTIONS: Any = STEP_KERNEL  # typed Any: numba's stubs type jit_options as a TypedDict without `_nrt`
+
+
+class ContactForceSink(NamedTuple):
+    """The force stage's sink of the contact search (search.py): each contact's force is added to F and
+    tau (at the bodies' centres of mass x), its spring proposed to the history, at offset s into the step."""
+
+    x: np.ndarray
+    s: float
+    F: np.ndarray
+    tau: np.ndarray
 
 
 @numba.njit(**STEP_KERNEL)
@@ -67,7 +92,7 @@ def commit_contacts(model, contact, work, x, q, P, L) -> None:  # noqa: ANN001
     s_last = work.clock[2]
     rest = work.clock[1] - s_last
     if rest != 0.0:  # the end-of-step velocities (the evaluation's are no longer needed)
-        _body_velocities(model, work, x, q, P, L)
+        body_velocities(model, work, x, q, P, L)
     for i in range(work.hist_count.shape[0]):
         count = work.trial_count[i]
         work.hist_count[i] = count
@@ -83,9 +108,9 @@ def commit_contacts(model, contact, work, x, q, P, L) -> None:  # noqa: ANN001
                 continue
             c0, c1, c2 = work.trial_point[i, k, 0], work.trial_point[i, k, 1], work.trial_point[i, k, 2]
             n0, n1, n2 = work.trial_normal[i, k, 0], work.trial_normal[i, k, 1], work.trial_normal[i, k, 2]
-            v0, v1, v2 = _velocity_at(work, x, ba, c0, c1, c2)
+            v0, v1, v2 = velocity_at(work, x, ba, c0, c1, c2)
             if partner >= 0:
-                w0, w1, w2 = _velocity_at(work, x, contact.sphere_body[partner], c0, c1, c2)
+                w0, w1, w2 = velocity_at(work, x, contact.sphere_body[partner], c0, c1, c2)
                 v0, v1, v2 = v0 - w0, v1 - w1, v2 - w2
             vn = v0 * n0 + v1 * n1 + v2 * n2
             e0 = work.trial_xi[i, k, 0] + rest * (v0 - vn * n0)
@@ -112,240 +137,57 @@ def hold_static_bodies(contact, F, tau) -> None:  # noqa: ANN001
 @numba.njit(**STEP_KERNEL)
 def accumulate_contact(model, contact, work, t, x, q, P, L, F, tau) -> None:  # noqa: ANN001
     """Add every contact's force and torque to F and tau (world frame, about each centre of mass)."""
-    _body_velocities(model, work, x, q, P, L)
-    _sphere_positions(contact, work, x, q)
-    grid = build_grid(contact, work)
+    body_velocities(model, work, x, q, P, L)
+    sphere_positions(contact, work, x, q)
     work.trial_count[:] = 0
     work.stats[:] = 0.0
     work.counters[COUNT_EVALUATIONS] += 1
     s = t - work.clock[0]
-    h = work.clock[1]
     work.clock[2] = s
-    _plane_contacts(contact, work, x, s, h, F, tau)
-    # the walk reads the bucket-ordered copies (sorted_*: build_grid), so the distance checks of the
-    # candidates touch neighbouring memory; sphere and body arrays are read only for real overlaps
-    cell, sp, order, start = work.sorted_cell, work.sorted_position, work.sorted_sphere, work.bucket_start
-    dense = grid[0]
-    candidates = 0
-    for a in range(order.shape[0]):
-        ci, cj, ck = cell[a, 0], cell[a, 1], cell[a, 2]
-        p0, p1, p2, ra = sp[a, 0], sp[a, 1], sp[a, 2], sp[a, 3]
-        own = work.sphere_bucket[order[a]]
-        for e in range(a + 1, start[own + 1]):  # later spheres of the same bucket, same cell
-            if dense or (cell[e, 0] == ci and cell[e, 1] == cj and cell[e, 2] == ck):
-                candidates += 1
-                d0, d1, d2 = p0 - sp[e, 0], p1 - sp[e, 1], p2 - sp[e, 2]
-                reach = ra + sp[e, 3]
-                dist2 = d0 * d0 + d1 * d1 + d2 * d2
-                if dist2 < reach * reach and dist2 > 0.0:  # coincident centres: no normal, skipped
-                    _pair(contact, work, x, s, h, order[a], order[e], d0, d1, d2, dist2, reach, F, tau)
-        for n in range(HALF_SHELL.shape[0]):
-            ni, nj, nk = ci + HALF_SHELL[n, 0], cj + HALF_SHELL[n, 1], ck + HALF_SHELL[n, 2]
-            b = bucket_of(ni, nj, nk, grid)
-            if b < 0:
-                continue
-            for e in range(start[b], start[b + 1]):
-                # dense: a bucket is one cell; hashed: other cells may share it
-                if dense or (cell[e, 0] == ni and cell[e, 1] == nj and cell[e, 2] == nk):
-                    candidates += 1
-                    d0, d1, d2 = p0 - sp[e, 0], p1 - sp[e, 1], p2 - sp[e, 2]
-                    reach = ra + sp[e, 3]
-                    dist2 = d0 * d0 + d1 * d1 + d2 * d2
-                    if dist2 < reach * reach and dist2 > 0.0:
-                        _pair(contact, work, x, s, h, order[a], order[e], d0, d1, d2, dist2, reach, F, tau)
-    work.counters[COUNT_CANDIDATES] += candidates
+    work.counters[COUNT_CANDIDATES] += find_contacts(contact, work, ContactForceSink(x, s, F, tau))
 
 
-@numba.njit(cache=True, inline="always")
-def _body_velocities(model, work, x, q, P, L) -> None:  # noqa: ANN001
-    """v = P / M and w = R I^-1 R^T L of every body (static bodies: 0)."""
-    v, w = work.body_velocity, work.body_omega
-    inv = model.body_inertia_inv
-    for b in range(v.shape[0]):
-        inv_m = 1.0 / model.body_mass[b]
-        v[b, 0], v[b, 1], v[b, 2] = P[b, 0] * inv_m, P[b, 1] * inv_m, P[b, 2] * inv_m
-        i0, i1, i2 = inv[b, 0], inv[b, 1], inv[b, 2]
-        if i0 == i1 and i1 == i2:  # a ball: w = L / I in any frame, no rotation needed
-            w[b, 0], w[b, 1], w[b, 2] = L[b, 0] * i0, L[b, 1] * i0, L[b, 2] * i0
-            continue
-        qw, qx, qy, qz = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
-        m0, m1, m2 = rotate_inverse(qw, qx, qy, qz, L[b, 0], L[b, 1], L[b, 2])
-        w[b, 0], w[b, 1], w[b, 2] = rotate(qw, qx, qy, qz, m0 * i0, m1 * i1, m2 * i2)
+# not inline="always": numba 0.68's IR inlining of this overload lost the writes to sink.F and sink.tau
+# (the forces came out zero; measured); as a function LLVM still inlines it into the walk
+@overload(contact_found, jit_options=_OPTIONS)
+def _contact_force(sink, contact, work, owner, partner, ba, bb, n0, n1, n2, overlap, c0, c1, c2, k, zeta, mu):  # noqa: ANN001, ANN202
+    """The force of one contact (module docstring) on body ba (owner) and bb (partner; -1: a plane), its
+    spring proposed to the history (trial arrays; commit_contacts advances it to the end of the step)."""
+    if not (isinstance(sink, types.BaseNamedTuple) and sink.instance_class is ContactForceSink):
+        return None
 
+    def resolve(sink, contact, work, owner, partner, ba, bb, n0, n1, n2, overlap, c0, c1, c2, k, zeta, mu):  # noqa: ANN001, ANN202
+        x = sink.x
+        m_eff, vn, t0, t1, t2 = relative_velocity(contact, work, x, ba, bb, n0, n1, n2, c0, c1, c2)
+        fn, cn = normal_force(k, zeta, m_eff, overlap, vn)
+        energy = 0.5 * k * overlap * overlap
+        f0, f1, f2 = fn * n0, fn * n1, fn * n2
+        if mu > 0.0:
+            g0, g1, g2, u0, u1, u2, kt = tangential_force(contact.tangential_ratio, work, sink.s, owner, partner,
+                                                          n0, n1, n2, t0, t1, t2, k, cn, fn, mu)  # fmt: skip
+            energy += 0.5 * kt * (u0 * u0 + u1 * u1 + u2 * u2)
+            f0, f1, f2 = f0 + g0, f1 + g1, f2 + g2
+            slot = work.trial_count[owner]
+            if slot < work.trial_partner.shape[1]:  # commit_contacts advances it to the end of the step
+                work.trial_partner[owner, slot] = partner
+                work.trial_xi[owner, slot, 0], work.trial_xi[owner, slot, 1] = u0, u1
+                work.trial_xi[owner, slot, 2] = u2
+                work.trial_normal[owner, slot, 0], work.trial_normal[owner, slot, 1] = n0, n1
+                work.trial_normal[owner, slot, 2] = n2
+                work.trial_point[owner, slot, 0], work.trial_point[owner, slot, 1] = c0, c1
+                work.trial_point[owner, slot, 2] = c2
+                work.trial_limit[owner, slot] = mu * fn / kt
+                work.trial_count[owner] = slot + 1
+            else:
+                work.counters[COUNT_OVERFLOW] += 1
+                if work.overflow_sphere[0] < 0:
+                    work.overflow_sphere[0] = owner
+        push(x, ba, c0, c1, c2, f0, f1, f2, sink.F, sink.tau)
+        if bb >= 0:
+            push(x, bb, c0, c1, c2, -f0, -f1, -f2, sink.F, sink.tau)
+        work.stats[STAT_CONTACTS] += 1.0
+        work.stats[STAT_MAX_PENETRATION] = max(work.stats[STAT_MAX_PENETRATION], overlap)
+        work.stats[STAT_ENERGY] += energy
+        work.counters[COUNT_CONTACTS] += 1
 
-@numba.njit(cache=True, inline="always")
-def _sphere_positions(contact, work, x, q) -> None:  # noqa: ANN001
-    """p = x_b + R r0 of every contact sphere (no rotation for a sphere at its body's centre)."""
-    pos = work.sphere_position
-    off = contact.sphere_offset
-    for i in range(pos.shape[0]):
-        b = contact.sphere_body[i]
-        o0, o1, o2 = off[i, 0], off[i, 1], off[i, 2]
-        if o0 == 0.0 and o1 == 0.0 and o2 == 0.0:
-            pos[i, 0], pos[i, 1], pos[i, 2] = x[b, 0], x[b, 1], x[b, 2]
-        else:
-            r0, r1, r2 = rotate(q[b, 0], q[b, 1], q[b, 2], q[b, 3], o0, o1, o2)
-            pos[i, 0], pos[i, 1], pos[i, 2] = x[b, 0] + r0, x[b, 1] + r1, x[b, 2] + r2
-
-
-@numba.njit(cache=True, inline="always")
-def _plane_contacts(contact, work, x, s, h, F, tau) -> None:  # noqa: ANN001
-    pos = work.sphere_position
-    planes = contact.plane_point.shape[0]
-    for i in range(pos.shape[0]):
-        b = contact.sphere_body[i]
-        if contact.body_inv_contact_mass[b] == 0.0:
-            continue
-        r = contact.sphere_radius[i]
-        for p in range(planes):
-            n0, n1, n2 = contact.plane_normal[p, 0], contact.plane_normal[p, 1], contact.plane_normal[p, 2]
-            dist = (
-                (pos[i, 0] - contact.plane_point[p, 0]) * n0
-                + (pos[i, 1] - contact.plane_point[p, 1]) * n1
-                + (pos[i, 2] - contact.plane_point[p, 2]) * n2
-            )
-            overlap = r - dist
-            if overlap <= 0.0:
-                continue
-            back = r - 0.5 * overlap  # contact point: halfway through the overlap
-            c0, c1, c2 = pos[i, 0] - back * n0, pos[i, 1] - back * n1, pos[i, 2] - back * n2
-            k = contact.body_plane_stiffness[b]
-            zeta = min(contact.body_damping_ratio[b], contact.plane_damping_ratio[p])
-            mu = contact.body_friction_root[b] * contact.plane_friction_root[p]
-            _resolve(contact, work, x, s, h, i, PLANE_PARTNER_BASE - p, b, -1, n0, n1, n2, overlap,
-                     c0, c1, c2, k, zeta, mu, F, tau)  # fmt: skip
-
-
-@numba.njit(cache=True, inline="always")
-def _pair(contact, work, x, s, h, i, j, d0, d1, d2, dist2, reach, F, tau) -> None:  # noqa: ANN001
-    """The contact of spheres i and j, overlapping (d = p_i - p_j, |d|^2 = dist2 < reach^2)."""
-    pos = work.sphere_position
-    bi, bj = contact.sphere_body[i], contact.sphere_body[j]
-    if bi == bj:
-        return
-    if contact.body_inv_contact_mass[bi] == 0.0 and contact.body_inv_contact_mass[bj] == 0.0:
-        return
-    if j < i:  # the owner is the lower index: one history per pair whichever sphere found it
-        i, j, bi, bj = j, i, bj, bi
-        d0, d1, d2 = -d0, -d1, -d2
-    dist = math.sqrt(dist2)
-    overlap = reach - dist
-    n0, n1, n2 = d0 / dist, d1 / dist, d2 / dist
-    forward = contact.sphere_radius[j] - 0.5 * overlap
-    c0, c1, c2 = pos[j, 0] + forward * n0, pos[j, 1] + forward * n1, pos[j, 2] + forward * n2
-    ka, kb = contact.body_stiffness[bi], contact.body_stiffness[bj]
-    k = ka if ka == kb else 2.0 * ka * kb / (ka + kb)
-    zeta = min(contact.body_damping_ratio[bi], contact.body_damping_ratio[bj])
-    mu = contact.body_friction_root[bi] * contact.body_friction_root[bj]
-    _resolve(contact, work, x, s, h, i, j, bi, bj, n0, n1, n2, overlap, c0, c1, c2, k, zeta, mu, F, tau)
-
-
-@numba.njit(cache=True, inline="always")
-def _velocity_at(work, x, b, c0, c1, c2):  # noqa: ANN001, ANN202
-    v, w = work.body_velocity, work.body_omega
-    r0, r1, r2 = c0 - x[b, 0], c1 - x[b, 1], c2 - x[b, 2]
-    return (
-        v[b, 0] + w[b, 1] * r2 - w[b, 2] * r1,
-        v[b, 1] + w[b, 2] * r0 - w[b, 0] * r2,
-        v[b, 2] + w[b, 0] * r1 - w[b, 1] * r0,
-    )
-
-
-@numba.njit(cache=True, inline="always")
-def _push(x, b, c0, c1, c2, f0, f1, f2, F, tau) -> None:  # noqa: ANN001
-    """Force f at world point c on body b."""
-    r0, r1, r2 = c0 - x[b, 0], c1 - x[b, 1], c2 - x[b, 2]
-    F[b, 0] += f0
-    F[b, 1] += f1
-    F[b, 2] += f2
-    tau[b, 0] += r1 * f2 - r2 * f1
-    tau[b, 1] += r2 * f0 - r0 * f2
-    tau[b, 2] += r0 * f1 - r1 * f0
-
-
-@numba.njit(cache=True, inline="always")
-def _resolve(  # noqa: ANN202
-    contact,
-    work,
-    x,
-    s,
-    h,
-    owner,
-    partner,
-    ba,
-    bb,
-    n0,
-    n1,
-    n2,
-    overlap,
-    c0,
-    c1,
-    c2,
-    k,
-    zeta,
-    mu,
-    F,
-    tau,  # noqa: ANN001
-):
-    """Force of one contact (module docstring) on body ba (owner) and bb (partner; -1: a plane)."""
-    inv_a = contact.body_inv_contact_mass[ba]
-    inv_b = contact.body_inv_contact_mass[bb] if bb >= 0 else 0.0
-    m_eff = 1.0 / (inv_a + inv_b)
-    va0, va1, va2 = _velocity_at(work, x, ba, c0, c1, c2)
-    if bb >= 0:
-        vb0, vb1, vb2 = _velocity_at(work, x, bb, c0, c1, c2)
-        va0, va1, va2 = va0 - vb0, va1 - vb1, va2 - vb2
-    vn = va0 * n0 + va1 * n1 + va2 * n2
-    t0, t1, t2 = va0 - vn * n0, va1 - vn * n1, va2 - vn * n2
-    cn = 2.0 * zeta * math.sqrt(k * m_eff)
-    fn = k * overlap - cn * vn
-    if fn < 0.0:  # a dashpot pulling the surfaces together is not a contact force
-        fn = 0.0
-    energy = 0.5 * k * overlap * overlap
-    f0, f1, f2 = fn * n0, fn * n1, fn * n2
-    if mu > 0.0:
-        # the history of this contact, turned into the current tangent plane with its length kept
-        x0, x1, x2 = 0.0, 0.0, 0.0
-        for slot in range(work.hist_count[owner]):
-            if work.hist_partner[owner, slot] == partner:
-                x0, x1, x2 = work.hist_xi[owner, slot, 0], work.hist_xi[owner, slot, 1], work.hist_xi[owner, slot, 2]
-                length2 = x0 * x0 + x1 * x1 + x2 * x2
-                along = x0 * n0 + x1 * n1 + x2 * n2
-                if along * along > 1e-12 * length2:  # else: a normal part < 1e-6 |xi| stays, harmless
-                    x0, x1, x2 = x0 - along * n0, x1 - along * n1, x2 - along * n2
-                    kept2 = x0 * x0 + x1 * x1 + x2 * x2
-                    scale = math.sqrt(length2 / kept2) if kept2 > 0.0 else 0.0
-                    x0, x1, x2 = x0 * scale, x1 * scale, x2 * scale
-                break
-        kt = contact.tangential_ratio * k
-        ct = cn * math.sqrt(contact.tangential_ratio)  # 2 zeta sqrt(k_t m_eff)
-        u0, u1, u2 = x0 + s * t0, x1 + s * t1, x2 + s * t2  # elongation now
-        g0, g1, g2 = -kt * u0 - ct * t0, -kt * u1 - ct * t1, -kt * u2 - ct * t2
-        ft2 = g0 * g0 + g1 * g1 + g2 * g2
-        cap = mu * fn
-        if ft2 > cap * cap:  # sliding: the force at the Coulomb limit, the spring stretched to match it
-            scale = cap / math.sqrt(ft2)
-            g0, g1, g2 = g0 * scale, g1 * scale, g2 * scale
-            inv_kt = 1.0 / kt
-            u0, u1, u2 = -(g0 + ct * t0) * inv_kt, -(g1 + ct * t1) * inv_kt, -(g2 + ct * t2) * inv_kt
-        energy += 0.5 * kt * (u0 * u0 + u1 * u1 + u2 * u2)
-        f0, f1, f2 = f0 + g0, f1 + g1, f2 + g2
-        slot = work.trial_count[owner]
-        if slot < work.trial_partner.shape[1]:  # commit_contacts advances it to the end of the step
-            work.trial_partner[owner, slot] = partner
-            work.trial_xi[owner, slot, 0], work.trial_xi[owner, slot, 1], work.trial_xi[owner, slot, 2] = u0, u1, u2
-            work.trial_normal[owner, slot, 0], work.trial_normal[owner, slot, 1] = n0, n1
-            work.trial_normal[owner, slot, 2] = n2
-            work.trial_point[owner, slot, 0], work.trial_point[owner, slot, 1] = c0, c1
-            work.trial_point[owner, slot, 2] = c2
-            work.trial_limit[owner, slot] = cap / kt
-            work.trial_count[owner] = slot + 1
-        else:
-            work.counters[COUNT_OVERFLOW] += 1
-    _push(x, ba, c0, c1, c2, f0, f1, f2, F, tau)
-    if bb >= 0:
-        _push(x, bb, c0, c1, c2, -f0, -f1, -f2, F, tau)
-    work.stats[STAT_CONTACTS] += 1.0
-    work.stats[STAT_MAX_PENETRATION] = max(work.stats[STAT_MAX_PENETRATION], overlap)
-    work.stats[STAT_ENERGY] += energy
-    work.counters[COUNT_CONTACTS] += 1
+    return resolve

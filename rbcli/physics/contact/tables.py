@@ -30,13 +30,18 @@ PLANE_PARTNER_BASE = -1
 # History slots per contact sphere: the contacts it owns (it is the lower index of the pair, or a plane
 # contact). 12 is the kissing number of equal spheres; a sphere owning more contacts keeps the first 12
 # histories and counts the others in `ContactWork.counters[COUNT_OVERFLOW]` (their friction then starts
-# afresh every step, still Coulomb-limited).
+# afresh every step, still Coulomb-limited): recorded as the invariant `contact_history_overflow`, and
+# `rbsim run` warns naming the body of the first such sphere.
 HISTORY_SLOTS = 12
 
 # ContactWork.stats of the last force evaluation: contacts, the deepest overlap [m], the elastic energy
 # stored in the contact springs [J] (normal k d^2 / 2 plus tangential k_t |xi|^2 / 2)
 STAT_CONTACTS, STAT_MAX_PENETRATION, STAT_ENERGY = range(3)
 STAT_COUNT = 3
+# columns of a recorded frame's contact row (physics/step.py FrameBuffers.contact, CONTACT_STATS): the
+# STAT_* of the recorded state (contact/state.py), then the run's history overflows so far
+STAT_OVERFLOW = 3
+FRAME_STAT_COUNT = 4
 # ContactWork.counters, cumulative over a run: candidate pairs tested (distance checks), contacts found,
 # contacts whose history did not fit, force evaluations
 COUNT_CANDIDATES, COUNT_CONTACTS, COUNT_OVERFLOW, COUNT_EVALUATIONS = range(4)
@@ -108,6 +113,9 @@ class ContactWork(NamedTuple):
     trial_limit: np.ndarray  # [m] (sphere_count, HISTORY_SLOTS), the Coulomb limit mu f_n / k_t of |xi|
     stats: np.ndarray  # float64 (STAT_COUNT,)
     counters: np.ndarray  # int64 (COUNTER_COUNT,)
+    # int64 (1,): the sphere of the run's first contact whose history did not fit (-1: none), so the
+    # runner can name its body; not carried by checkpoints (a resumed run names its own first)
+    overflow_sphere: np.ndarray
 
 
 def _ro(values: object, dtype: type, *shape: int) -> np.ndarray:
@@ -190,43 +198,5 @@ def make_contact_work(contact: ContactTable, body_count: int, *, history: bool =
         trial_limit=np.zeros((s, k)),
         stats=np.zeros(STAT_COUNT),
         counters=np.zeros(COUNTER_COUNT, dtype=np.int64),
-    )
-
-
-def has_contact(contact: ContactTable) -> bool:
-    return bool(contact.sphere_radius.shape[0])
-
-
-class KinematicTable(NamedTuple):
-    """The prescribed motions of a scene's kinematic bodies, one row each (read-only; the closed form
-    and the stages that set it: contact/kinematic.py)."""
-
-    body: np.ndarray  # int64 (row_count,)
-    schedule: np.ndarray  # int64 (row_count,): NO_SCHEDULE (s = 1) or a ScheduleTable row of ForceTables
-    velocity: np.ndarray  # v0 [m/s] (row_count, 3), world
-    angular_velocity: np.ndarray  # w0 [rad/s] (row_count, 3), world
-    pivot: np.ndarray  # p0 [m] (row_count, 3), world, at t = 0
-    position: np.ndarray  # x0 [m] (row_count, 3), world, centre of mass at t = 0
-    orientation: np.ndarray  # q0 (row_count, 4) wxyz, world-from-principal at t = 0
-
-
-def kinematic_table(
-    body=(),  # noqa: ANN001
-    schedule=(),  # noqa: ANN001
-    velocity=(),  # noqa: ANN001
-    angular_velocity=(),  # noqa: ANN001
-    pivot=(),  # noqa: ANN001
-    position=(),  # noqa: ANN001
-    orientation=(),  # noqa: ANN001
-) -> KinematicTable:
-    """A KinematicTable with consistent dtypes (empty: a scene without kinematic bodies)."""
-
-    return KinematicTable(
-        _ro(body, np.int64),
-        _ro(schedule, np.int64),
-        _ro(velocity, np.float64, 3),
-        _ro(angular_velocity, np.float64, 3),
-        _ro(pivot, np.float64, 3),
-        _ro(position, np.float64, 3),
-        _ro(orientation, np.float64, 4),
+        overflow_sphere=np.full(1, -1, dtype=np.int64),
     )

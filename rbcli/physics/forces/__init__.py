@@ -2,10 +2,24 @@
 
 Force types are data: `ForceTables` holds one parameter table per type (`tables.py`), with 0 rows
 when the scene does not use it, so the compiled step does no work for terms a scene does not have,
-and a table lists only the bodies its terms touch. Adding a force type = one module here with a
-compiled `accumulate_*` kernel (+ numpy reference and, when conservative, a potential energy), one
-table in `tables.py`, and one line each in `accumulate_wrench`, `wrench_numpy`, `potential_energy`
-(and, when it can produce a torque, in `terms_with_torque` and `bodies_with_torque`).
+and a table lists only the bodies its terms touch. The compiled force pass `accumulate_wrench` is
+generated from one list, `stage_list.py: FORCE_STAGES` (into `wrench_pass.py`; each stage's dispatcher
+comes from `stages.py: force_stage`).
+
+Adding a force type, in physics/ (what each place is for):
+  1. its module here: the compiled `accumulate_<name>` kernel, a numpy reference, a potential energy
+     when conservative;
+  2. `tables.py`: its table (NamedTuple + constructor), a field in ForceTables and KernelForceTables
+     (numba needs a typed field per table: a dict of tables would not compile), and its TERM_<NAME>
+     counter in TERM_NAMES (`force_terms_present` and `ForceTables.kernel()` then cover it);
+  3. one entry in `stage_list.py: FORCE_STAGES`, then `python tests/physics/test_pipeline.py
+     --regenerate` (the dispatcher and the call in accumulate_wrench are generated);
+  4. the Python side that is not compiled: a line each in `wrench.py: wrench_numpy` and, when
+     conservative, `potential_energy` (each reference has its own arguments), a keyword of
+     `build_force_tables`, and its torque rule in `terms_with_torque` / `bodies_with_torque` when it can
+     produce a torque (`conservation.py` when it changes which invariants are kept).
+The scene side (schemas/scene.schema.json, scene/force_specs.py, scene/compile_forces.py) parses and
+compiles its YAML into the table; docs/forces.md documents it.
 
 Modules: gravity (uniform, at the centre of mass), field (per-particle force or acceleration field),
 point_force (force at a body point), torque (pure couple), spring (spring-damper to a world anchor or
@@ -20,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from rbcli.physics.contact.tables import ContactTable, KinematicTable, contact_table, kinematic_table
+from rbcli.physics.contact.tables import ContactTable, contact_table
 from rbcli.physics.forces.tables import (
     NO_SCHEDULE,
     TERM_NAMES,
@@ -30,6 +44,7 @@ from rbcli.physics.forces.tables import (
     ForceData,
     ForceTables,
     ImpulseTable,
+    KinematicTable,
     PointForceTable,
     ScheduleTable,
     SpringTable,
@@ -37,6 +52,7 @@ from rbcli.physics.forces.tables import (
     drag_table,
     field_table,
     impulse_table,
+    kinematic_table,
     make_force_data,
     point_force_table,
     schedule_table,
@@ -218,14 +234,6 @@ def _check_contact(body_count: int, contact: ContactTable) -> None:
 
 def force_terms_present(forces: ForceTables) -> tuple[str, ...]:
     """Names of the terms the compiled wrench (and `apply_impulses`) will evaluate, in TERM_NAMES order."""
-    rows = {
-        "gravity": 1 if forces.has_gravity else 0,
-        "field": table_rows(forces.field),
-        "point_force": table_rows(forces.point_force),
-        "torque": table_rows(forces.torque),
-        "spring": table_rows(forces.spring),
-        "drag": table_rows(forces.drag),
-        "impulse": table_rows(forces.impulse),
-        "contact": int(forces.contact.sphere_body.shape[0]),
-    }
+    special = {"gravity": 1 if forces.has_gravity else 0, "contact": int(forces.contact.sphere_body.shape[0])}
+    rows = {name: special[name] if name in special else table_rows(getattr(forces, name)) for name in TERM_NAMES}
     return tuple(name for name in TERM_NAMES if rows[name])

@@ -11,6 +11,10 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from rbcli.physics import kernel_cache
+
+kernel_cache.install()  # before this module's kernels first run: their cache is keyed on the physics sources
+
 
 @numba.njit(cache=True)
 def rotate(q: np.ndarray, b: int, vx: float, vy: float, vz: float) -> tuple[float, float, float]:

@@ -34,7 +34,10 @@ import math
 import numba
 import numpy as np
 
+from rbcli.physics import kernel_cache
 from rbcli.physics.forces.body_point import rotate, rotate_inverse
+
+kernel_cache.install()  # before this module's kernels first run: their cache is keyed on the physics sources
 
 _MIDPOINT_ITERATIONS = 50
 

@@ -8,9 +8,12 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from rbcli.physics import kernel_cache
 from rbcli.physics.forces.body_point import angular_velocity
 from rbcli.physics.forces.tables import DragTable
 from rbcli.physics.frames import body_angular_velocity
+
+kernel_cache.install()  # before this module's kernels first run: their cache is keyed on the physics sources
 
 
 @numba.njit(cache=True)

@@ -13,9 +13,12 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from rbcli.physics import kernel_cache
 from rbcli.physics.forces.schedule import schedule_value, schedule_values_numpy
 from rbcli.physics.forces.tables import NO_SCHEDULE, FieldTable, ScheduleTable
 from rbcli.physics.rotation import quat_to_matrix
+
+kernel_cache.install()  # before this module's kernels first run: their cache is keyed on the physics sources
 
 # A gradient counts as symmetric (conservative) when |G - G^T| <= this times |G|: round-off of a
 # symmetric matrix typed in by hand is exact, so anything above ~1e-15 relative is a real curl.

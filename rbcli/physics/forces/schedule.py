@@ -3,7 +3,7 @@
 s(t) = 0 outside start <= t < stop; inside: constant `offset`; piecewise-linear through knots (held
 at the end values outside them; right-continuous, so a repeated knot time is a step whose later value
 holds from that time on); or offset + amplitude sin(2 pi frequency t + phase). Its integral from 0,
-`schedule_integral`, moves kinematic bodies on a schedule (contact/kinematic.py) in closed form.
+`schedule_integral`, moves kinematic bodies on a schedule (physics/kinematic.py) in closed form.
 """
 
 from __future__ import annotations
@@ -11,12 +11,15 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from rbcli.physics import kernel_cache
 from rbcli.physics.forces.tables import (
     NO_SCHEDULE,
     SCHEDULE_CONSTANT,
     SCHEDULE_SINE,
     schedule_values_numpy,
 )
+
+kernel_cache.install()  # before this module's kernels first run: their cache is keyed on the physics sources
 
 __all__ = ["schedule_integral", "schedule_value", "schedule_values_numpy"]
 

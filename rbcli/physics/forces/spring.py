@@ -12,10 +12,13 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from rbcli.physics import kernel_cache
 from rbcli.physics.forces.body_point import add_force_at, point_velocity, rotate
 from rbcli.physics.forces.tables import SpringTable
 from rbcli.physics.frames import body_angular_velocity
 from rbcli.physics.rotation import quat_to_matrix
+
+kernel_cache.install()  # before this module's kernels first run: their cache is keyed on the physics sources
 
 
 @numba.njit(cache=True)

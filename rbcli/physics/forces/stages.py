@@ -17,37 +17,28 @@ A scene always gets the same combination of None and tables, so its kernels' typ
 every run and numba's on-disk cache serves them (the implementations below are compiled into the
 cached caller; they take STEP_KERNEL's options: cached, no reference counting).
 
-Force stages (called by forces/wrench.accumulate_wrench, each adding its rows to `counts`, the
-ForceData.term_evaluations counter): field, point force, torque, spring, drag, contact (with the
-static bodies held). Pipeline stages (called by the generated chunk loops, physics/pipeline.py):
+Force stages (the force pass forces/wrench_pass.accumulate_wrench, generated from forces/stage_list.py
+FORCE_STAGES, each adding its rows to `counts`, the ForceData.term_evaluations counter): one factory,
+`force_stage`, makes each stage's dispatcher from the stage's code and the tables it needs. Pipeline
+stages (called by the generated chunk loops, physics/pipeline.py):
 impulses, contact_begin, kinematic_begin, kinematic_end, contact_commit, contact_record; and for adaptive
-stepping the contacts' step limit. Gravity has no table (a flag and a vector) and is not here.
+stepping the contacts' step limit and the next step that holds an impulse. Gravity has no table (a flag
+and a vector) and is not here.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 from numba.core import types
 from numba.extending import overload
 
-from rbcli.physics.contact.force import accumulate_contact, begin_contact_step, commit_contacts, hold_static_bodies
-from rbcli.physics.contact.kinematic import kinematic_begin, kinematic_end
-from rbcli.physics.forces.drag import accumulate_drag
-from rbcli.physics.forces.field import accumulate_field
-from rbcli.physics.forces.impulse import apply_impulses
-from rbcli.physics.forces.point_force import accumulate_point_force
-from rbcli.physics.forces.spring import accumulate_spring
-from rbcli.physics.forces.tables import (
-    TERM_CONTACT,
-    TERM_DRAG,
-    TERM_FIELD,
-    TERM_POINT_FORCE,
-    TERM_SPRING,
-    TERM_TORQUE,
-)
-from rbcli.physics.forces.torque import accumulate_torque
+from rbcli.physics.contact.force import begin_contact_step, commit_contacts
+from rbcli.physics.contact.state import record_contact_state
+from rbcli.physics.forces.impulse import NO_IMPULSE_STEP, apply_impulses, next_impulse_step
+from rbcli.physics.kinematic import kinematic_begin, kinematic_end
 from rbcli.physics.step import STEP_KERNEL
 
 # the dispatchers' implementations compile with the step kernels' options (cached, no reference counting);
@@ -69,113 +60,33 @@ def _kernel_only(*_args: object) -> None:
     raise TypeError("a stage dispatcher runs in compiled kernels only (forces/stages.py)")
 
 
-# ---- force stages: accumulate_wrench's -------------------------------------------------------------
+# ---- force stages: accumulate_wrench's (forces/stage_list.py, generated into forces/wrench_pass.py) --
 
 
-def field_stage(model, field, schedule, t, x, q, F, tau, counts) -> None:  # noqa: ANN001
-    """Per-particle fields (forces/field.py) when the scene has any."""
-    _kernel_only()
+def _no_force_stage(model, forces, force_data, t, x, q, P, L, F, tau, counts, dissipative) -> None:  # noqa: ANN001
+    """What a force stage compiles to when one of its tables is None."""
 
 
-@overload(field_stage, jit_options=_OPTIONS)
-def _field_stage(model, field, schedule, t, x, q, F, tau, counts):  # noqa: ANN001, ANN202
-    if _absent(field):
-        return lambda model, field, schedule, t, x, q, F, tau, counts: None
+def force_stage(run: Callable[..., None], *tables: str) -> Callable[..., None]:
+    """The dispatcher of a force stage: compiles to `run(model, forces, force_data, t, x, q, P, L, F, tau,
+    counts, dissipative)` when each of `tables` ("forces.<field>" or "force_data.<field>") is a table
+    in the caller's argument types, and to nothing when one is None. `run` is a plain function of the
+    generated forces/wrench_pass.py, compiled with the step kernels' options into its caller."""
+    owners = tuple(table.split(".", 1) for table in tables)
 
-    def run(model, field, schedule, t, x, q, F, tau, counts):  # noqa: ANN001, ANN202
-        if field.body.shape[0]:
-            counts[TERM_FIELD] += accumulate_field(model, field, schedule, t, x, q, F, tau)
+    def stage(model, forces, force_data, t, x, q, P, L, F, tau, counts, dissipative) -> None:  # noqa: ANN001
+        _kernel_only()
 
-    return run
+    stage.__name__ = stage.__qualname__ = f"{run.__name__.lstrip('_')}_stage"
 
+    @overload(stage, jit_options=_OPTIONS)
+    def _stage(model, forces, force_data, t, x, q, P, L, F, tau, counts, dissipative):  # noqa: ANN001, ANN202
+        given = {"forces": forces, "force_data": force_data}
+        if _absent(*(_member(given[owner], field) for owner, field in owners)):
+            return _no_force_stage
+        return run
 
-def point_force_stage(point_force, schedule, t, q, F, tau, counts) -> None:  # noqa: ANN001
-    """Forces at body points (forces/point_force.py) when the scene has any."""
-    _kernel_only()
-
-
-@overload(point_force_stage, jit_options=_OPTIONS)
-def _point_force_stage(point_force, schedule, t, q, F, tau, counts):  # noqa: ANN001, ANN202
-    if _absent(point_force):
-        return lambda point_force, schedule, t, q, F, tau, counts: None
-
-    def run(point_force, schedule, t, q, F, tau, counts):  # noqa: ANN001, ANN202
-        if point_force.body.shape[0]:
-            counts[TERM_POINT_FORCE] += accumulate_point_force(point_force, schedule, t, q, F, tau)
-
-    return run
-
-
-def torque_stage(torque, schedule, t, q, tau, counts) -> None:  # noqa: ANN001
-    """Pure torques (forces/torque.py) when the scene has any."""
-    _kernel_only()
-
-
-@overload(torque_stage, jit_options=_OPTIONS)
-def _torque_stage(torque, schedule, t, q, tau, counts):  # noqa: ANN001, ANN202
-    if _absent(torque):
-        return lambda torque, schedule, t, q, tau, counts: None
-
-    def run(torque, schedule, t, q, tau, counts):  # noqa: ANN001, ANN202
-        if torque.body.shape[0]:
-            counts[TERM_TORQUE] += accumulate_torque(torque, schedule, t, q, tau)
-
-    return run
-
-
-def spring_stage(model, spring, x, q, P, L, F, tau, counts, dissipative) -> None:  # noqa: ANN001
-    """Springs-dampers (forces/spring.py) when the scene has any; dampers only when dissipative."""
-    _kernel_only()
-
-
-@overload(spring_stage, jit_options=_OPTIONS)
-def _spring_stage(model, spring, x, q, P, L, F, tau, counts, dissipative):  # noqa: ANN001, ANN202
-    if _absent(spring):
-        return lambda model, spring, x, q, P, L, F, tau, counts, dissipative: None
-
-    def run(model, spring, x, q, P, L, F, tau, counts, dissipative):  # noqa: ANN001, ANN202
-        if spring.body_a.shape[0]:
-            counts[TERM_SPRING] += accumulate_spring(model, spring, x, q, P, L, F, tau, dissipative)
-
-    return run
-
-
-def drag_stage(model, drag, q, P, L, F, tau, counts) -> None:  # noqa: ANN001
-    """Drag (forces/drag.py) when the scene has any."""
-    _kernel_only()
-
-
-@overload(drag_stage, jit_options=_OPTIONS)
-def _drag_stage(model, drag, q, P, L, F, tau, counts):  # noqa: ANN001, ANN202
-    if _absent(drag):
-        return lambda model, drag, q, P, L, F, tau, counts: None
-
-    def run(model, drag, q, P, L, F, tau, counts):  # noqa: ANN001, ANN202
-        if drag.body.shape[0]:
-            counts[TERM_DRAG] += accumulate_drag(model, drag, q, P, L, F, tau)
-
-    return run
-
-
-def contact_stage(model, contact, work, t, x, q, P, L, F, tau, counts) -> None:  # noqa: ANN001
-    """Contact forces (contact/force.py), then the static bodies held (their wrench zeroed), when the
-    scene has a contact stage; work: ForceData.contact."""
-    _kernel_only()
-
-
-@overload(contact_stage, jit_options=_OPTIONS)
-def _contact_stage(model, contact, work, t, x, q, P, L, F, tau, counts):  # noqa: ANN001, ANN202
-    if _absent(contact, work):
-        return lambda model, contact, work, t, x, q, P, L, F, tau, counts: None
-
-    def run(model, contact, work, t, x, q, P, L, F, tau, counts):  # noqa: ANN001, ANN202
-        if contact.sphere_body.shape[0]:
-            accumulate_contact(model, contact, work, t, x, q, P, L, F, tau)
-            counts[TERM_CONTACT] += np.int64(work.stats[0])
-        if contact.static_body.shape[0]:
-            hold_static_bodies(contact, F, tau)
-
-    return run
+    return stage
 
 
 # ---- pipeline stages: the generated chunk loops' ---------------------------------------------------
@@ -194,6 +105,24 @@ def _impulse_stage(model, forces, force_data, t_prev, t_next, x, q, P, L):  # no
     def run(model, forces, force_data, t_prev, t_next, x, q, P, L):  # noqa: ANN001, ANN202
         if forces.impulse.body.shape[0]:
             apply_impulses(model, forces, force_data, t_prev, t_next, x, q, P, L)
+
+    return run
+
+
+def next_impulse_step_stage(forces, dt, index) -> int:  # noqa: ANN001
+    """The next grid step after `index` that holds an impulse (forces/impulse.py; where the adaptive loop
+    lands to apply it), NO_IMPULSE_STEP when the scene has none."""
+    _kernel_only()
+    return 0
+
+
+@overload(next_impulse_step_stage, jit_options=_OPTIONS)
+def _next_impulse_step_stage(forces, dt, index):  # noqa: ANN001, ANN202
+    if _absent(_member(forces, "impulse")):
+        return lambda forces, dt, index: NO_IMPULSE_STEP
+
+    def run(forces, dt, index):  # noqa: ANN001, ANN202
+        return next_impulse_step(forces, dt, index)
 
     return run
 
@@ -232,28 +161,28 @@ def _contact_commit_stage(model, contact, work, x, q, P, L):  # noqa: ANN001, AN
     return run
 
 
-def contact_record_stage(work, frames, filled, due) -> None:  # noqa: ANN001
-    """On a recording step, put the step's contact statistics (count, deepest overlap, stored energy of its
-    last force evaluation) in the frame the record stage is about to fill, when the scene has contact."""
+def contact_record_stage(contact, work, x, q, frames, filled, due) -> None:  # noqa: ANN001
+    """On a recording step, put the contact statistics of the state (count, deepest overlap, stored energy,
+    history overflows so far: contact/state.py) in the frame the record stage is about to fill, when the
+    scene has contact."""
     _kernel_only()
 
 
 @overload(contact_record_stage, jit_options=_OPTIONS)
-def _contact_record_stage(work, frames, filled, due):  # noqa: ANN001, ANN202
-    if _absent(work):
-        return lambda work, frames, filled, due: None
+def _contact_record_stage(contact, work, x, q, frames, filled, due):  # noqa: ANN001, ANN202
+    if _absent(contact, work):
+        return lambda contact, work, x, q, frames, filled, due: None
 
-    def run(work, frames, filled, due):  # noqa: ANN001, ANN202
-        if due and filled < frames.contact.shape[0]:
-            for k in range(frames.contact.shape[1]):
-                frames.contact[filled, k] = work.stats[k]
+    def run(contact, work, x, q, frames, filled, due):  # noqa: ANN001, ANN202
+        if due and filled < frames.contact.shape[0] and contact.sphere_body.shape[0]:
+            record_contact_state(contact, work, x, q, frames.contact, filled)
 
     return run
 
 
 def kinematic_begin_stage(model, forces, t, h, x, q, P, L) -> bool:  # noqa: ANN001
     """Kinematic bodies at their exact pose at t, moving at their mean velocity over [t, t + h)
-    (contact/kinematic.py), when the scene has any; True when it moved something."""
+    (physics/kinematic.py), when the scene has any; True when it moved something."""
     _kernel_only()
     return False
 
@@ -273,7 +202,7 @@ def _kinematic_begin_stage(model, forces, t, h, x, q, P, L):  # noqa: ANN001, AN
 
 
 def kinematic_end_stage(model, forces, t, x, q, P, L) -> None:  # noqa: ANN001
-    """Kinematic bodies at their exact x, q, P, L at t (contact/kinematic.py) when the scene has any."""
+    """Kinematic bodies at their exact x, q, P, L at t (physics/kinematic.py) when the scene has any."""
     _kernel_only()
 
 

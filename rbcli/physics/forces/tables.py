@@ -21,7 +21,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from rbcli.physics.contact.tables import ContactTable, ContactWork, KinematicTable, kinematic_table, make_contact_work
+from rbcli.physics.contact.tables import ContactTable, ContactWork, make_contact_work
 from rbcli.physics.joints.tables import JointTable, JointWork, make_joint_work
 
 # Row column `schedule` value meaning "no schedule": the force acts at full strength at all times.
@@ -37,6 +37,24 @@ SCHEDULE_KINDS = {"constant": SCHEDULE_CONSTANT, "piecewise_linear": SCHEDULE_PI
 # Indices into ForceData.term_evaluations, and the names force_terms_present reports.
 TERM_NAMES = ("gravity", "field", "point_force", "torque", "spring", "drag", "impulse", "contact")
 TERM_GRAVITY, TERM_FIELD, TERM_POINT_FORCE, TERM_TORQUE, TERM_SPRING, TERM_DRAG, TERM_IMPULSE, TERM_CONTACT = range(8)
+
+
+def _f(values, *shape: int) -> np.ndarray:  # noqa: ANN001
+    out = np.ascontiguousarray(np.asarray(values, dtype=np.float64).reshape((-1, *shape)))
+    out.setflags(write=False)
+    return out
+
+
+def _i(values) -> np.ndarray:  # noqa: ANN001
+    out = np.ascontiguousarray(np.asarray(values, dtype=np.int64).reshape(-1))
+    out.setflags(write=False)
+    return out
+
+
+def _b(values) -> np.ndarray:  # noqa: ANN001
+    out = np.ascontiguousarray(np.asarray(values, dtype=np.bool_).reshape(-1))
+    out.setflags(write=False)
+    return out
 
 
 class ScheduleTable(NamedTuple):
@@ -133,6 +151,39 @@ class ImpulseTable(NamedTuple):
     body_frame: np.ndarray  # bool (row_count,)
 
 
+class KinematicTable(NamedTuple):
+    """The prescribed motions of a scene's kinematic bodies, one row each (read-only; the closed form
+    and the stages that set it: physics/kinematic.py)."""
+
+    body: np.ndarray  # int64 (row_count,)
+    schedule: np.ndarray  # int64 (row_count,): NO_SCHEDULE (s = 1) or a ScheduleTable row of ForceTables
+    velocity: np.ndarray  # v0 [m/s] (row_count, 3), world
+    angular_velocity: np.ndarray  # w0 [rad/s] (row_count, 3), world
+    pivot: np.ndarray  # p0 [m] (row_count, 3), world, at t = 0
+    position: np.ndarray  # x0 [m] (row_count, 3), world, centre of mass at t = 0
+    orientation: np.ndarray  # q0 (row_count, 4) wxyz, world-from-principal at t = 0
+
+
+def kinematic_table(
+    body=(),  # noqa: ANN001
+    schedule=(),  # noqa: ANN001
+    velocity=(),  # noqa: ANN001
+    angular_velocity=(),  # noqa: ANN001
+    pivot=(),  # noqa: ANN001
+    position=(),  # noqa: ANN001
+    orientation=(),  # noqa: ANN001
+) -> KinematicTable:
+    """A KinematicTable with consistent dtypes (empty: a scene without kinematic bodies)."""
+
+    return KinematicTable(_i(body), _i(schedule), _f(velocity, 3), _f(angular_velocity, 3), _f(pivot, 3),
+                          _f(position, 3), _f(orientation, 4))  # fmt: skip
+
+
+# the fields of ForceTables that kernels take as they are (switches, gravity, the shared schedules);
+# every other field is a force type's table, None in KernelForceTables when it has no rows
+_KERNEL_AS_IS = ("gravity", "has_gravity", "has_torque", "torque_body", "schedule")
+
+
 class ForceTables(NamedTuple):
     """Every force term of a scene as arrays (numba-friendly).
 
@@ -142,7 +193,7 @@ class ForceTables(NamedTuple):
       the wrench leaves tau untouched (all zeros). Equal to torque_body.any().
     contact: contact spheres, materials, planes and static bodies (contact/tables.py; 0 spheres: no
       contact stage).
-    kinematic: the prescribed motions of kinematic bodies (contact/tables.py, contact/kinematic.py;
+    kinematic: the prescribed motions of kinematic bodies (KinematicTable; their stages: physics/kinematic.py;
       0 rows: no kinematic stages).
     joint: the joints (physics/joints/tables.py), None without joints: the joint stages compile to
       nothing (physics/joints/stages.py) in either form of the tables.
@@ -172,15 +223,16 @@ class ForceTables(NamedTuple):
         """The tables as compiled kernels take them: None for each table without rows (see
         KernelForceTables)."""
 
-        def rows(table):  # noqa: ANN001, ANN202
-            return table if table_rows(table) else None
+        def kernel_field(name: str, value: Any) -> Any:  # noqa: ANN401 - a table or a switch
+            if name in _KERNEL_AS_IS:
+                return value
+            if value is None:  # a table a scene may lack altogether (joint)
+                return None
+            if name == "contact":
+                return value if contact_present(value) else None
+            return value if table_rows(value) else None  # every force type's table
 
-        return KernelForceTables(
-            self.gravity, self.has_gravity, self.has_torque, self.torque_body, self.schedule,
-            rows(self.field), rows(self.point_force), rows(self.torque), rows(self.spring), rows(self.drag),
-            rows(self.impulse), self.contact if contact_present(self.contact) else None, rows(self.kinematic),
-            self.joint if self.joint is not None and table_rows(self.joint) else None,
-        )  # fmt: skip
+        return KernelForceTables(*(kernel_field(name, getattr(self, name)) for name in self._fields))
 
 
 class KernelForceTables(NamedTuple):
@@ -241,24 +293,6 @@ def make_force_data(forces: ForceTables | KernelForceTables) -> ForceData:
 
 
 # ---- constructors: every table has the same dtypes and layouts whether empty or not ----------------
-
-
-def _f(values, *shape: int) -> np.ndarray:  # noqa: ANN001
-    out = np.ascontiguousarray(np.asarray(values, dtype=np.float64).reshape((-1, *shape)))
-    out.setflags(write=False)
-    return out
-
-
-def _i(values) -> np.ndarray:  # noqa: ANN001
-    out = np.ascontiguousarray(np.asarray(values, dtype=np.int64).reshape(-1))
-    out.setflags(write=False)
-    return out
-
-
-def _b(values) -> np.ndarray:  # noqa: ANN001
-    out = np.ascontiguousarray(np.asarray(values, dtype=np.bool_).reshape(-1))
-    out.setflags(write=False)
-    return out
 
 
 def schedule_table(

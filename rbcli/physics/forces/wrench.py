@@ -1,17 +1,20 @@
-"""The total wrench of all force terms on every body: the one function integrators call.
+"""The total wrench of all force terms on every body: `accumulate_wrench`, the one function integrators
+call, and its numpy reference and the potential energy.
 
-Stages, each a loop over its own table's rows only (rows list only touched bodies): gravity,
-per-particle fields, point forces, torques, springs-dampers, drag, contact (physics/contact: broad
-phase and contact forces), then static bodies held (their wrench zeroed). Impulses are not forces:
-they are applied between steps by `impulse.apply_impulses` (the pipeline's impulse stage).
+`accumulate_wrench` is generated (forces/wrench_pass.py) from the one list of force stages,
+forces/stage_list.py FORCE_STAGES: gravity, per-particle fields, point forces, torques,
+springs-dampers, drag, contact (physics/contact: broad phase and contact forces), then static bodies
+held (their wrench zeroed), each a loop over its own table's rows only (rows list only touched bodies).
+Impulses are not forces: they are applied between steps by `impulse.apply_impulses` (the pipeline's
+impulse stage).
 
 Only the stages a scene has are compiled. The kernels take `ForceTables.kernel()` (KernelForceTables,
 forces/tables.py), whose table of a force type the scene does not use is None; every stage but gravity
-is called through a dispatcher of forces/stages.py, a `numba.extending.overload` that compiles to a
-no-op for a NoneType table and to the stage's kernel otherwise. A run-time `if table.rows:` test, as
-this function had, skips the work but not the compilation: numba compiles both sides of a branch, so
-a gravity-only scene's first run compiled every force type. Why this design: the Python side keeps
-reading ForceTables as before (every table present, 0 rows when unused: `forces.spring.body_a`,
+is called through a dispatcher (forces/stages.py `force_stage`, a `numba.extending.overload`) that
+compiles to a no-op for a NoneType table and to the stage otherwise. A run-time `if table.rows:` test
+alone skips the work but not the compilation: numba compiles both sides of a branch, so a gravity-only
+scene's first run compiled every force type. Why this design: the Python side keeps reading
+ForceTables as before (every table present, 0 rows when unused: `forces.spring.body_a`,
 `force_terms_present`, the scene checks), only the places that hand tables to kernels call `.kernel()`
 (runner/simulation.py), and kernels still accept a plain ForceTables (each stage then compiled and
 skipped at run time when empty), so tests and benchmarks that call kernels with `compiled.forces`
@@ -21,51 +24,18 @@ serves its kernels from run to run.
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
 from rbcli.physics.forces.drag import drag_numpy
 from rbcli.physics.forces.field import field_numpy, field_potential
-from rbcli.physics.forces.gravity import accumulate_gravity, gravity_potential
+from rbcli.physics.forces.gravity import gravity_potential
 from rbcli.physics.forces.point_force import point_force_numpy, point_force_potential
 from rbcli.physics.forces.spring import spring_numpy, spring_potential
-from rbcli.physics.forces.stages import (
-    contact_stage,
-    drag_stage,
-    field_stage,
-    point_force_stage,
-    spring_stage,
-    torque_stage,
-)
-from rbcli.physics.forces.tables import TERM_GRAVITY, ForceTables
+from rbcli.physics.forces.tables import ForceTables
 from rbcli.physics.forces.torque import torque_numpy
-from rbcli.physics.step import STEP_KERNEL
+from rbcli.physics.forces.wrench_pass import accumulate_wrench
 
-
-@numba.njit(**STEP_KERNEL)
-def accumulate_wrench(model, forces, force_data, t, x, q, P, L, F, tau, dissipative=True) -> None:  # noqa: ANN001 - numba types
-    """Set F [N] and tau [N m] (body_count, 3), world frame, about each centre of mass, to the sum of the
-    scene's force terms at time t [s]. tau is left untouched (zero) when forces.has_torque is False;
-    otherwise it is exactly zero for every body that forces.torque_body does not flag. forces:
-    KernelForceTables (or ForceTables); force_data (ForceData) holds what the pass writes besides F and
-    tau: the stage counters and the contact work. dissipative=False leaves out the spring dampers and
-    drag, which the splitting integrators integrate as their own flow (forces/damping.py); contact's
-    dashpots stay in (contact is not smooth, so no integrator keeps its order through it anyway)."""
-    F[:, :] = 0.0
-    if forces.has_torque:
-        tau[:, :] = 0.0
-    counts = force_data.term_evaluations
-    if forces.has_gravity:
-        accumulate_gravity(model.body_mass, forces.gravity, F)
-        counts[TERM_GRAVITY] += F.shape[0]
-    # each stage compiles to nothing when its table is None (forces/stages.py)
-    field_stage(model, forces.field, forces.schedule, t, x, q, F, tau, counts)
-    point_force_stage(forces.point_force, forces.schedule, t, q, F, tau, counts)
-    torque_stage(forces.torque, forces.schedule, t, q, tau, counts)
-    spring_stage(model, forces.spring, x, q, P, L, F, tau, counts, dissipative)
-    if dissipative:
-        drag_stage(model, forces.drag, q, P, L, F, tau, counts)
-    contact_stage(model, forces.contact, force_data.contact, t, x, q, P, L, F, tau, counts)
+__all__ = ["accumulate_wrench", "potential_energy", "wrench_numpy"]
 
 
 def wrench_numpy(  # noqa: ANN001

@@ -7,8 +7,9 @@ and `SCRATCH_WIDTH`, the float64 scratch columns per body its compiled step need
 only from `accumulate_wrench`. The chunk loop that runs a step's stages around it is generated from
 physics/pipeline.py into physics/chunks/<module>.py (`IntegratorInfo.chunk`).
 `kinematics.py` holds the per-body kernels they share (not a method).
-Adaptive time stepping (a tolerance instead of dt) is `rbcli.physics.adaptive`, driven by the
-methods flagged `adaptive`. docs/integrators.md has the measured orders, errors and costs.
+Adaptive time stepping (a tolerance instead of dt) is `rbcli.physics.adaptive` (the method) and
+physics/chunks/<module>_adaptive.py (its loop, generated from the same stages), for the methods
+flagged `adaptive`. docs/integrators.md has the measured orders, errors and costs.
 """
 
 from __future__ import annotations
@@ -56,6 +57,13 @@ class IntegratorInfo:
         """Import the generated chunk loop: run_chunk(model, forces, data, dt, step0, n_steps,
         record_every, frames, filled) and SCRATCH_WIDTH."""
         return importlib.import_module(self.chunk_module)
+
+    def adaptive_chunk(self) -> ModuleType:
+        """Import the generated error-controlled loop of an `adaptive` method (physics/adaptive.py):
+        run_chunk with the same arguments as `chunk`'s, on a Data made with adaptive=True."""
+        if not self.adaptive:
+            raise ValueError(f"{self.name!r} is fixed-step: it has no adaptive loop")
+        return importlib.import_module(f"{self.chunk_module}_adaptive")
 
 
 _PKG = "rbcli.physics.integrators"

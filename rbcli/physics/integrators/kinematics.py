@@ -22,33 +22,13 @@ import math
 import numba
 import numpy as np
 
+from rbcli.physics import kernel_cache
 from rbcli.physics.rotation import quat_multiply, quat_rotate, quat_rotate_inverse
 
+# rotate and rotate_inverse live with the other one-body rotation kernels; imported here for the integrators
+from rbcli.physics.rotation_kernels import rotate, rotate_inverse  # noqa: F401
 
-@numba.njit(cache=True)
-def rotate_inverse(w, x, y, z, vx, vy, vz):  # noqa: ANN001, ANN201 - numba scalars
-    """R(q)^T v for a unit quaternion q = (w, x, y, z): v - w t + u x t with t = 2 u x v, u = (x, y, z)."""
-    tx = 2.0 * (y * vz - z * vy)
-    ty = 2.0 * (z * vx - x * vz)
-    tz = 2.0 * (x * vy - y * vx)
-    return (
-        vx - w * tx + (y * tz - z * ty),
-        vy - w * ty + (z * tx - x * tz),
-        vz - w * tz + (x * ty - y * tx),
-    )
-
-
-@numba.njit(cache=True)
-def rotate(w, x, y, z, vx, vy, vz):  # noqa: ANN001, ANN201
-    """R(q) v for a unit quaternion q = (w, x, y, z): v + w t + u x t with t = 2 u x v (Rodrigues)."""
-    tx = 2.0 * (y * vz - z * vy)
-    ty = 2.0 * (z * vx - x * vz)
-    tz = 2.0 * (x * vy - y * vx)
-    return (
-        vx + w * tx + (y * tz - z * ty),
-        vy + w * ty + (z * tx - x * tz),
-        vz + w * tz + (x * ty - y * tx),
-    )
+kernel_cache.install()  # before this module's kernels first run: their cache is keyed on the physics sources
 
 
 @numba.njit(cache=True)

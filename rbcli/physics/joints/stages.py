@@ -40,7 +40,7 @@ import numba
 from numba.core import types
 from numba.extending import overload
 
-from rbcli.physics.joints.dense import factor_rows, solve_rows
+from rbcli.physics.joints.solver import factor_rows, solve_rows
 from rbcli.physics.joints.drives import drive_velocities, limit_positions
 from rbcli.physics.joints.impulses import (
     apply_body_impulses,

@@ -29,7 +29,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from rbcli.physics.joints.dense_layout import DenseGraph, DenseWork, joint_graph, make_solver_work
+from rbcli.physics.joints.solver import JointGraph, SolverWork, joint_graph, make_solver_work
 
 WORLD = -1
 
@@ -67,7 +67,7 @@ class JointTable(NamedTuple):
     row_start: np.ndarray  # int64 (J,)
     row_count: np.ndarray  # int64 (J,)
     body_ground: np.ndarray  # bool (N,): static or kinematic bodies, which act as the world
-    graph: DenseGraph  # the solver's ordering (dense.py now; jointsolve's tree order later)
+    graph: JointGraph  # the solver's ordering (joints/solver.py: leaves first, loop joints apart)
 
 
 class JointWork(NamedTuple):
@@ -86,7 +86,7 @@ class JointWork(NamedTuple):
     impulse_body: np.ndarray  # [N s, N m s] (N, 6): one solve's momentum change per body
     limit_hit: np.ndarray  # (J,): 1 where this step's position stage pushed a coordinate back onto a limit
     stats: np.ndarray  # (STAT_COUNT,): see STAT_*
-    solver: DenseWork
+    solver: SolverWork
 
 
 def _f(values, *shape: int) -> np.ndarray:  # noqa: ANN001

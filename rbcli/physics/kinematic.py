@@ -10,8 +10,11 @@ and p0 the pivot it turns about [world, at t = 0; default its centre of mass x0]
     v(t) = s(t) (v0 + w0 x (x(t) - p(t))),   w(t) = s(t) w0,   P = M v,   L = I w
 
 (kinematic bodies get an isotropic inertia I at compile time, so L = I w in any frame). A constant
-velocity is the schedule-free case, `kinematic: true`. The table (`KinematicTable`) is in tables.py,
-the numpy reference of the closed form (`kinematic_state_numpy`) in reference.py.
+velocity is the schedule-free case, `kinematic: true`. The table (`KinematicTable`, one row per body)
+is one of the ForceTables (forces/tables.py); kinematic_reference.py holds the numpy reference of the
+closed form (numpy only: the scene compiler uses it for the initial state). Kinematic bodies are not
+contact code: contact sees them as bodies of infinite contact mass (inverse contact mass 0,
+contact/tables.py) moving at the velocity the stages below set.
 
 Two pipeline stages hold it (physics/pipeline.py), around each (sub-)step [t, t + h) of the integrator:
   kinematic_begin  x, q at t exactly, and P, L set to the step's mean motion: P = M (x(t+h) - x(t)) / h
@@ -29,7 +32,7 @@ import math
 import numba
 
 from rbcli.physics.forces.schedule import schedule_integral, schedule_value
-from rbcli.physics.integrators.kinematics import rotate
+from rbcli.physics.rotation_kernels import rotate
 from rbcli.physics.step import STEP_KERNEL
 
 

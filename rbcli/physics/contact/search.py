@@ -1,0 +1,150 @@
+"""The contact search: every sphere overlapping a plane and every overlapping pair of contact spheres of
+different bodies, with its geometry and mixed material, handed to a sink. The force stage (force.py),
+the recorded contact points (points.py) and the recorded state's contact statistics (state.py) are its
+sinks: one search, so what they report is the same set of contacts with the same numbers.
+
+Per contact, with d the overlap and n the unit normal towards the owner:
+    plane p, sphere i (owner i, partner PLANE_PARTNER_BASE - p):  d = r_i - (p_i - p0) . n,  n the plane's
+    spheres i < j (owner i, partner j):  d = r_i + r_j - |p_i - p_j|,  n = (p_i - p_j) / |p_i - p_j|
+and the contact point c halfway through the overlap (plane: p_i - (r_i - d / 2) n; pair:
+p_j + (r_j - d / 2) n). The owner is the lower sphere index whichever sphere's walk found the pair
+(p_i - p_j is exactly -(p_j - p_i) in floating point, so the numbers do not depend on the finder).
+Materials mix as tables.py says: k in series (a plane: the body's plane stiffness), the smaller zeta,
+mu = sqrt(mu_a) sqrt(mu_b). Skipped: spheres of one body, pairs of two bodies that cannot move
+(static or kinematic: inverse contact mass 0), coincident centres (no normal).
+
+Pairs come from the grid of broad_phase.py: each sphere looks at the later spheres of its own bucket
+and at every sphere of the 13 cells of its half shell, so each pair is found once; a hashed bucket may
+hold several cells, so a candidate of another cell is skipped by comparing cells (a dense bucket is one
+cell). The walk reads the bucket-ordered copies (sorted_*: build_grid), so the distance checks of the
+candidates touch neighbouring memory; sphere and body arrays are read only for real overlaps.
+
+Sinks: `contact_found(sink, ...)` is a stub; each sink module registers a numba `overload` of it for
+its own sink type (a NamedTuple), so a search compiled for one sink inlines that sink's code and no
+other: the force stage pays nothing for the recorded streams, and numba caches each combination.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+
+from rbcli.physics.contact.broad_phase import HALF_SHELL, bucket_of, build_grid
+from rbcli.physics.contact.tables import PLANE_PARTNER_BASE
+from rbcli.physics.rotation_kernels import rotate
+
+
+def contact_found(sink, contact, work, owner, partner, ba, bb, n0, n1, n2, overlap, c0, c1, c2, k, zeta, mu):  # noqa: ANN001, ANN201
+    """One contact for `sink` (kernels only; implemented per sink type by an overload in the sink's
+    module): owner and partner (sphere indices; a plane: PLANE_PARTNER_BASE - p), their bodies ba and bb
+    (bb = -1: a plane), the unit normal n towards the owner, the overlap d [m], the contact point c [m,
+    world], the mixed stiffness k [N/m], damping ratio zeta [1] and friction mu [1]."""
+    raise TypeError("contact_found runs in compiled kernels only, with a sink type that registers it")
+
+
+@numba.njit(cache=True, inline="always")
+def sphere_positions(contact, work, x, q) -> None:  # noqa: ANN001
+    """p = x_b + R r0 of every contact sphere into work.sphere_position (no rotation for a sphere at its
+    body's centre)."""
+    pos = work.sphere_position
+    off = contact.sphere_offset
+    for i in range(pos.shape[0]):
+        b = contact.sphere_body[i]
+        o0, o1, o2 = off[i, 0], off[i, 1], off[i, 2]
+        if o0 == 0.0 and o1 == 0.0 and o2 == 0.0:
+            pos[i, 0], pos[i, 1], pos[i, 2] = x[b, 0], x[b, 1], x[b, 2]
+        else:
+            r0, r1, r2 = rotate(q[b, 0], q[b, 1], q[b, 2], q[b, 3], o0, o1, o2)
+            pos[i, 0], pos[i, 1], pos[i, 2] = x[b, 0] + r0, x[b, 1] + r1, x[b, 2] + r2
+
+
+@numba.njit(cache=True, inline="always")
+def find_contacts(contact, work, sink) -> int:  # noqa: ANN001
+    """Every contact of the sphere positions in work.sphere_position, plane contacts first (by sphere,
+    then plane), then the pairs in walk order, each handed to `contact_found(sink, ...)`; returns the
+    candidate pairs tested (distance checks)."""
+    _plane_contacts(contact, work, sink)
+    grid = build_grid(contact, work)
+    cell, sp, order, start = work.sorted_cell, work.sorted_position, work.sorted_sphere, work.bucket_start
+    dense = grid[0]
+    candidates = 0
+    for a in range(order.shape[0]):
+        ci, cj, ck = cell[a, 0], cell[a, 1], cell[a, 2]
+        p0, p1, p2, ra = sp[a, 0], sp[a, 1], sp[a, 2], sp[a, 3]
+        own = work.sphere_bucket[order[a]]
+        for e in range(a + 1, start[own + 1]):  # later spheres of the same bucket, same cell
+            if dense or (cell[e, 0] == ci and cell[e, 1] == cj and cell[e, 2] == ck):
+                candidates += 1
+                d0, d1, d2 = p0 - sp[e, 0], p1 - sp[e, 1], p2 - sp[e, 2]
+                reach = ra + sp[e, 3]
+                dist2 = d0 * d0 + d1 * d1 + d2 * d2
+                if dist2 < reach * reach and dist2 > 0.0:  # coincident centres: no normal, skipped
+                    _pair(contact, work, sink, order[a], order[e], d0, d1, d2, dist2, reach)
+        for n in range(HALF_SHELL.shape[0]):
+            ni, nj, nk = ci + HALF_SHELL[n, 0], cj + HALF_SHELL[n, 1], ck + HALF_SHELL[n, 2]
+            b = bucket_of(ni, nj, nk, grid)
+            if b < 0:
+                continue
+            for e in range(start[b], start[b + 1]):
+                # dense: a bucket is one cell; hashed: other cells may share it
+                if dense or (cell[e, 0] == ni and cell[e, 1] == nj and cell[e, 2] == nk):
+                    candidates += 1
+                    d0, d1, d2 = p0 - sp[e, 0], p1 - sp[e, 1], p2 - sp[e, 2]
+                    reach = ra + sp[e, 3]
+                    dist2 = d0 * d0 + d1 * d1 + d2 * d2
+                    if dist2 < reach * reach and dist2 > 0.0:
+                        _pair(contact, work, sink, order[a], order[e], d0, d1, d2, dist2, reach)
+    return candidates
+
+
+@numba.njit(cache=True, inline="always")
+def _plane_contacts(contact, work, sink) -> None:  # noqa: ANN001
+    pos = work.sphere_position
+    planes = contact.plane_point.shape[0]
+    for i in range(pos.shape[0]):
+        b = contact.sphere_body[i]
+        if contact.body_inv_contact_mass[b] == 0.0:
+            continue
+        r = contact.sphere_radius[i]
+        for p in range(planes):
+            n0, n1, n2 = contact.plane_normal[p, 0], contact.plane_normal[p, 1], contact.plane_normal[p, 2]
+            dist = (
+                (pos[i, 0] - contact.plane_point[p, 0]) * n0
+                + (pos[i, 1] - contact.plane_point[p, 1]) * n1
+                + (pos[i, 2] - contact.plane_point[p, 2]) * n2
+            )
+            overlap = r - dist
+            if overlap <= 0.0:
+                continue
+            back = r - 0.5 * overlap  # contact point: halfway through the overlap
+            c0, c1, c2 = pos[i, 0] - back * n0, pos[i, 1] - back * n1, pos[i, 2] - back * n2
+            k = contact.body_plane_stiffness[b]
+            zeta = min(contact.body_damping_ratio[b], contact.plane_damping_ratio[p])
+            mu = contact.body_friction_root[b] * contact.plane_friction_root[p]
+            contact_found(sink, contact, work, i, PLANE_PARTNER_BASE - p, b, -1, n0, n1, n2, overlap,
+                          c0, c1, c2, k, zeta, mu)  # fmt: skip
+
+
+@numba.njit(cache=True, inline="always")
+def _pair(contact, work, sink, i, j, d0, d1, d2, dist2, reach) -> None:  # noqa: ANN001
+    """The contact of spheres i and j, overlapping (d = p_i - p_j, |d|^2 = dist2 < reach^2)."""
+    pos = work.sphere_position
+    bi, bj = contact.sphere_body[i], contact.sphere_body[j]
+    if bi == bj:
+        return
+    if contact.body_inv_contact_mass[bi] == 0.0 and contact.body_inv_contact_mass[bj] == 0.0:
+        return
+    if j < i:  # the owner is the lower index: one history per pair whichever sphere found it
+        i, j, bi, bj = j, i, bj, bi
+        d0, d1, d2 = -d0, -d1, -d2
+    dist = math.sqrt(dist2)
+    overlap = reach - dist
+    n0, n1, n2 = d0 / dist, d1 / dist, d2 / dist
+    forward = contact.sphere_radius[j] - 0.5 * overlap
+    c0, c1, c2 = pos[j, 0] + forward * n0, pos[j, 1] + forward * n1, pos[j, 2] + forward * n2
+    ka, kb = contact.body_stiffness[bi], contact.body_stiffness[bj]
+    k = ka if ka == kb else 2.0 * ka * kb / (ka + kb)
+    zeta = min(contact.body_damping_ratio[bi], contact.body_damping_ratio[bj])
+    mu = contact.body_friction_root[bi] * contact.body_friction_root[bj]
+    contact_found(sink, contact, work, i, j, bi, bj, n0, n1, n2, overlap, c0, c1, c2, k, zeta, mu)
