@@ -72,7 +72,10 @@ def test_stage_list_is_impulses_contact_update_record():
     # which loops have which stage: one field per stage; materialise (exact's) and the joint stages
     # (split2's: joints refuse a tolerance) are fixed-step only
     fixed_only = ("materialise", "joint_begin", "joint_position", "joint_velocity")
-    assert {stage.name: stage.loops for stage in STEP_STAGES} == {**dict.fromkeys(names, BOTH), **dict.fromkeys(fixed_only, (FIXED,))}
+    assert {stage.name: stage.loops for stage in STEP_STAGES} == {
+        **dict.fromkeys(names, BOTH),
+        **dict.fromkeys(fixed_only, (FIXED,)),
+    }
     adaptive = adaptive_source("dopri5", "dopri5")
     in_adaptive = [stage.name for stage in STEP_STAGES if ADAPTIVE in stage.loops and stage.name != "update"]
     assert all(f"# {name}: " in adaptive for name in in_adaptive), in_adaptive

@@ -30,8 +30,8 @@ import math
 import numba
 
 from rbcli.physics.integrators.kinematics import rotate
-from rbcli.physics.joints.solver import solve_rows
 from rbcli.physics.joints.impulses import apply_body_impulses, body_omega, gather_impulses
+from rbcli.physics.joints.solver import solve_rows
 from rbcli.physics.joints.tables import JOINT_HINGE
 
 # a coordinate within this of a bound [rad or m] is at it (the velocity stage stops outward motion):

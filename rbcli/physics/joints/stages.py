@@ -40,7 +40,6 @@ import numba
 from numba.core import types
 from numba.extending import overload
 
-from rbcli.physics.joints.solver import factor_rows, solve_rows
 from rbcli.physics.joints.drives import drive_velocities, limit_positions
 from rbcli.physics.joints.impulses import (
     apply_body_impulses,
@@ -51,6 +50,7 @@ from rbcli.physics.joints.impulses import (
     turn,
 )
 from rbcli.physics.joints.rows import joint_rows
+from rbcli.physics.joints.solver import factor_rows, solve_rows
 from rbcli.physics.joints.tables import STAT_ITERATIONS, STAT_POSITION, STAT_REDUNDANT, STAT_VELOCITY
 from rbcli.physics.step import STEP_KERNEL
 
