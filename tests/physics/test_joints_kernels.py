@@ -12,6 +12,8 @@ from conftest import make_scene, random_bodies
 from rbcli.api import prepare
 from rbcli.physics.integrators import split2
 from rbcli.physics.joints.dense import factor_rows, solve_rows
+from rbcli.physics.joints.dense_layout import joint_graph as dense_graph
+from rbcli.physics.joints.dense_layout import make_solver_work as dense_work
 from rbcli.physics.joints.reference import joint_begin_numpy, joint_rows_numpy, joint_stages_numpy
 from rbcli.physics.joints.rows import joint_rows
 from rbcli.physics.joints.tables import JointTable, make_joint_work
@@ -116,10 +118,14 @@ def _dense_problem(compiled):  # noqa: ANN001, ANN202
 
 
 def _factor_and_solve(table, work, inv_mass, inv_inertia, rhs):  # noqa: ANN001, ANN202
-    dropped = factor_rows(table.graph, work.solver, table.row_start, table.row_count, table.body_a, table.body_b,
+    """The dense implementation of the solver interface (the run's stages use joints/solver.py, tested
+    against dense numpy solves in test_joint_solver.py)."""
+    graph = dense_graph(table.body_a, table.body_b, table.body_ground, table.row_count)
+    solver = dense_work(graph)
+    dropped = factor_rows(graph, solver, table.row_start, table.row_count, table.body_a, table.body_b,
                           work.jac_a, work.jac_b, inv_mass, inv_inertia)  # fmt: skip
     out = np.zeros_like(rhs)
-    solve_rows(table.graph, work.solver, table.row_start, table.row_count, table.body_a, table.body_b, rhs, out)
+    solve_rows(graph, solver, table.row_start, table.row_count, table.body_a, table.body_b, rhs, out)
     return dropped, out
 
 

@@ -29,7 +29,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from rbcli.physics.joints.solver import JointGraph, SolverWork, joint_graph, make_solver_work
+from rbcli.physics.joints.solver_layout import JointGraph, SolverWork, joint_graph, make_solver_work
 
 WORLD = -1
 
