@@ -133,9 +133,10 @@ def fit_order(dt: np.ndarray, error: np.ndarray, floor: np.ndarray | float = 0.0
 
 
 def admits_exact_solution(compiled: CompiledScene) -> bool:
-    """True when every force term is uniform gravity: free flight plus torque-free rotation is exact."""
+    """True when every force term is uniform gravity and no joint holds a body: free flight plus
+    torque-free rotation is then exact (a jointed body's motion is not that)."""
     terms = set(force_terms_present(compiled.forces))
-    return terms <= EXACT_FORCE_TERMS and not compiled.spec.forces
+    return terms <= EXACT_FORCE_TERMS and not compiled.spec.forces and not compiled.spec.joints
 
 
 def conserved_quantities(compiled: CompiledScene) -> tuple[str, ...]:
@@ -212,6 +213,74 @@ def exact_reference(compiled: CompiledScene, times: np.ndarray) -> ReferencePath
         else:
             q[:, b] = state.q[b]
     return ReferencePath(x, user_orientation(model, q))
+
+
+@dataclass(frozen=True)
+class Pendulum:
+    """A scene that is one rigid pendulum: one body on one hinge to the world, released from rest under
+    gravity perpendicular to the axis, nothing else. pivot [m] and axis [1] world; theta0 [rad] the
+    centre of mass's angle from straight down (positive about the axis); omega0 = sqrt(M g d / I_pivot)."""
+
+    pivot: np.ndarray
+    axis: np.ndarray
+    theta0: float
+    omega0: float
+
+    @property
+    def period(self) -> float:
+        """4 K(sin^2(theta0 / 2)) / omega0 [s]."""
+        from rbcli.analysis.exact import pendulum_period
+
+        return pendulum_period(self.theta0, self.omega0)
+
+
+def pendulum_of(compiled: CompiledScene) -> Pendulum | None:
+    """The Pendulum a scene is, or None (any other body, joint, force, drive, limit or initial motion)."""
+    from rbcli.physics.joints.tables import JOINT_HINGE
+
+    joint, model, state = compiled.forces.joint, compiled.model, compiled.initial_state
+    if joint is None or model.body_count != 1 or joint.kind.shape[0] != 1 or compiled.spec.forces:
+        return None
+    if set(force_terms_present(compiled.forces)) != {"gravity"} or compiled.spec.contact is not None:
+        return None
+    drives = joint.damping[0] > 0.0 or joint.motor_cap[0] > 0.0
+    if joint.kind[0] != JOINT_HINGE or joint.body_b[0] >= 0 or drives or np.isfinite(joint.limit_lower[0]):
+        return None
+    if np.isfinite(joint.limit_upper[0]) or np.any(state.P != 0.0) or np.any(state.L != 0.0):
+        return None
+    R0 = quat_to_matrix(state.q[0])
+    axis = R0 @ joint.axis_a[0]
+    g = np.asarray(compiled.forces.gravity, dtype=np.float64)
+    g_norm = float(np.linalg.norm(g))
+    if abs(float(g @ axis)) > 1e-12 * g_norm:  # gravity along the axis too: not a plane pendulum
+        return None
+    pivot = np.asarray(joint.anchor_b[0], dtype=np.float64)
+    offset = state.x[0] - pivot
+    arm = offset - (offset @ axis) * axis  # the centre of mass's distance from the axis
+    d = float(np.linalg.norm(arm))
+    if d == 0.0:
+        return None
+    down = g / g_norm
+    inertia = float(axis @ (R0 @ np.diag(model.body_inertia[0]) @ R0.T) @ axis) + float(model.body_mass[0]) * d * d
+    theta0 = float(np.arctan2(axis @ np.cross(down, arm), down @ arm))
+    return Pendulum(pivot, axis, theta0, float(np.sqrt(model.body_mass[0] * g_norm * d / inertia)))
+
+
+def pendulum_reference(compiled: CompiledScene, pendulum: Pendulum, times: np.ndarray) -> ReferencePath:
+    """The pendulum's exact motion at `times` [s] (exact.pendulum_angle): every point of the body turns
+    about the axis through the pivot by theta(t) - theta0."""
+    from rbcli.analysis.exact import pendulum_angle
+    from rbcli.physics.rotation import quat_from_axis_angle, quat_multiply, quat_rotate
+
+    state = compiled.initial_state
+    turned = pendulum_angle(pendulum.theta0, pendulum.omega0, times) - pendulum.theta0
+    x = np.empty((times.size, 1, 3))
+    q = np.empty((times.size, 1, 4))
+    for k, angle in enumerate(turned):  # once per output time, at set-up
+        r = quat_from_axis_angle(pendulum.axis, float(angle))
+        x[k, 0] = pendulum.pivot + quat_rotate(r, state.x[0] - pendulum.pivot)
+        q[k, 0] = quat_multiply(r, state.q[0])
+    return ReferencePath(x, user_orientation(compiled.model, q))
 
 
 def run_errors(traj: Trajectory, ref: ReferencePath) -> tuple[float, float, float, float]:

@@ -384,3 +384,28 @@ def _solution(
         omega_world=np.einsum("tij,tj->ti", R_p, omega_p),
         L_world=L_world,
     )
+
+
+def pendulum_angle(theta0: float, omega0: float, t: np.ndarray) -> np.ndarray:
+    """The angle [rad] of a rigid pendulum released from rest at theta0 (|theta0| < pi), with
+    omega0 = sqrt(M g d / I_pivot) [1/s]: theta(t) = sign(theta0) 2 arcsin(k sn(K(m) - omega0 t | m)),
+    k = sin(|theta0| / 2), m = k^2 (the classical solution: Lawden, Elliptic Functions and Applications,
+    5.2; at t = 0, sn(K) = 1 gives theta0; the period is 4 K(m) / omega0)."""
+    k = float(np.sin(abs(theta0) / 2.0))
+    m, mc = k * k, float(np.cos(abs(theta0) / 2.0) ** 2)  # mc = 1 - m without the cancellation near the top
+    sn = _ellipj(_ellipk(m, mc) - omega0 * np.asarray(t, dtype=np.float64), m, mc)[0]
+    return float(np.sign(theta0)) * 2.0 * np.arcsin(np.clip(k * sn, -1.0, 1.0))
+
+
+def pendulum_period(theta0: float, omega0: float) -> float:
+    """The rigid pendulum's period 4 K(m) / omega0 [s], m = sin^2(theta0 / 2) (see pendulum_angle)."""
+    return 4.0 * _ellipk(float(np.sin(abs(theta0) / 2.0) ** 2), float(np.cos(abs(theta0) / 2.0) ** 2)) / omega0
+
+
+def _ellipk(m: float, mc: float) -> float:
+    """K(m) from scipy, or from the complement mc where scipy loses it (m within 1e-8 of 1)."""
+    if mc >= _SCIPY_ELLIPJ_MIN_MC:
+        return float(sp.ellipk(m))
+    from rbcli.physics.elliptic import ellipk_mc
+
+    return float(ellipk_mc(mc))

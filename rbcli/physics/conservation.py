@@ -20,6 +20,12 @@ scene's terms, with F_ext and tau_ext the total external force and torque about 
   are equal, opposite and along the line joining their ends, so their torques cancel. The norm is kept
   when all three components are.
 - quaternion_norm_defect is |q| - 1, zero in the exact motion under any force: always a drift.
+- Joints (ideal constraints) do no work, so they leave energy_total as the forces make it, unless a joint
+  has a damper, a motor (work done by the drive) or limits (a stop is inelastic); a joint to the
+  world or to a static or kinematic body is an external force and torque (momentum and angular momentum
+  change), while joints between moving bodies act equally and oppositely at one point and keep both. The
+  joint violations (joint_position_violation, joint_velocity_violation) are zero in the exact motion:
+  always a drift.
 - Anything else (the contact series) is a changing quantity, not an invariant.
 
 When a rule cannot tell (contact between free bodies alone would keep momentum), it says "changed": a
@@ -43,12 +49,21 @@ def conserved_invariants(forces: ForceTables, names: tuple[str, ...] | list[str]
     internal_springs = "spring" not in terms or bool(np.all(forces.spring.body_b >= 0))
     # a term that can add a net external force (and torque) in any direction
     external = bool(terms - {"gravity", "spring", "torque"}) or not internal_springs
+    joint = forces.joint
+    if joint is not None:
+        ends = np.concatenate([joint.body_a, joint.body_b[joint.body_b >= 0]])
+        external = external or bool(np.any(joint.body_b < 0) or np.any(joint.body_ground[ends]))
     force_free = not external  # apart from gravity (and pure torques, which add no force)
     torque_free = force_free and "torque" not in terms
 
     kept: dict[str, bool] = {}
-    kept["energy_total"] = _conservative(forces, terms)
-    kept["energy_kinetic"] = not terms
+    # joint dampers, motors and limit stops do work on the bodies
+    driven = joint is not None and bool(
+        np.any(joint.damping > 0.0) or np.any(joint.motor_cap > 0.0)
+        or np.any(np.isfinite(joint.limit_lower)) or np.any(np.isfinite(joint.limit_upper))
+    )  # fmt: skip
+    kept["energy_total"] = _conservative(forces, terms) and not driven
+    kept["energy_kinetic"] = not terms and not driven
     kept["energy_potential"] = not (terms & {"gravity", "spring", "field", "point_force", "contact"})
     for i, axis in enumerate("xyz"):
         kept[f"momentum_{axis}"] = force_free and g[i] == 0.0
@@ -56,6 +71,7 @@ def conserved_invariants(forces: ForceTables, names: tuple[str, ...] | list[str]
         kept[f"angular_momentum_{axis}"] = torque_free and along_axis
     kept["angular_momentum_norm"] = all(kept[f"angular_momentum_{axis}"] for axis in "xyz")
     kept["quaternion_norm_defect"] = True
+    kept["joint_position_violation"] = kept["joint_velocity_violation"] = True
     return {name: kept.get(name, False) for name in names}
 
 

@@ -35,6 +35,10 @@ INVARIANT_NAMES = (
 # contacts so far whose tangential history found no free slot (cumulative; their friction restarted)
 CONTACT_INVARIANT_NAMES = ("contact_count", "contact_max_overlap", "contact_energy", "contact_history_overflow")
 
+# added for scenes with joints: the largest constraint violation over every joint row of the frame's
+# state, in position |g| [m or rad] and velocity |G V| [m/s or rad/s] (physics/joints/violation.py)
+JOINT_INVARIANT_NAMES = ("joint_position_violation", "joint_velocity_violation")
+
 
 def kinetic_energy(model: Model, P: np.ndarray, L: np.ndarray, omega: np.ndarray) -> np.ndarray:
     """Total kinetic energy [J] per frame, (K,): sum_b |P_b|^2/(2 M_b) + L_b . omega_b / 2."""

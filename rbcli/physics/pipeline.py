@@ -4,6 +4,8 @@ the error-controlled loop of adaptive runs.
 A step from grid index n (t = n dt) to n + 1 runs, in this order (STEP_STAGES):
 
     impulses        exact jumps P += J, L += r x J of the impulses due in [t, t + dt)  (forces/impulse.py)
+    joint_begin     (split2, scenes with joints) velocities that break the joints' rows (a kick, initial
+                    velocities given so) projected onto G V = 0: the exact impulsive reaction
     then data.substeps times (1 unless contact sub-stepping is on), over [ts, ts + h), h = dt / substeps:
       contact_begin   the contact springs' clock: the (sub-)step being taken            (contact/force.py)
       kinematic_begin kinematic bodies at their exact pose, at their mean velocity  (physics/kinematic.py)
@@ -13,6 +15,9 @@ A step from grid index n (t = n dt) to n + 1 runs, in this order (STEP_STAGES):
                       forces, torques, springs, drag, contact), each present only when the scene has it
     materialise     exact's loop only: the torque-free bodies it defers, written when due
       kinematic_end   kinematic bodies at their exact state at the end of the (sub-)step
+      joint_position  (split2, scenes with joints) the joints' impulse at the kick, by Newton, so the
+                      end configuration satisfies the joints to round-off               (joints/stages.py)
+      joint_velocity  (split2, scenes with joints) momenta projected onto the joints' velocity rows
       contact_commit  the last evaluation's contacts and tangential springs become the history
     contact_record  on recording steps: the step's contact statistics into the next frame
     record          on recording steps: the divergence check, then the state copied into the next frame
@@ -115,6 +120,14 @@ STEP_STAGES: tuple[Stage, ...] = (
         lands_at="next_impulse_step_stage(forces, dt, index)",
     ),
     Stage(
+        "joint_begin",
+        "joint_begin: velocities that break the joints (a kick, or given so) projected: the exact impulsive reaction",
+        ("from rbcli.physics.joints.stages import joint_begin_stage",),
+        "joint_begin_stage(model, forces, force_data, x, q, P, L)",
+        integrators=("split2",),
+        loops=(FIXED,),  # joints refuse a tolerance (integrators.check_integrator)
+    ),
+    Stage(
         "contact_begin",
         "contact_begin: the contact springs measure time from the start of this (sub-)step",
         ("from rbcli.physics.forces.stages import contact_begin_stage",),
@@ -143,6 +156,24 @@ STEP_STAGES: tuple[Stage, ...] = (
         ("from rbcli.physics.forces.stages import kinematic_end_stage",),
         "kinematic_end_stage(model, forces, {te}, x, q, P, L)",
         substep=True,
+    ),
+    Stage(
+        "joint_position",
+        "joint_position: the joints' impulse at the kick that puts the end configuration on g = 0 (RATTLE)",
+        ("from rbcli.physics.joints.stages import joint_position_stage",),
+        "joint_position_stage(model, forces, force_data, h, x, q, P, L)",
+        substep=True,
+        integrators=("split2",),
+        loops=(FIXED,),  # joints refuse a tolerance (integrators.check_integrator)
+    ),
+    Stage(
+        "joint_velocity",
+        "joint_velocity: the momenta projected so that the joints' rows have zero rate, G V = 0",
+        ("from rbcli.physics.joints.stages import joint_velocity_stage",),
+        "joint_velocity_stage(model, forces, force_data, h, x, q, P, L)",
+        substep=True,
+        integrators=("split2",),
+        loops=(FIXED,),  # joints refuse a tolerance (integrators.check_integrator)
     ),
     Stage(
         "contact_commit",

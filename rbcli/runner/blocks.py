@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rbcli.physics.energy import CONTACT_INVARIANT_NAMES, invariants_from_totals
+from rbcli.physics.energy import CONTACT_INVARIANT_NAMES, JOINT_INVARIANT_NAMES, invariants_from_totals
 from rbcli.physics.frames import particle_world
 from rbcli.physics.outputs import TOTALS_WIDTH, derive_outputs
 from rbcli.record.frame import FrameBlock
@@ -44,11 +44,26 @@ def make_block(
                 block.invariants[name] = np.ascontiguousarray(stats[:, k], dtype=np.float64)
             for name in ("energy_potential", "energy_total"):  # the contact springs' energy is potential
                 block.invariants[name] = block.invariants[name] + block.invariants["contact_energy"]
+        if compiled.forces.joint is not None:
+            for name, column in zip(JOINT_INVARIANT_NAMES, joint_invariants(compiled, x, q, P, L).T, strict=True):
+                block.invariants[name] = np.ascontiguousarray(column)
     if "particles" in settings.streams:
         block.particle_position, _ = particle_world(model, x, q, P, L)
     if "contacts" in settings.streams and compiled.contact is not None:
         block.contact_point, block.contact_force = frame_contacts(compiled, x, q, P, L)
     return block
+
+
+def joint_invariants(compiled: CompiledScene, x: np.ndarray, q: np.ndarray, P: np.ndarray, L: np.ndarray) -> np.ndarray:
+    """(K, 2): each raw state's largest joint violation in position and velocity (physics/joints/violation.py)."""
+    from rbcli.physics.joints.tables import make_joint_work
+    from rbcli.physics.joints.violation import joint_violations
+
+    table = compiled.forces.joint
+    assert table is not None
+    out = np.zeros((x.shape[0], 2))
+    joint_violations(compiled.model.kernel(), table, make_joint_work(table), x, q, P, L, out)
+    return out
 
 
 def frame_contacts(

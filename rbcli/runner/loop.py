@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from rbcli._version import __version__
-from rbcli.physics.energy import CONTACT_INVARIANT_NAMES, INVARIANT_NAMES
+from rbcli.physics.energy import CONTACT_INVARIANT_NAMES, INVARIANT_NAMES, JOINT_INVARIANT_NAMES
 from rbcli.record.frame import FrameBlock, RunHeader, RunSummary, Sink
 from rbcli.runner.divergence import GUARD_STEPS, JUMP_FACTOR, EnergyGuard, explain, likely_cause
 from rbcli.runner.recorder import Recorder
@@ -69,7 +69,11 @@ def run_header(compiled: CompiledScene, *, steps: int | None = None, record_ever
         seed=settings.seed,
         tolerance=settings.tolerance,
         invariant_names=(
-            (*INVARIANT_NAMES, *(CONTACT_INVARIANT_NAMES if compiled.contact is not None else ()))
+            (
+                *INVARIANT_NAMES,
+                *(CONTACT_INVARIANT_NAMES if compiled.contact is not None else ()),
+                *(JOINT_INVARIANT_NAMES if compiled.forces.joint is not None else ()),
+            )
             if "invariants" in settings.streams
             else ()
         ),

@@ -77,6 +77,8 @@ def refusal(compiled: CompiledScene) -> str | None:
         terms.append("static bodies")
     if contact.sphere_body.size and "contact" not in terms:
         terms.append("contact")
+    if compiled.forces.joint is not None:  # the twin builds free bodies only (a jointed twin: next)
+        terms.append("joints")
     if terms:
         return (
             f"the scene has {', '.join(terms)}: the MuJoCo rows cover free bodies under uniform gravity only "

@@ -48,6 +48,8 @@ from rbcli.analysis.errors import (
     exact_reference,
     fit_order,
     invariant_drifts,
+    pendulum_of,
+    pendulum_reference,
     roundoff_floor,
     run_errors,
     smoothness_notes,
@@ -235,10 +237,15 @@ class StudyResult:
 # what the scene admits
 
 
-def applicable_integrators() -> tuple[str, ...]:
+def applicable_integrators(*, jointed: bool = False) -> tuple[str, ...]:
     """Every registered integrator (fixed-step ones by dt, adaptive ones by tolerance), except those
-    kept only to demonstrate a failure (ask for them by name)."""
-    return tuple(name for name, info in INTEGRATORS.items() if not getattr(info, "demonstration", False))
+    kept only to demonstrate a failure (ask for them by name); for a scene with joints, the ones that
+    hold joints (integrators.check_integrator)."""
+    return tuple(
+        name
+        for name, info in INTEGRATORS.items()
+        if not getattr(info, "demonstration", False) and (info.joints or not jointed)
+    )
 
 
 def is_adaptive(info: IntegratorInfo) -> bool:
@@ -317,10 +324,13 @@ def default_dts(dt: float) -> tuple[float, ...]:
 # references
 
 
-def reference_integrator() -> str:
+def reference_integrator(*, jointed: bool = False) -> str:
     """The most accurate registered fixed-step method: the highest order, ties broken by
-    REFERENCE_PREFERENCE (symplectic split4 before rk4); demonstration methods never."""
-    candidates = [i for i in INTEGRATORS.values() if not getattr(i, "demonstration", False)]
+    REFERENCE_PREFERENCE (symplectic split4 before rk4); demonstration methods never; for a scene with
+    joints, among those that hold joints."""
+    candidates = [
+        i for i in INTEGRATORS.values() if not getattr(i, "demonstration", False) and (i.joints or not jointed)
+    ]
     rank = {name: k for k, name in enumerate(REFERENCE_PREFERENCE)}
     return max(candidates, key=lambda i: (i.order, -rank.get(i.name, len(rank)))).name
 
@@ -421,7 +431,7 @@ def study(
         raise ValueError(f"the minimum timing must be >= 0 s, got {min_time}")
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
     spec = _study_spec(scene)
-    names = tuple(integrators) if integrators else applicable_integrators()
+    names = tuple(integrators) if integrators else applicable_integrators(jointed=bool(spec.joints))
     infos = [get_integrator(name) for name in names]  # KeyError names the known ones
     adaptive = [i for i in infos if is_adaptive(i)]  # also by tolerance (their fixed-step rows fit the order)
     dts = tuple(sorted({float(d) for d in (dts or default_dts(spec.simulation.dt))}, reverse=True))
@@ -431,6 +441,7 @@ def study(
     times = grid.times
     base = compile_scene(spec, duration=grid.duration)
     exact = admits_exact_solution(base)
+    pendulum = pendulum_of(base) if base.forces.joint is not None else None
     conserved = conserved_quantities(base)
     notes: list[str] = []
 
@@ -450,7 +461,8 @@ def study(
         every = grid.every_base * round(grid.base / dt) * scale
         return compile_scene(spec, dt=dt / scale, duration=grid.duration, integrator=name, record_every=every)
 
-    ref_name = None if exact else reference_integrator()
+    # joints: the pendulum's exact motion, else the finest run of a method that holds joints
+    ref_name = None if exact or pendulum is not None else reference_integrator(jointed=bool(spec.joints))
     dt_ref = min(dts) / REFERENCE_REFINEMENT
     tolerances = tuple(tolerances or DEFAULT_TOLERANCES)
     total = float(len(dts) * (len(infos) + len(mujoco_methods)) + len(adaptive) * len(tolerances) + 1)
@@ -467,6 +479,12 @@ def study(
     if exact:
         reference = ReferenceInfo("exact", "exact: free flight under uniform gravity and torque-free rotation")
         ref_path = exact_reference(base, times)
+    elif pendulum is not None:
+        reference = ReferenceInfo(
+            "exact", "exact: a rigid pendulum on a hinge, theta(t) = 2 arcsin(k sn(K - omega0 t | k^2)), period "
+            f"4 K(k^2) / omega0 = {pendulum.period:.6g} s"
+        )  # fmt: skip
+        ref_path = pendulum_reference(base, pendulum, times)
     else:
         assert ref_name is not None
         fine_c = compiled_for(ref_name, min(dts), REFERENCE_REFINEMENT)
@@ -527,8 +545,8 @@ def study(
         mujoco_skipped=mujoco_reason,
         load_average=load,
     )
-    if not (np.any(base.initial_state.L != 0.0) or base.forces.has_torque):
-        result.primary_error = "position"  # nothing rotates: rotation errors are all zero
+    if not (np.any(base.initial_state.L != 0.0) or base.forces.has_torque or base.forces.joint is not None):
+        result.primary_error = "position"  # nothing rotates: rotation errors are all zero (a joint turns bodies)
     length_scale = max(float(np.abs(ref_path.x).max(initial=0.0)), 1e-3)
     fitted = [(i.name, i.order, i.symplectic) for i in infos] + [(m.name, m.order, False) for m in mujoco_methods]
     for name, order, symplectic in fitted:

@@ -71,6 +71,10 @@ class CompiledScene:
         from rbcli.scene.checks import stability_warnings
 
         issues = [*self.spec.warnings, *stability_warnings(self)]
+        if self.spec.joints:
+            from rbcli.scene.compile_joints import redundant_row_warnings
+
+            issues += redundant_row_warnings(self.spec.joints, self.forces.joint, self.model, self.initial_state)
         return sorted(issues, key=SceneIssue.order)
 
 
@@ -130,6 +134,11 @@ def compile_model(spec: SceneSpec) -> CompiledModel:
     kinematic_initial_state(forces, model, state)
     if summary is not None and contact is not None:  # the speeds need the initial state, kinematic ones too
         summary = replace(summary, impact=impact_bound(spec, model, state, contact))
+    if spec.joints:
+        from rbcli.scene.compile_joints import compile_joints
+
+        joints = compile_joints(spec.joints, spec.bodies, model, centres, state, has_contact=spec.contact is not None)
+        forces = forces._replace(joint=joints)
     return CompiledModel(model, forces, state, summary)
 
 
@@ -236,8 +245,8 @@ def run_settings(
     name = integrator if integrator is not None else sim.integrator
     from rbcli.physics.integrators import check_integrator
 
-    refusal = check_integrator(name)
-    if refusal is not None:
+    refusal = check_integrator(name, joints=bool(spec.joints))
+    if refusal is not None and refusal.key == "integrator":
         raise refuse("integrator", name, f"{refusal.reason}; {refusal.expected}")
     if tolerance is not None or sim.tolerance is not None:
         number("tolerance", tolerance if tolerance is not None else sim.tolerance)
@@ -264,7 +273,7 @@ def run_settings(
         if settings.tolerance is not None:
             substeps = 1  # adaptive steps are capped at the contacts' stable step instead (physics/adaptive.py)
         settings = replace(settings, substeps=int(substeps))
-    refusal = check_integrator(settings.integrator, tolerance=settings.tolerance is not None)
+    refusal = check_integrator(settings.integrator, tolerance=settings.tolerance is not None, joints=bool(spec.joints))
     if refusal is not None:
         raise ValueError(refusal.reason)
     return settings

@@ -53,6 +53,9 @@ EXCLUSIVE_GROUPS = (
 # the integrator of a scene with contact that names none (euler-matrix, the tutorial's, warns with contact)
 CONTACT_DEFAULT_INTEGRATOR = "split2"
 
+# the integrator of a scene with joints that names none: split2 is the one that holds them (docs/joints.md)
+JOINTS_DEFAULT_INTEGRATOR = "split2"
+
 # a run longer than this many steps is more likely a unit slip (dt in ms?) than intended
 MANY_STEPS = 1_000_000_000
 
@@ -170,6 +173,15 @@ def _analyse(
             # the tutorial's default (euler-matrix) gains energy in every bounce; split2 is symplectic,
             # second order and evaluates the contact forces once per step
             simulation = replace(simulation, integrator=CONTACT_DEFAULT_INTEGRATOR)
+    joints: tuple[Any, ...] = ()
+    if isinstance(data.get("joints"), list):
+        from rbcli.scene.joint_spec import joints_from_list
+
+        joints = joints_from_list(data["joints"], [b.name for b in bodies], issues, clean)
+        if joints and simulation is not None:
+            if "integrator" not in data["simulation"]:  # the one method that holds joints (docs/joints.md)
+                simulation = replace(simulation, integrator=JOINTS_DEFAULT_INTEGRATOR)
+            _check_joint_integrator(data["simulation"], simulation, issues)
     if issues.error_count or simulation is None:
         return None, issues.sorted()
     gravity = data.get("gravity")
@@ -180,6 +192,7 @@ def _analyse(
         gravity=None if gravity is None else _frozen_vector(gravity),
         forces=forces,
         contact=contact,
+        joints=joints,
         source_path=file,
         source_text=text,
     )
@@ -219,6 +232,17 @@ def _warn_materials_without_contact(entries: list[Any], issues: IssueCollector) 
         issues.add(path, f"body '{name}': a material does nothing in a scene without `contact:` (no body collides)",
                    "a `contact:` section (docs/contact.md), or no material", key=True, severity="warning",
                    dedupe_key="material without contact")  # fmt: skip
+
+
+def _check_joint_integrator(written: dict[str, Any], simulation: SimulationSpec, issues: IssueCollector) -> None:
+    """A located error when the scene's integrator (or tolerance) cannot hold joints: `check_integrator`
+    decides, at the key the scene wrote (an integrator the loader chose is always one that can)."""
+    from rbcli.physics.integrators import check_integrator
+
+    refusal = check_integrator(simulation.integrator, tolerance=simulation.tolerance is not None, joints=True)
+    if refusal is not None:
+        key = refusal.key if refusal.key in written else "integrator"
+        issues.error(("simulation", key), refusal.reason, refusal.expected, key=key == "tolerance")
 
 
 def _frozen_vector(value: list[float]) -> Any:

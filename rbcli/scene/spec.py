@@ -191,6 +191,7 @@ class SceneSpec:
     gravity: np.ndarray | None = None  # [m/s^2], shape (3,), world frame
     forces: tuple[ForceSpec, ...] = ()
     contact: ContactSpec | None = None  # None: no contact stage at all
+    joints: tuple[Any, ...] = ()  # scene/joint_spec.py JointSpec, one per `joints:` entry (docs/joints.md)
     source_path: str | None = None
     source_text: str = ""
     warnings: tuple[SceneIssue, ...] = ()  # non-fatal issues found while loading (e.g. a normalised quaternion)

@@ -22,6 +22,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from rbcli.physics.contact.tables import ContactTable, ContactWork, make_contact_work
+from rbcli.physics.joints.tables import JointTable, JointWork, make_joint_work
 
 # Row column `schedule` value meaning "no schedule": the force acts at full strength at all times.
 NO_SCHEDULE = -1
@@ -194,6 +195,8 @@ class ForceTables(NamedTuple):
       contact stage).
     kinematic: the prescribed motions of kinematic bodies (KinematicTable; their stages: physics/kinematic.py;
       0 rows: no kinematic stages).
+    joint: the joints (physics/joints/tables.py), None without joints: the joint stages compile to
+      nothing (physics/joints/stages.py) in either form of the tables.
     torque_body: bool (body_count,): True for a body that some term can give a torque (a field row,
       a point force or spring end off its centre of mass, a pure torque, angular drag). Integrators
       run their torque path (L += h tau, the body-frame torque in Euler's equations) only for these
@@ -214,6 +217,7 @@ class ForceTables(NamedTuple):
     impulse: ImpulseTable
     contact: ContactTable
     kinematic: KinematicTable = kinematic_table()
+    joint: JointTable | None = None
 
     def kernel(self) -> KernelForceTables:
         """The tables as compiled kernels take them: None for each table without rows (see
@@ -222,6 +226,8 @@ class ForceTables(NamedTuple):
         def kernel_field(name: str, value: Any) -> Any:  # noqa: ANN401 - a table or a switch
             if name in _KERNEL_AS_IS:
                 return value
+            if value is None:  # a table a scene may lack altogether (joint)
+                return None
             if name == "contact":
                 return value if contact_present(value) else None
             return value if table_rows(value) else None  # every force type's table
@@ -249,6 +255,7 @@ class KernelForceTables(NamedTuple):
     impulse: ImpulseTable | None
     contact: ContactTable | None
     kinematic: KinematicTable | None = None
+    joint: JointTable | None = None
 
 
 def contact_present(contact: ContactTable | None) -> bool:
@@ -265,10 +272,12 @@ class ForceData(NamedTuple):
       found) it processed.
     contact: the contact stage's grid, per-evaluation arrays and contact history (contact/tables.py);
       None when the scene has no contact stage (`contact_present`), as KernelForceTables.contact is.
+    joint: the joint stages' work arrays (physics/joints/tables.py); None without joints.
     """
 
     term_evaluations: np.ndarray
     contact: ContactWork | None
+    joint: JointWork | None = None
 
 
 def make_force_data(forces: ForceTables | KernelForceTables) -> ForceData:
@@ -279,6 +288,7 @@ def make_force_data(forces: ForceTables | KernelForceTables) -> ForceData:
         contact=make_contact_work(contact, forces.torque_body.shape[0])
         if contact is not None and contact_present(contact)
         else None,
+        joint=make_joint_work(forces.joint) if forces.joint is not None and table_rows(forces.joint) else None,
     )
 
 

@@ -42,6 +42,7 @@ class IntegratorInfo:
     summary: str
     adaptive: bool = False
     demonstration: bool = False
+    joints: bool = False  # holds joints (physics/joints/: its loop runs the joint stages; docs/joints.md)
 
     def load(self) -> ModuleType:
         """Import the integrator's module: step, step_numpy, SCRATCH_WIDTH (pulls in numba)."""
@@ -128,6 +129,7 @@ INTEGRATORS: dict[str, IntegratorInfo] = {
             force_evals=1,
             summary="Symplectic splitting: leapfrog for the centre of mass, exact turns about the "
             "principal axes (McLachlan 1993, Reich 1994, Dullweber et al. 1997). The default choice.",
+            joints=True,
         ),
         IntegratorInfo(
             "split4",
@@ -204,9 +206,15 @@ def closest_integrator(name: object) -> str | None:
     return close[0] if close else None
 
 
-def check_integrator(name: object, *, tolerance: bool = False) -> IntegratorRefusal | None:
+def joint_integrators() -> tuple[str, ...]:
+    """The integrators that hold joints (RATTLE-type stages in their loops: docs/joints.md)."""
+    return tuple(name for name, info in INTEGRATORS.items() if info.joints)
+
+
+def check_integrator(name: object, *, tolerance: bool = False, joints: bool = False) -> IntegratorRefusal | None:
     """None when `name` is a known integrator that can run as asked (with a tolerance: an adaptive
-    one), else the refusal. Checks names only: nothing is imported or compiled."""
+    one; for a scene with joints: one that holds them, fixed-step), else the refusal. Checks names
+    only: nothing is imported or compiled."""
     if not isinstance(name, str) or name not in INTEGRATORS:
         hint = closest_integrator(name)
         guess = f" (did you mean {hint!r}?)" if hint else ""
@@ -217,6 +225,19 @@ def check_integrator(name: object, *, tolerance: bool = False) -> IntegratorRefu
             "tolerance",
             f"a tolerance needs an adaptive integrator ({adaptive}); {name!r} is fixed-step",
             f"integrator: one of {adaptive} with a tolerance, or no tolerance (fixed dt)",
+        )
+    if joints and (tolerance or not INTEGRATORS[name].joints):
+        holding = ", ".join(joint_integrators())
+        if tolerance:
+            return IntegratorRefusal(
+                "tolerance",
+                f"joints need a fixed step: adaptive stepping does not hold them (integrators that do: {holding})",
+                f"no tolerance, a fixed dt with integrator {holding}",
+            )
+        return IntegratorRefusal(
+            "integrator",
+            f"integrator {name!r} does not hold joints; the ones that do: {holding}",
+            f"integrator: {holding} (docs/joints.md)",
         )
     return None
 

@@ -1,0 +1,134 @@
+"""Shared pieces of the joint stages: body weights W at a configuration, the rows' momentum changes per
+body, and how an impulse at the kick moves a body in the step's second half drift.
+
+W_b = blockdiag(I3 / M_b, R_b I0_b^-1 R_b^T) (0 for ground bodies, which act as the world); an impulse
+(dP, dL) at the kick changes P and L by it and, through the half drift after the kick, x by h/2 dP / M and
+q by the turn exp(h/2 I_w^-1 dL) (physics/joints/stages.py says why that is the method's order).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+
+from rbcli.physics.integrators.kinematics import rotate, rotate_inverse
+
+
+@numba.njit(cache=True)
+def body_weights(model, table, work, q) -> None:  # noqa: ANN001
+    """inv_mass and world inverse inertia R I0^-1 R^T of every body at orientations q (0: ground)."""
+    for b in range(q.shape[0]):
+        if table.body_ground[b]:
+            work.inv_mass[b] = 0.0
+            for i in range(3):
+                for k in range(3):
+                    work.inv_inertia[b, i, k] = 0.0
+            continue
+        work.inv_mass[b] = 1.0 / model.body_mass[b]
+        w, x, y, z = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
+        c00, c01, c02 = rotate(w, x, y, z, 1.0, 0.0, 0.0)
+        c10, c11, c12 = rotate(w, x, y, z, 0.0, 1.0, 0.0)
+        c20, c21, c22 = rotate(w, x, y, z, 0.0, 0.0, 1.0)
+        i0, i1, i2 = model.body_inertia_inv[b, 0], model.body_inertia_inv[b, 1], model.body_inertia_inv[b, 2]
+        # columns c_k = R e_k: (R D R^T)_ik = sum_k D_k c_k[i] c_k[m]
+        col = ((c00, c01, c02), (c10, c11, c12), (c20, c21, c22))
+        for i in range(3):
+            for m in range(3):
+                work.inv_inertia[b, i, m] = (
+                    i0 * col[0][i] * col[0][m] + i1 * col[1][i] * col[1][m] + (i2 * col[2][i] * col[2][m])
+                )
+
+
+@numba.njit(cache=True, inline="always")
+def turn(q, b, t0, t1, t2) -> None:  # noqa: ANN001
+    """q_b <- exp(theta / 2) q_b for the world rotation vector theta, renormalised."""
+    angle = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+    if angle == 0.0:
+        return
+    c, s = math.cos(0.5 * angle), math.sin(0.5 * angle) / angle
+    rx, ry, rz = s * t0, s * t1, s * t2
+    w, qx, qy, qz = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
+    w, qx, qy, qz = (
+        c * w - rx * qx - ry * qy - rz * qz,
+        c * qx + rx * w + ry * qz - rz * qy,
+        c * qy - rx * qz + ry * w + rz * qx,
+        c * qz + rx * qy - ry * qx + rz * w,
+    )
+    norm = 1.0 / math.sqrt(w * w + qx * qx + qy * qy + qz * qz)
+    q[b, 0], q[b, 1], q[b, 2], q[b, 3] = w * norm, qx * norm, qy * norm, qz * norm
+
+
+@numba.njit(cache=True, inline="always")
+def body_omega(model, q, L, b):  # noqa: ANN001, ANN202
+    """omega = R I0^-1 R^T L [rad/s], world."""
+    w, x, y, z = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
+    m0, m1, m2 = rotate_inverse(w, x, y, z, L[b, 0], L[b, 1], L[b, 2])
+    inv = model.body_inertia_inv
+    return rotate(w, x, y, z, inv[b, 0] * m0, inv[b, 1] * m1, inv[b, 2] * m2)
+
+
+@numba.njit(cache=True)
+def gather_impulses(table, work, multipliers) -> None:  # noqa: ANN001
+    """impulse_body = G^T multipliers per body (ground bodies and the world get nothing)."""
+    impulse = work.impulse_body
+    impulse[:, :] = 0.0
+    for j in range(table.kind.shape[0]):
+        a, b = table.body_a[j], table.body_b[j]
+        for r in range(table.row_start[j], table.row_start[j] + table.row_count[j]):
+            m = multipliers[r]
+            for c in range(6):
+                impulse[a, c] += work.jac_a[r, c] * m
+                if b >= 0:
+                    impulse[b, c] += work.jac_b[r, c] * m
+
+
+@numba.njit(cache=True)
+def apply_body_impulses(table, work, drift, x, q, P, L) -> None:  # noqa: ANN001
+    """P, L += work.impulse_body of every moving body; with drift > 0 also x += drift dP / M and
+    q <- exp(drift I_w^-1 dL) q (the position stage's second half drift, drift = h/2, W in work)."""
+    for b in range(x.shape[0]):
+        if table.body_ground[b]:
+            continue
+        d = work.impulse_body[b]
+        if d[0] == 0.0 and d[1] == 0.0 and d[2] == 0.0 and d[3] == 0.0 and d[4] == 0.0 and d[5] == 0.0:
+            continue  # a body no row touched
+        P[b, 0] += d[0]
+        P[b, 1] += d[1]
+        P[b, 2] += d[2]
+        L[b, 0] += d[3]
+        L[b, 1] += d[4]
+        L[b, 2] += d[5]
+        if drift > 0.0:
+            move = drift * work.inv_mass[b]
+            x[b, 0] += move * d[0]
+            x[b, 1] += move * d[1]
+            x[b, 2] += move * d[2]
+            W = work.inv_inertia[b]
+            t0 = drift * (W[0, 0] * d[3] + W[0, 1] * d[4] + W[0, 2] * d[5])
+            t1 = drift * (W[1, 0] * d[3] + W[1, 1] * d[4] + W[1, 2] * d[5])
+            t2 = drift * (W[2, 0] * d[3] + W[2, 1] * d[4] + W[2, 2] * d[5])
+            turn(q, b, t0, t1, t2)
+
+
+@numba.njit(cache=True)
+def row_velocities(model, table, work, q, P, L) -> float:  # noqa: ANN001
+    """residual = G V (every body's own velocity, ground bodies' too); returns max |G V|."""
+    worst = 0.0
+    for j in range(table.kind.shape[0]):
+        a, b = table.body_a[j], table.body_b[j]
+        inv_a = 1.0 / model.body_mass[a]
+        oa0, oa1, oa2 = body_omega(model, q, L, a)
+        va = (inv_a * P[a, 0], inv_a * P[a, 1], inv_a * P[a, 2], oa0, oa1, oa2)
+        vb = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        if b >= 0:
+            inv_b = 1.0 / model.body_mass[b]
+            ob0, ob1, ob2 = body_omega(model, q, L, b)
+            vb = (inv_b * P[b, 0], inv_b * P[b, 1], inv_b * P[b, 2], ob0, ob1, ob2)
+        for r in range(table.row_start[j], table.row_start[j] + table.row_count[j]):
+            total = 0.0
+            for c in range(6):
+                total += work.jac_a[r, c] * va[c] + work.jac_b[r, c] * vb[c]
+            work.residual[r] = total
+            worst = max(worst, abs(total))
+    return worst

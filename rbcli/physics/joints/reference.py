@@ -1,0 +1,176 @@
+"""Plain numpy twins of the joint kernels: the rows (rows.py) and a whole split2 step with its joint
+stages (stages.py), with a choice of where the position impulse's direction G is taken. Tests compare
+the kernels with them; scene/compile_joints.py uses the rows and matrices once, at compile time, to find
+redundant rows (a loop that constrains a direction twice) and warn about them.
+
+Written for clarity, one joint at a time, with a dense numpy solve; the compiled stages must agree with
+them to round-off. `direction="end"` is the plain post-projection (G at the end of the step), kept to
+measure against the midpoint choice the kernels make (docs/joints.md).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rbcli.physics.joints.tables import (
+    JOINT_BALL,
+    JOINT_DISTANCE,
+    JOINT_FIXED,
+    JOINT_HINGE,
+    JOINT_SLIDER,
+    JointTable,
+)
+from rbcli.physics.rotation import quat_conjugate, quat_multiply, quat_to_matrix, skew
+
+
+def joint_rows_numpy(table: JointTable, x: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(g (R,), G_a (R, 6), G_b (R, 6)) at the configuration (x, q): rows.joint_rows in numpy."""
+    rows = int(table.row_count.sum())
+    g, ga, gb = np.zeros(rows), np.zeros((rows, 6)), np.zeros((rows, 6))
+    R = quat_to_matrix(q)
+    for j in range(table.kind.shape[0]):
+        a, b, r, kind = int(table.body_a[j]), int(table.body_b[j]), int(table.row_start[j]), int(table.kind[j])
+        ra = R[a] @ table.anchor_a[j]
+        Rb = R[b] if b >= 0 else np.eye(3)
+        qb = q[b] if b >= 0 else np.array([1.0, 0.0, 0.0, 0.0])
+        rb = Rb @ table.anchor_b[j] if b >= 0 else np.zeros(3)
+        d = x[a] + ra - (x[b] + rb if b >= 0 else table.anchor_b[j])
+
+        def linear(r: int, n: np.ndarray, turn: np.ndarray, ra: np.ndarray = ra, rb: np.ndarray = rb) -> None:
+            ga[r] = np.concatenate([n, np.cross(ra, n)])
+            gb[r] = np.concatenate([-n, -np.cross(rb, n) + turn])
+
+        if kind in (JOINT_BALL, JOINT_HINGE, JOINT_FIXED):
+            for i, e in enumerate(np.eye(3)):
+                g[r] = d[i]
+                linear(r, e, np.zeros(3))
+                r += 1
+        if kind == JOINT_DISTANCE:
+            length = np.linalg.norm(d)
+            g[r] = length - table.length[j]
+            linear(r, d / length, np.zeros(3))
+            r += 1
+        if kind in (JOINT_FIXED, JOINT_SLIDER):
+            e = quat_multiply(quat_multiply(q[a], quat_conjugate(table.relative_q[j])), quat_conjugate(qb))
+            e = -e if e[0] < 0 else e
+            for i in range(3):
+                g[r] = 2.0 * e[1 + i]
+                ga[r, 3:] = e[0] * np.eye(3)[i] - skew(e[1:])[i]
+                gb[r, 3:] = -(e[0] * np.eye(3)[i] + skew(e[1:])[i])
+                r += 1
+        if kind == JOINT_HINGE:
+            u = R[a] @ table.axis_a[j]
+            for k in range(2):
+                n = Rb @ table.normal_b[j, k]
+                g[r] = u @ n
+                ga[r, 3:], gb[r, 3:] = np.cross(u, n), -np.cross(u, n)
+                r += 1
+        if kind == JOINT_SLIDER:
+            for k in range(2):
+                n = Rb @ table.normal_b[j, k]
+                g[r] = d @ n
+                linear(r, n, np.cross(n, d))
+                r += 1
+    return g, ga, gb
+
+
+def body_weights_numpy(model, table: JointTable, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001
+    """(1 / M (N,), R I0^-1 R^T (N, 3, 3)) at orientations q, zero for ground bodies; model: a Model or
+    KernelModel (body_mass, body_inertia)."""
+    R = quat_to_matrix(q)
+    inv_inertia = np.einsum("bij,bj,bkj->bik", R, 1.0 / model.body_inertia, R)
+    inv_mass = 1.0 / model.body_mass
+    inv_mass[table.body_ground] = 0.0
+    inv_inertia[table.body_ground] = 0.0
+    return inv_mass, inv_inertia
+
+
+def rows_matrix_numpy(table: JointTable, ga: np.ndarray, gb: np.ndarray, bodies: int) -> np.ndarray:
+    """G (R, 6 N): the rows against every body's (v, omega)."""
+    G = np.zeros((ga.shape[0], 6 * bodies))
+    for j in range(table.kind.shape[0]):
+        rows = slice(int(table.row_start[j]), int(table.row_start[j] + table.row_count[j]))
+        a, b = int(table.body_a[j]), int(table.body_b[j])
+        G[rows, 6 * a : 6 * a + 6] += ga[rows]
+        if b >= 0:
+            G[rows, 6 * b : 6 * b + 6] += gb[rows]
+    return G
+
+
+def weight_matrix_numpy(inv_mass: np.ndarray, inv_inertia: np.ndarray) -> np.ndarray:
+    """W = blockdiag(I3 / M_b, R_b I0_b^-1 R_b^T) (6 N, 6 N)."""
+    n = inv_mass.shape[0]
+    W = np.zeros((6 * n, 6 * n))
+    for b in range(n):
+        W[6 * b : 6 * b + 3, 6 * b : 6 * b + 3] = inv_mass[b] * np.eye(3)
+        W[6 * b + 3 : 6 * b + 6, 6 * b + 3 : 6 * b + 6] = inv_inertia[b]
+    return W
+
+
+def _turn(q: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    angle = np.linalg.norm(theta, axis=1)
+    safe = np.where(angle > 0.0, angle, 1.0)
+    r = np.concatenate([np.cos(0.5 * angle)[:, None], (np.sin(0.5 * angle) / safe)[:, None] * theta], axis=1)
+    out = quat_multiply(r, q)
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+
+def joint_stages_numpy(model, table: JointTable, h: float, x, q, P, L, direction: str = "mid") -> np.ndarray:  # noqa: ANN001
+    """The position and velocity stages after an unconstrained split2 step, in place; returns the step's
+    multipliers (R,). direction: "mid" (the kernels' choice) or "end" (G of the position impulse at the
+    end configuration: the plain post-projection)."""
+    n = x.shape[0]
+    moving = ~table.body_ground
+    omega = np.einsum("bij,bj->bi", body_weights_numpy(model, table._replace(body_ground=np.zeros(n, bool)), q)[1], L)
+    if direction == "mid":
+        x_dir, q_dir = x - 0.5 * h * P / model.body_mass[:, None], _turn(q, -0.5 * h * omega)
+    else:
+        x_dir, q_dir = x.copy(), q.copy()
+    inv_mass, inv_inertia = body_weights_numpy(model, table, q_dir)
+    _, ga, gb = joint_rows_numpy(table, x_dir, q_dir)
+    G = rows_matrix_numpy(table, ga, gb, n)
+    W = weight_matrix_numpy(inv_mass, inv_inertia)
+    A = G @ W @ G.T
+    total = np.zeros(G.shape[0])
+    g = joint_rows_numpy(table, x, q)[0]
+    for _ in range(50):
+        if not np.abs(g).max() > 0.0:
+            break
+        delta = np.linalg.solve(A, -2.0 / h * g)
+        total += delta
+        d = (G.T @ delta).reshape(n, 6) * moving[:, None]
+        P += d[:, :3]
+        L += d[:, 3:]
+        x += 0.5 * h * inv_mass[:, None] * d[:, :3]
+        q[:] = _turn(q, 0.5 * h * np.einsum("bij,bj->bi", inv_inertia, d[:, 3:]))
+        previous, g = np.abs(g).max(), joint_rows_numpy(table, x, q)[0]
+        if np.abs(g).max() > 0.5 * previous:
+            break
+    return total - project_velocities_numpy(model, table, x, q, P, L)
+
+
+def _rates(model, table: JointTable, x, q, P, L):  # noqa: ANN001, ANN202
+    """(G (R, 6 N), W (6 N, 6 N), G V (R,)) at (x, q), V every body's own velocity (ground bodies' too)."""
+    n = x.shape[0]
+    inv_mass, inv_inertia = body_weights_numpy(model, table, q)
+    _, ga, gb = joint_rows_numpy(table, x, q)
+    G = rows_matrix_numpy(table, ga, gb, n)
+    omega = np.einsum("bij,bj->bi", body_weights_numpy(model, table._replace(body_ground=np.zeros(n, bool)), q)[1], L)
+    V = np.concatenate([P / model.body_mass[:, None], omega], axis=1).reshape(-1)
+    return G, weight_matrix_numpy(inv_mass, inv_inertia), G @ V
+
+
+def project_velocities_numpy(model, table: JointTable, x, q, P, L) -> np.ndarray:  # noqa: ANN001
+    """(P, L) -= G^T mu with mu = (G W G^T)^-1 G V, in place (stages._project); returns mu."""
+    G, W, rate = _rates(model, table, x, q, P, L)
+    mu = np.linalg.solve(G @ W @ G.T, rate)
+    d = (G.T @ mu).reshape(x.shape[0], 6) * ~table.body_ground[:, None]
+    P -= d[:, :3]
+    L -= d[:, 3:]
+    return mu
+
+
+def joint_begin_numpy(model, table: JointTable, x, q, P, L) -> None:  # noqa: ANN001
+    """stages.joint_begin: the velocities projected when some row's rate exceeds 1e-12."""
+    if np.abs(_rates(model, table, x, q, P, L)[2]).max() > 1e-12:
+        project_velocities_numpy(model, table, x, q, P, L)

@@ -1,0 +1,220 @@
+"""The joint stages of a step: RATTLE-type position and velocity stages after split2's update.
+
+After the unconstrained split2 step (all forces; D(h/2) K(h) D(h/2), docs/integrators.md) the state is
+(x~, q~, P~, L~). The constraint force acts as an impulse Lambda at the kick, in the direction of the
+rows' Jacobian G at the step's midpoint configuration (SHAKE at the midpoint, Hairer-Lubich-Wanner
+VII.1; Leimkuhler-Reich ch. 7):
+
+    P = P~ + G_mid^T Lambda,  and the second half drift moves the bodies by
+    x = x~ + h/2 M^-1 dP,   q = exp(h/2 I_w^-1 dL) q~           (dP, dL: body b's part of G_mid^T Lambda)
+
+with Lambda such that g(x, q) = 0 at the end of the step. `joint_position` solves that by simplified
+Newton, Lambda += -(2/h) A^-1 g(x, q), A = G_mid W G_mid^T factored once per step, until |g| stops
+falling (round-off: each iteration gains a factor ~ h |omega|, measured 4-6 iterations at dt = 1e-3).
+The translation part is exact (the drift is linear in P); the rotation part is the first-order response
+of the turns to dL, an O(h^3) local difference, so the method keeps order 2.
+
+The midpoint configuration comes from the end state without a saved copy: x_mid = x~ - h/2 P~/M
+exactly (the second drift used the kicked P~), and q_mid = exp(-h/2 omega~) q~, omega~ = I_w^-1 L~,
+the second half turn undone to O(h^2) (exact for isotropic bodies, whose half turn it is).
+
+`joint_velocity` then projects the momenta so that the end velocities satisfy the hidden constraint
+G_end V = 0 (one linear solve): mu = A_end^-1 G_end V, (P, L) -= G_end^T mu. Both multipliers summed
+are the step's joint impulse (work.impulse), the reaction force being impulse / h.
+
+Why the midpoint (measured, docs/joints.md): with G at the end (a plain post-projection) the
+projection removes the velocity's normal part at the end, which shortens the tangential speed by a
+factor cos(h omega) per step: first order and dissipative (energy falls steadily); with G at the
+midpoint the impulse's tangential part at the end, Lambda sin(h omega / 2), restores it to O(h^3), and
+the period error is second order with the energy error bounded.
+
+Static and kinematic bodies act as the world (W = 0, nothing applied to them) but their anchors move
+with their pose; a kinematic body's velocity enters G V. Stats go to work.stats (tables.STAT_*).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numba
+from numba.core import types
+from numba.extending import overload
+
+from rbcli.physics.joints.drives import drive_velocities, limit_positions
+from rbcli.physics.joints.impulses import (
+    apply_body_impulses,
+    body_omega,
+    body_weights,
+    gather_impulses,
+    row_velocities,
+    turn,
+)
+from rbcli.physics.joints.rows import joint_rows
+from rbcli.physics.joints.solver import factor_rows, solve_rows
+from rbcli.physics.joints.tables import STAT_ITERATIONS, STAT_POSITION, STAT_REDUNDANT, STAT_VELOCITY
+from rbcli.physics.step import STEP_KERNEL
+
+# the Newton iteration stops when |g| falls by less than this factor in one iteration (round-off
+# reached), or after NEWTON_ITERATIONS (a step far too long for its joints: the stats show it)
+NEWTON_STALL = 0.5
+NEWTON_ITERATIONS = 50
+# rounds of (limits onto their bounds, joints again) in one position stage: each round gains the
+# simplified Newton's factor ~ h |omega| on both, so a few reach round-off
+LIMIT_ROUNDS = 8
+# joint_begin projects the velocities when some row's rate |G V| exceeds this [m/s or rad/s]: the velocity
+# stage leaves ~1e-16 to 1e-14 (a loop with dropped rows and motors), a kick or a velocity given without
+# regard to the joints leaves orders of magnitude more
+VELOCITY_SLACK = 1e-12
+
+_OPTIONS: Any = STEP_KERNEL
+
+
+@numba.njit(cache=True)
+def joint_position(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
+    """The position stage: the midpoint impulse that puts the end configuration on g = 0 (module
+    docstring), then each violated limit pushed back onto its bound the same way (drives.py)."""
+    half = 0.5 * h
+    for b in range(x.shape[0]):  # the midpoint configuration of the step just taken
+        inv_m = 1.0 / model.body_mass[b]
+        work.x_mid[b, 0] = x[b, 0] - half * inv_m * P[b, 0]
+        work.x_mid[b, 1] = x[b, 1] - half * inv_m * P[b, 1]
+        work.x_mid[b, 2] = x[b, 2] - half * inv_m * P[b, 2]
+        for c in range(4):
+            work.q_mid[b, c] = q[b, c]
+        w0, w1, w2 = body_omega(model, q, L, b)
+        turn(work.q_mid, b, -half * w0, -half * w1, -half * w2)
+    body_weights(model, table, work, work.q_mid)
+    joint_rows(table, work.x_mid, work.q_mid, work.jac_a, work.jac_b, work.residual, True)
+    redundant = factor_rows(table.graph, work.solver, table.row_start, table.row_count, table.body_a, table.body_b,
+                            work.jac_a, work.jac_b, work.inv_mass, work.inv_inertia)  # fmt: skip
+    work.impulse[:] = 0.0
+    work.limit_hit[:] = 0.0
+    worst, iterations = _newton(table, work, h, x, q, P, L)
+    for _ in range(LIMIT_ROUNDS):  # limits reached in this step: onto the bound, then the joints again
+        if not limit_positions(table, work, h, x, q, P, L):
+            break
+        worst, more = _newton(table, work, h, x, q, P, L)
+        iterations += more
+    work.stats[STAT_ITERATIONS] = iterations
+    work.stats[STAT_POSITION] = worst
+    work.stats[STAT_REDUNDANT] = redundant
+
+
+@numba.njit(cache=True)
+def _newton(table, work, h, x, q, P, L):  # noqa: ANN001, ANN202
+    """Simplified Newton on the end configuration's residual with the midpoint factor; (max |g|, iterations)."""
+    worst = joint_rows(table, x, q, work.jac_a, work.jac_b, work.residual, False)
+    iterations = 0
+    scale = -2.0 / h
+    while worst > 0.0 and iterations < NEWTON_ITERATIONS:
+        for r in range(work.rhs.shape[0]):
+            work.rhs[r] = scale * work.residual[r]
+        solve_rows(table.graph, work.solver, table.row_start, table.row_count, table.body_a, table.body_b,
+                   work.rhs, work.delta)  # fmt: skip
+        for r in range(work.delta.shape[0]):
+            work.impulse[r] += work.delta[r]
+        gather_impulses(table, work, work.delta)
+        apply_body_impulses(table, work, 0.5 * h, x, q, P, L)
+        iterations += 1
+        previous = worst
+        worst = joint_rows(table, x, q, work.jac_a, work.jac_b, work.residual, False)
+        if worst > NEWTON_STALL * previous:
+            break
+    return worst, iterations
+
+
+@numba.njit(cache=True)
+def joint_velocity(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
+    """The velocity stage: (P, L) -= G^T mu with G V = 0 after it, G at the end configuration; then the
+    motors and dampers, then the limits that are reached (drives.py)."""
+    _project(model, table, work, x, q, P, L)
+    drive_velocities(model, table, work, h, x, q, P, L)
+    work.stats[STAT_VELOCITY] = row_velocities(model, table, work, q, P, L)
+
+
+@numba.njit(cache=True)
+def joint_begin(model, table, work, x, q, P, L) -> None:  # noqa: ANN001
+    """Before a step: velocities that break the joints' rows (initial velocities given without regard to
+    the joints, or an impulse just applied) are projected onto G V = 0 at the current configuration. For
+    ideal joints that projection is the exact impulsive reaction (the W-orthogonal projection of the
+    velocity onto the joints' tangent space: the momenta change only along G^T), so a kick on a jointed
+    body acts as the joints would take it. Otherwise (every step after the first) it checks G V only."""
+    joint_rows(table, x, q, work.jac_a, work.jac_b, work.residual, True)
+    if row_velocities(model, table, work, q, P, L) > VELOCITY_SLACK:
+        _project(model, table, work, x, q, P, L)
+
+
+@numba.njit(cache=True)
+def _project(model, table, work, x, q, P, L) -> None:  # noqa: ANN001
+    """(P, L) -= G^T mu, mu = A^-1 G V at (x, q): G V = 0 after it; mu is added to work.impulse."""
+    body_weights(model, table, work, q)
+    joint_rows(table, x, q, work.jac_a, work.jac_b, work.residual, True)
+    factor_rows(table.graph, work.solver, table.row_start, table.row_count, table.body_a, table.body_b,
+                work.jac_a, work.jac_b, work.inv_mass, work.inv_inertia)  # fmt: skip
+    row_velocities(model, table, work, q, P, L)
+    solve_rows(table.graph, work.solver, table.row_start, table.row_count, table.body_a, table.body_b,
+               work.residual, work.delta)  # fmt: skip
+    for r in range(work.delta.shape[0]):
+        work.delta[r] = -work.delta[r]
+        work.impulse[r] += work.delta[r]
+    gather_impulses(table, work, work.delta)
+    apply_body_impulses(table, work, 0.0, x, q, P, L)
+
+
+# ---- the pipeline's dispatchers: compiled to nothing for a scene without joints ---------------------
+
+
+def joint_begin_stage(model, forces, force_data, x, q, P, L) -> None:  # noqa: ANN001
+    """`joint_begin` when the scene has joints (forces.joint is not None)."""
+    raise TypeError("a stage dispatcher runs in compiled kernels only (physics/joints/stages.py)")
+
+
+@overload(joint_begin_stage, jit_options=_OPTIONS)
+def _joint_begin_stage(model, forces, force_data, x, q, P, L):  # noqa: ANN001, ANN202
+    if _absent(_member(forces, "joint"), _member(force_data, "joint")):
+        return lambda model, forces, force_data, x, q, P, L: None
+
+    def run(model, forces, force_data, x, q, P, L):  # noqa: ANN001, ANN202
+        joint_begin(model, forces.joint, force_data.joint, x, q, P, L)
+
+    return run
+
+
+def _absent(*argument_types: types.Type) -> bool:
+    return any(isinstance(t, types.NoneType) for t in argument_types)
+
+
+def _member(tuple_type: Any, name: str) -> types.Type:  # noqa: ANN401 - a numba NamedTuple type
+    return dict(zip(tuple_type.fields, tuple_type.types, strict=True))[name]
+
+
+def joint_position_stage(model, forces, force_data, h, x, q, P, L) -> None:  # noqa: ANN001
+    """`joint_position` when the scene has joints (forces.joint is not None)."""
+    raise TypeError("a stage dispatcher runs in compiled kernels only (physics/joints/stages.py)")
+
+
+@overload(joint_position_stage, jit_options=_OPTIONS)
+def _joint_position_stage(model, forces, force_data, h, x, q, P, L):  # noqa: ANN001, ANN202
+    if _absent(_member(forces, "joint"), _member(force_data, "joint")):
+        return lambda model, forces, force_data, h, x, q, P, L: None
+
+    def run(model, forces, force_data, h, x, q, P, L):  # noqa: ANN001, ANN202
+        joint_position(model, forces.joint, force_data.joint, h, x, q, P, L)
+
+    return run
+
+
+def joint_velocity_stage(model, forces, force_data, h, x, q, P, L) -> None:  # noqa: ANN001
+    """`joint_velocity` when the scene has joints (forces.joint is not None)."""
+    raise TypeError("a stage dispatcher runs in compiled kernels only (physics/joints/stages.py)")
+
+
+@overload(joint_velocity_stage, jit_options=_OPTIONS)
+def _joint_velocity_stage(model, forces, force_data, h, x, q, P, L):  # noqa: ANN001, ANN202
+    if _absent(_member(forces, "joint"), _member(force_data, "joint")):
+        return lambda model, forces, force_data, h, x, q, P, L: None
+
+    def run(model, forces, force_data, h, x, q, P, L):  # noqa: ANN001, ANN202
+        joint_velocity(model, forces.joint, force_data.joint, h, x, q, P, L)
+
+    return run

@@ -1,0 +1,155 @@
+"""The joint table (read-only, part of the force tables) and the joints' work arrays (in the run's Data).
+
+Rows are grouped by joint: joint j connects body_a[j] and body_b[j] (WORLD = -1 for the world; body_a
+is never the world) and owns rows row_start[j] .. row_start[j] + row_count[j] - 1. Each row r is one
+scalar constraint g_r(x, q) = 0 with its Jacobian G_r = d g_r / d(v_a, omega_a, v_b, omega_b)
+(world frame; docs/joints.md has every type's rows):
+
+    ball      3  p_a - p_b = 0, p = x + R r the anchor's world position
+    distance  1  |p_a - p_b| - length = 0
+    hinge     5  ball, and (R_a u_a) . (R_b n_bk) = 0 for the two unit normals n_b1, n_b2 of the axis
+    slider    5  relative rotation held (3), and (p_a - p_b) . (R_b n_bk) = 0 (2)
+    fixed     6  ball, and relative rotation held (3)
+
+Relative rotation: with c = q_b0^* q_a0 (the initial relative rotation, principal frames), the error
+quaternion e = q_a c^* q_b^* is 1 while it holds; its rows are g = 2 vec(e) (w_e >= 0), the rotation
+vector of the error to second order.
+
+Points are body-fixed offsets about the centre of mass in the PRINCIPAL frame (as forces/tables.py),
+vectors likewise; an end on the world has its point and vectors in the world frame. Static and
+kinematic bodies act as the world (`body_ground`: infinite mass) but keep their own frame, so a
+kinematic body's anchor moves with it (a driven crank).
+
+This module imports numpy only, so scene/compile_joints.py builds tables cheaply.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from rbcli.physics.joints.solver_layout import JointGraph, SolverWork, joint_graph, make_solver_work
+
+WORLD = -1
+
+JOINT_BALL, JOINT_HINGE, JOINT_FIXED, JOINT_SLIDER, JOINT_DISTANCE = range(5)
+JOINT_KINDS = {"ball": JOINT_BALL, "hinge": JOINT_HINGE, "fixed": JOINT_FIXED, "slider": JOINT_SLIDER,
+               "distance": JOINT_DISTANCE}  # fmt: skip
+JOINT_ROWS = {JOINT_BALL: 3, JOINT_HINGE: 5, JOINT_FIXED: 6, JOINT_SLIDER: 5, JOINT_DISTANCE: 1}
+
+# columns of JointWork.stats: Newton iterations of the last position stage, the largest |g| it left
+# [m or rad], the largest |G V| the velocity stage left [m/s or rad/s], rows found redundant (dropped)
+STAT_ITERATIONS, STAT_POSITION, STAT_VELOCITY, STAT_REDUNDANT = range(4)
+STAT_COUNT = 4
+
+
+class JointTable(NamedTuple):
+    """Every joint of a scene (see the module docstring); read-only arrays, shapes over joints J,
+    rows R and bodies N."""
+
+    kind: np.ndarray  # int64 (J,): JOINT_*
+    body_a: np.ndarray  # int64 (J,), never WORLD
+    body_b: np.ndarray  # int64 (J,), WORLD for the world
+    anchor_a: np.ndarray  # [m] (J, 3), principal frame of body_a, about its centre of mass
+    anchor_b: np.ndarray  # [m] (J, 3), principal frame of body_b; a world point for WORLD
+    axis_a: np.ndarray  # [1] (J, 3), unit, principal frame of body_a (hinge, slider)
+    normal_b: np.ndarray  # [1] (J, 2, 3), two unit normals of the axis, principal frame of body_b (or world)
+    relative_q: np.ndarray  # (J, 4) wxyz: c = q_b0^* q_a0, the initial relative rotation (fixed, slider)
+    length: np.ndarray  # [m] (J,): distance joints' rod
+    damping: np.ndarray  # (J,): hinge [N m s/rad], slider [N s/m]; 0: no damper (stages.py: drives)
+    motor_speed: np.ndarray  # (J,): hinge [rad/s], slider [m/s]: the target rate of a velocity motor
+    motor_cap: np.ndarray  # (J,): hinge [N m], slider [N]: the motor's largest torque / force; 0: no motor
+    limit_lower: np.ndarray  # (J,): hinge [rad], slider [m] from the initial configuration; -inf: none
+    limit_upper: np.ndarray  # (J,): +inf: none
+    reference_a: np.ndarray  # [1] (J, 3), principal frame of body_a: n_b1 at the initial poses (hinge angle 0)
+    travel0: np.ndarray  # [m] (J,): a slider's initial (p_a - p_b) . u (its travel is measured from it)
+    row_start: np.ndarray  # int64 (J,)
+    row_count: np.ndarray  # int64 (J,)
+    body_ground: np.ndarray  # bool (N,): static or kinematic bodies, which act as the world
+    graph: JointGraph  # the solver's ordering (joints/solver.py: leaves first, loop joints apart)
+
+
+class JointWork(NamedTuple):
+    """The joint stages' mutable arrays, allocated once per run (`make_joint_work`), in ForceData.joint."""
+
+    jac_a: np.ndarray  # (R, 6): d g_r / d(v_a, omega_a), world
+    jac_b: np.ndarray  # (R, 6): d g_r / d(v_b, omega_b), world (unused for WORLD)
+    residual: np.ndarray  # (R,): g, or G V in the velocity stage
+    rhs: np.ndarray  # (R,)
+    delta: np.ndarray  # (R,): the solve's output
+    impulse: np.ndarray  # [N s or N m s] (R,): the last step's multipliers: position + velocity stage
+    x_mid: np.ndarray  # [m] (N, 3): the step's midpoint configuration, where the position impulse acts
+    q_mid: np.ndarray  # (N, 4)
+    inv_mass: np.ndarray  # [1/kg] (N,): 0 for ground bodies
+    inv_inertia: np.ndarray  # [1/(kg m^2)] (N, 3, 3), world frame: R I0^-1 R^T, 0 for ground bodies
+    impulse_body: np.ndarray  # [N s, N m s] (N, 6): one solve's momentum change per body
+    limit_hit: np.ndarray  # (J,): 1 where this step's position stage pushed a coordinate back onto a limit
+    stats: np.ndarray  # (STAT_COUNT,): see STAT_*
+    solver: SolverWork
+
+
+def _f(values, *shape: int) -> np.ndarray:  # noqa: ANN001
+    out = np.ascontiguousarray(np.asarray(values, dtype=np.float64).reshape((-1, *shape)))
+    out.setflags(write=False)
+    return out
+
+
+def _i(values) -> np.ndarray:  # noqa: ANN001
+    out = np.ascontiguousarray(np.asarray(values, dtype=np.int64).reshape(-1))
+    out.setflags(write=False)
+    return out
+
+
+def joint_table(
+    kind=(),
+    body_a=(),
+    body_b=(),
+    anchor_a=(),
+    anchor_b=(),
+    axis_a=(),
+    normal_b=(),
+    relative_q=(),
+    length=(),
+    damping=None,
+    motor_speed=None,
+    motor_cap=None,
+    limit_lower=None,
+    limit_upper=None,
+    reference_a=None,
+    travel0=None,
+    *,
+    body_ground: np.ndarray,
+) -> JointTable:  # noqa: ANN001
+    """A JointTable from per-joint sequences (damping and motors default to none); rows numbered in
+    joint order."""
+    kinds = _i(kind)
+    count = _i([JOINT_ROWS[int(k)] for k in kinds])
+    start = _i(np.concatenate([[0], np.cumsum(count)[:-1]]) if count.size else [])
+    ground = np.ascontiguousarray(np.asarray(body_ground, dtype=np.bool_))
+    ground.setflags(write=False)
+    a, b = _i(body_a), _i(body_b)
+    zeros, rows = np.zeros(kinds.shape[0]), kinds.shape[0]
+    damper, speed, cap = (_f(zeros if v is None else v) for v in (damping, motor_speed, motor_cap))
+    lower = _f(np.full(rows, -np.inf) if limit_lower is None else limit_lower)
+    upper = _f(np.full(rows, np.inf) if limit_upper is None else limit_upper)
+    reference = _f(np.zeros((rows, 3)) if reference_a is None else reference_a, 3)
+    return JointTable(
+        kinds, a, b, _f(anchor_a, 3), _f(anchor_b, 3), _f(axis_a, 3), _f(normal_b, 2, 3), _f(relative_q, 4),
+        _f(length), damper, speed, cap, lower, upper, reference, _f(zeros if travel0 is None else travel0),
+        start, count, ground, joint_graph(a, b, ground, count),
+    )  # fmt: skip
+
+
+def joint_row_total(table: JointTable) -> int:
+    return int(table.row_count.sum())
+
+
+def make_joint_work(table: JointTable) -> JointWork:
+    """Zeroed work arrays for `table`'s rows and bodies."""
+    rows, bodies = joint_row_total(table), table.body_ground.shape[0]
+    return JointWork(
+        np.zeros((rows, 6)), np.zeros((rows, 6)), np.zeros(rows), np.zeros(rows), np.zeros(rows), np.zeros(rows),
+        np.zeros((bodies, 3)), np.zeros((bodies, 4)), np.zeros(bodies), np.zeros((bodies, 3, 3)),
+        np.zeros((bodies, 6)), np.zeros(table.kind.shape[0]), np.zeros(STAT_COUNT), make_solver_work(table.graph),
+    )  # fmt: skip

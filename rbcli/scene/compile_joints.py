@@ -1,0 +1,268 @@
+"""Compile a scene's JointSpecs into the JointTable (physics/joints/tables.py), once, with located errors.
+
+Anchors and axes given in a body's user frame become principal-frame offsets about its centre of mass,
+r = E^T (p_user - centre_user), u = E^T u_user (E = user-from-principal, as compile_forces.py does);
+given as one world point / world axis at the initial poses they become r = R0^T (p - x0), u = R0^T u
+for each end (R0 world-from-principal at t = 0). What only the compiled bodies show is refused here,
+located at the key at fault: anchors or axes that disagree with the initial poses (saying by how
+much), a joint whose both ends are static (or static and the world), and what this slice does not yet
+hold (limits, joints together with contact: docs/joints.md says what is next).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from rbcli.physics.joints.tables import JOINT_KINDS, WORLD, JointTable, joint_table
+from rbcli.physics.model import Model
+from rbcli.physics.rotation import quat_conjugate, quat_multiply, quat_to_matrix
+from rbcli.physics.state import State
+from rbcli.scene.joint_spec import WORLD_NAME, JointSpec
+from rbcli.scene.spec import BodySpec, SceneError, SceneIssue
+
+# anchors that miss each other by more than this fraction of the bodies' size (at least 1 m: a tiny
+# body's anchors are still read to ~1e-16 m) were not meant to coincide; 1e-9 leaves room for anchors
+# written with 10 significant digits, and is far below any offset a person means
+ANCHOR_TOLERANCE = 1e-9
+# axes given per body that differ by more than this [rad] at the initial poses were not meant as one
+AXIS_TOLERANCE = 1e-9
+
+
+class _Invalid(Exception):
+    def __init__(self, key: str, message: str, expected: str = ""):
+        super().__init__(message)
+        self.key, self.expected = key, expected
+
+
+def compile_joints(
+    joints: Sequence[JointSpec],
+    bodies: Sequence[BodySpec],
+    model: Model,
+    centres_user: np.ndarray,
+    state: State,
+    *,
+    has_contact: bool,
+) -> JointTable | None:
+    """The JointTable of a scene's joints (None without joints); SceneError listing every invalid joint."""
+    if not joints:
+        return None
+    ground = np.array([b.static or b.kinematic for b in bodies], dtype=np.bool_)
+    index = {b.name: i for i, b in enumerate(bodies)}
+    rows: dict[str, list] = {
+        k: []
+        for k in ("kind", "body_a", "body_b", "anchor_a", "anchor_b", "axis_a", "normal_b", "relative_q", "length",
+                  "damping", "motor_speed", "motor_cap", "limit_lower", "limit_upper", "reference_a", "travel0")
+    }  # fmt: skip
+    issues = []
+    for joint in joints:
+        try:
+            for key, value in _joint_row(joint, index, ground, model, centres_user, state, has_contact).items():
+                rows[key].append(value)
+        except _Invalid as exc:
+            where = joint.locations.get(exc.key, joint.location)
+            issues.append(SceneIssue(where, f"joint '{joint.name}': {exc}", exc.expected))
+    if issues:
+        raise SceneError(issues)
+    return joint_table(**rows, body_ground=ground)
+
+
+def _unsupported(joint: JointSpec) -> None:
+    """Refuse what the joint stages do not hold yet, rather than ignore it (docs/joints.md, next)."""
+    if joint.kind == "hinge" and joint.limits is not None and not -np.pi < joint.limits[0] <= joint.limits[1] < np.pi:
+        raise _Invalid("limits", f"hinge limits {list(joint.limits)} rad reach past a half turn (the angle is "
+                       "measured in (-pi, pi))", "hinge limits strictly between -pi and pi")  # fmt: skip
+
+
+def _joint_row(
+    joint: JointSpec,
+    index: dict[str, int],
+    ground: np.ndarray,
+    model: Model,
+    centres: np.ndarray,
+    state: State,
+    has_contact: bool,
+) -> dict[str, object]:
+    _unsupported(joint)
+    ends = [WORLD if name == WORLD_NAME else index[name] for name in joint.bodies]
+    anchors = None if joint.anchors is None else [np.asarray(p, dtype=np.float64) for p in joint.anchors]
+    axes = None if joint.axes is None else [np.asarray(u, dtype=np.float64) for u in joint.axes]
+    if ends[0] == WORLD:  # body a is never the world: swap the ends (and what is given per end)
+        ends.reverse()
+        anchors = anchors[::-1] if anchors is not None else None
+        axes = axes[::-1] if axes is not None else None
+    a, b = ends
+    if ground[a] and (b == WORLD or ground[b]):
+        what = "the world" if b == WORLD else "a static or kinematic body"
+        raise _Invalid(
+            "bodies",
+            f"both ends are fixed (a static or kinematic body and {what}): the joint holds nothing",
+            "at least one end a moving (dynamic) body",
+        )
+    if has_contact:
+        raise _Invalid(
+            "type",
+            "joints in a scene with contact are not supported yet (the jointed bodies' "
+            "collision exclusion comes with a later slice of issue 27)",
+            "a scene with joints and no `contact:` section",
+        )
+    R = quat_to_matrix(state.q)  # world-from-principal at t = 0
+    E = quat_to_matrix(model.body_frame_q)  # user-from-principal
+
+    def to_body(end: int, world_vector: np.ndarray, point: bool) -> np.ndarray:
+        if end == WORLD:
+            return world_vector
+        return R[end].T @ (world_vector - state.x[end]) if point else R[end].T @ world_vector
+
+    def from_user(end: int, user: np.ndarray, point: bool) -> np.ndarray:
+        if end == WORLD:
+            return user
+        return E[end].T @ (user - centres[end]) if point else E[end].T @ user
+
+    def world_point(end: int, r: np.ndarray) -> np.ndarray:
+        return r if end == WORLD else state.x[end] + R[end] @ r
+
+    def world_vector(end: int, u: np.ndarray) -> np.ndarray:
+        return u if end == WORLD else R[end] @ u
+
+    if joint.anchor is not None:
+        anchor_a, anchor_b = to_body(a, joint.anchor, True), to_body(b, joint.anchor, True)
+    else:
+        assert anchors is not None  # the schema requires anchor or anchors
+        anchor_a, anchor_b = from_user(a, anchors[0], True), from_user(b, anchors[1], True)
+    p_a, p_b = world_point(a, anchor_a), world_point(b, anchor_b)
+    kind = JOINT_KINDS[joint.kind]
+    axis_a, normals = np.array([1.0, 0.0, 0.0]), np.zeros((2, 3))
+    if joint.kind in ("hinge", "slider"):
+        if joint.axis is not None:
+            axis_a, axis_b = to_body(a, joint.axis, False), to_body(b, joint.axis, False)
+        else:
+            assert axes is not None  # the schema requires axis or axes
+            axis_a, axis_b = from_user(a, axes[0], False), from_user(b, axes[1], False)
+            u_a, u_b = world_vector(a, axis_a), world_vector(b, axis_b)
+            angle = float(np.arctan2(np.linalg.norm(np.cross(u_a, u_b)), np.dot(u_a, u_b)))
+            if angle > AXIS_TOLERANCE:
+                raise _Invalid(
+                    "axes",
+                    f"the axes are {angle:.3g} rad apart at the initial poses",
+                    "axes that are the same world direction at the initial poses (or one `axis`)",
+                )
+        normals = _normals(axis_b)
+    offset = p_a - p_b
+    if joint.kind == "slider":  # only the offset across the axis must vanish: along it is the slider's travel
+        u = world_vector(b, normals[0]), world_vector(b, normals[1])
+        offset = np.array([offset @ u[0], offset @ u[1], 0.0])
+    size = max(1.0, *(_body_size(model, end) for end in (a, b) if end != WORLD))
+    length = 0.0
+    if joint.kind == "distance":
+        length = float(np.linalg.norm(p_a - p_b))
+        if joint.length is not None and abs(joint.length - length) > ANCHOR_TOLERANCE * size:
+            raise _Invalid(
+                "length",
+                f"the anchors are {length:.6g} m apart at the initial poses, the rod is {joint.length:.6g} m",
+                "a length equal to the anchors' initial distance (or none)",
+            )
+        if not length > ANCHOR_TOLERANCE * size:
+            raise _Invalid(
+                "anchors",
+                "the anchors coincide at the initial poses: a rod of length 0 has no direction",
+                "anchors apart (a ball joint holds coinciding points)",
+            )
+    else:
+        miss = float(np.linalg.norm(offset))
+        if miss > ANCHOR_TOLERANCE * size:
+            across = " across the axis" if joint.kind == "slider" else ""
+            raise _Invalid(
+                "anchors",
+                f"anchors are {miss:.3g} m apart{across} at the initial poses",
+                "anchors that are the same world point at the initial poses (or one `anchor`)",
+            )
+    q_b = np.array([1.0, 0.0, 0.0, 0.0]) if b == WORLD else state.q[b]
+    relative = quat_multiply(quat_conjugate(q_b), state.q[a])
+    motor = joint.motor
+    reference = np.zeros(3)
+    travel0 = 0.0
+    if joint.kind == "hinge":  # n_b1 at the initial poses, in a's frame: the angle's zero
+        reference = R[a].T @ world_vector(b, normals[0])
+    if joint.kind == "slider":
+        travel0 = float((p_a - p_b) @ world_vector(b, np.cross(normals[0], normals[1])))
+    lower, upper = joint.limits if joint.limits is not None else (-np.inf, np.inf)
+    return dict(
+        limit_lower=lower,
+        limit_upper=upper,
+        reference_a=reference,
+        travel0=travel0,
+        damping=joint.damping,
+        motor_speed=0.0 if motor is None else motor.speed,
+        motor_cap=0.0 if motor is None else motor.cap,
+        kind=kind,
+        body_a=a,
+        body_b=b,
+        anchor_a=anchor_a,
+        anchor_b=anchor_b,
+        axis_a=axis_a / np.linalg.norm(axis_a),
+        normal_b=normals,
+        relative_q=relative,
+        length=length,
+    )
+
+
+def _normals(axis: np.ndarray) -> np.ndarray:
+    """Two unit vectors perpendicular to `axis` and to each other (2, 3)."""
+    u = axis / np.linalg.norm(axis)
+    helper = np.eye(3)[int(np.argmin(np.abs(u)))]  # the basis vector least parallel to u
+    n1 = np.cross(u, helper)
+    n1 /= np.linalg.norm(n1)
+    return np.array([n1, np.cross(u, n1)])
+
+
+def _body_size(model: Model, body: int) -> float:
+    """The largest particle distance from the body's centre of mass [m] (its size for tolerances)."""
+    start, count = int(model.body_particle_start[body]), int(model.body_particle_count[body])
+    offsets = model.particle_offset[start : start + count]
+    return float(np.max(np.linalg.norm(offsets, axis=1))) if count else 0.0
+
+
+# the dense check of loops builds A = G W G^T densely (R^2 floats, R^3 flops): 3,000 rows is 72 MB, ~1 s
+_DENSE_CHECK_ROWS = 3000
+
+
+def redundant_row_warnings(joints: Sequence[JointSpec], table: JointTable | None, model: Model,
+                           state: State) -> list[SceneIssue]:  # fmt: skip
+    """A warning per joint that has rows repeating constraints of earlier joints (a loop that holds a
+    direction twice, as a planar four-bar of spatial hinges does: 3 rows), found as the solver finds them
+    (the zero pivots of A = G W G^T at the initial poses, rows in joint order): they are dropped with
+    multiplier 0 each step, and the loop still closes."""
+    if table is None or not np.any(table.graph.joint_node < 0):
+        return []  # no loop: a tree's rows are independent (each joint's own rows are, by construction)
+    if int(table.row_count.sum()) > _DENSE_CHECK_ROWS:
+        return []  # too many rows for the dense check; the solver still drops redundant rows each step
+    from rbcli.physics.joints.dense_layout import redundant_rows_numpy
+    from rbcli.physics.joints.reference import (
+        body_weights_numpy,
+        joint_rows_numpy,
+        rows_matrix_numpy,
+        weight_matrix_numpy,
+    )
+
+    _, ga, gb = joint_rows_numpy(table, state.x, state.q)
+    G = rows_matrix_numpy(table, ga, gb, state.x.shape[0])
+    A = G @ weight_matrix_numpy(*body_weights_numpy(model, table, state.q)) @ G.T
+    dropped = redundant_rows_numpy(A)
+    owner = np.searchsorted(table.row_start, dropped, side="right") - 1
+    issues = []
+    for j in np.unique(owner):
+        rows = [int(r - table.row_start[j]) for r in dropped[owner == j]]
+        joint = joints[int(j)]
+        others = ", ".join(repr(joints[int(k)].name) for k in range(int(j)))
+        listed = ", ".join(map(str, rows))
+        issues.append(SceneIssue(
+            joint.location,
+            f"joint '{joint.name}': {len(rows)} of its {int(table.row_count[j])} rows (rows {listed}) repeat "
+            f"constraints of earlier joints ({others}): a loop that holds a "
+            "direction twice; they are dropped (multiplier 0) and the loop still closes",
+            "a loop whose joints leave its free directions free (e.g. ball joints instead of hinges at one end)",
+            severity="warning",
+        ))  # fmt: skip
+    return issues

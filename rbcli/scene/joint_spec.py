@@ -1,0 +1,175 @@
+"""The scene's `joints:` list, validated into JointSpec (docs/joints.md).
+
+The schema has checked the keys each type takes, the types and the ranges; this adds what it cannot
+say: a body name that is not a body, a joint from a body to itself or between two `world` ends, a zero
+axis, limits with lower > upper, duplicate joint names. What needs the compiled bodies (anchors that
+disagree with the initial poses, a joint whose both ends are static) is checked by
+scene/compile_joints.py. Every problem is located at the key at fault.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from rbcli.scene.issues import IssueCollector, did_you_mean
+from rbcli.scene.spec import SourceLocation
+from rbcli.scene.yaml_located import YamlPath
+
+# the name a joint's end uses for the fixed world frame
+WORLD_NAME = "world"
+
+JOINT_TYPES = ("ball", "hinge", "fixed", "slider", "distance")
+
+# a joint axis shorter than this [1] has no direction: the scene gives it as a direction, so any length
+# well above round-off is meant, and 1e-12 is far below any length a person writes
+MIN_AXIS_LENGTH = 1e-12
+
+
+@dataclass(frozen=True)
+class JointMotor:
+    """A velocity motor: drives the joint rate to `speed` [rad/s or m/s] with at most `cap` [N m or N]."""
+
+    speed: float
+    cap: float
+
+
+@dataclass(frozen=True)
+class JointSpec:
+    """One joint between bodies[0] and bodies[1] (either may be WORLD_NAME, not both).
+
+    anchor: one world point [m] at the initial poses, or None when `anchors` gives one point per end,
+    each in that end's own (user particle) frame, a world point for the world [m], shape (2, 3).
+    axis: hinge / slider axis, world frame at the initial poses [1] (unit), or None when `axes` gives one
+    per end's frame, shape (2, 3), unit rows. length: distance joint's rod [m] (None: the anchors'
+    initial distance). limits [rad or m] (lower, upper) from the initial configuration; damping
+    [N m s/rad or N s/m]; motor. locations: where each given key is, for compile's located errors.
+    """
+
+    name: str
+    kind: str
+    bodies: tuple[str, str]
+    anchor: np.ndarray | None = None
+    anchors: np.ndarray | None = None
+    axis: np.ndarray | None = None
+    axes: np.ndarray | None = None
+    length: float | None = None
+    limits: tuple[float, float] | None = None
+    damping: float = 0.0
+    motor: JointMotor | None = None
+    collide: bool = False
+    location: SourceLocation | None = None
+    locations: dict[str, SourceLocation] = field(default_factory=dict, compare=False, repr=False)
+
+
+def _frozen(value: Any, shape: tuple[int, ...]) -> np.ndarray:
+    out = np.asarray(value, dtype=np.float64).reshape(shape)
+    out.flags.writeable = False
+    return out
+
+
+def _unit(value: Any, path: YamlPath, issues: IssueCollector) -> np.ndarray | None:
+    """The direction of an axis (normalised); None with a located error for a zero one."""
+    v = np.asarray(value, dtype=np.float64)
+    length = float(np.linalg.norm(v))
+    if not length > MIN_AXIS_LENGTH:
+        issues.error(path, f"a zero axis ({length:.3g}) has no direction", "a non-zero vector")
+        return None
+    return v / length
+
+
+def joints_from_list(
+    entries: Sequence[Any], body_names: Sequence[str], issues: IssueCollector, clean: Any
+) -> tuple[JointSpec, ...]:
+    """JointSpecs of the `joints:` entries that passed the schema (`clean(path)`); errors go to `issues`."""
+    known = set(body_names)
+    joints: list[JointSpec] = []
+    first_name: dict[str, YamlPath] = {}
+    for i, entry in enumerate(entries):
+        path: YamlPath = ("joints", i)
+        if not clean(path):
+            continue
+        joint = _joint(entry, i, path, known, issues)
+        if joint is None:
+            continue
+        if joint.name in first_name:
+            line = issues.locate(first_name[joint.name]).line
+            issues.error(
+                (*path, "name"),
+                f"duplicate joint name '{joint.name}' (first at line {line})",
+                "a unique name per joint",
+            )
+            continue
+        first_name[joint.name] = (*path, "name") if "name" in entry else path
+        joints.append(joint)
+    return tuple(joints)
+
+
+def _joint(
+    entry: dict[str, Any], index: int, path: YamlPath, known: set[str], issues: IssueCollector
+) -> JointSpec | None:
+    before = issues.error_count
+    kind = str(entry["type"])
+    name = str(entry.get("name", f"joint{index}"))
+    a, b = (str(n) for n in entry["bodies"])
+    if WORLD_NAME in known and WORLD_NAME in (a, b):
+        issues.error(
+            (*path, "bodies"),
+            f"a body is named '{WORLD_NAME}', so `{WORLD_NAME}` here is ambiguous",
+            f"rename the body: '{WORLD_NAME}' names the fixed world frame in joints",
+        )
+    for k, body in enumerate((a, b)):
+        if body != WORLD_NAME and body not in known:
+            hint = did_you_mean(body, [*known, WORLD_NAME])
+            guess = f" (did you mean '{hint}'?)" if hint else ""
+            issues.error((*path, "bodies", k), f"no body named '{body}'{guess}", f"a body name or '{WORLD_NAME}'")
+    if a == b:
+        what = "both ends are the world" if a == WORLD_NAME else f"body '{a}' is jointed to itself"
+        issues.error(
+            (*path, "bodies"),
+            f"{what}: a joint connects two different bodies",
+            f"two different bodies, or one body and '{WORLD_NAME}'",
+        )
+    axis = axes = None
+    if "axis" in entry:
+        axis = _unit(entry["axis"], (*path, "axis"), issues)
+    if "axes" in entry:
+        units = [_unit(v, (*path, "axes", k), issues) for k, v in enumerate(entry["axes"])]
+        axes = None if any(u is None for u in units) else np.array(units)
+    limits = None
+    if "limits" in entry:
+        lower, upper = (float(v) for v in entry["limits"])
+        if lower > upper:
+            issues.error(
+                (*path, "limits"),
+                f"lower limit {lower:g} is above upper limit {upper:g}",
+                "limits: [lower, upper] with lower <= upper",
+            )
+        limits = (lower, upper)
+    motor = None
+    if "motor" in entry:
+        value = entry["motor"]
+        cap = value.get("max_torque", value.get("max_force"))
+        motor = JointMotor(float(value["speed"]), float(cap))
+    if issues.error_count > before:
+        return None
+    locations = {key: issues.locate((*path, key)) for key in entry}
+    return JointSpec(
+        name=name,
+        kind=kind,
+        bodies=(a, b),
+        anchor=_frozen(entry["anchor"], (3,)) if "anchor" in entry else None,
+        anchors=_frozen(entry["anchors"], (2, 3)) if "anchors" in entry else None,
+        axis=None if axis is None else _frozen(axis, (3,)),
+        axes=None if axes is None else _frozen(axes, (2, 3)),
+        length=float(entry["length"]) if "length" in entry else None,
+        limits=limits,
+        damping=float(entry.get("damping", 0.0)),
+        motor=motor,
+        collide=bool(entry.get("collide", False)),
+        location=issues.locate(path),
+        locations=locations,
+    )
