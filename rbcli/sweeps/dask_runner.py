@@ -65,6 +65,19 @@ LOCAL_CLUSTER_CONFIG: dict[str, Any] = {
 # Where the local cluster's scheduler, workers and dashboard listen unless asked otherwise: this machine
 # only (Dask's dashboard default, ":8787", is every interface).
 LOCAL_HOST = "127.0.0.1"
+
+
+def _worker_env() -> dict[str, str]:
+    """RBSIM_THREADS=1 and NUMBA_NUM_THREADS=1 for the local workers unless this process set them
+    (runner/threads.py): each worker is one process per core, so its kernels run on one thread."""
+    import os
+
+    from rbcli.runner.threads import WORKER_ENV
+
+    wanted = {**WORKER_ENV, "NUMBA_NUM_THREADS": "1"}
+    return {name: os.environ.get(name, value) for name, value in wanted.items()}
+
+
 # Tasks submitted per slot at a time: the one running and the next, queued on the worker (Dask's scheduler
 # keeps it there, worker-saturation 1.1 rounding up), so a worker starts its next task without a round trip.
 IN_FLIGHT_PER_SLOT = 2
@@ -188,6 +201,7 @@ def _start_local_cluster(workers: int, host: str) -> tuple[Any, Any]:
             n_workers=workers,
             threads_per_worker=1,
             processes=True,
+            env=_worker_env(),  # one kernel thread per worker: a worker per core already fills the cores
             host=host,
             dashboard_address=f"{host}:0",  # any free port: 8787 may be another cluster's (the dashboard needs bokeh)
             silence_logs=logging.ERROR,
