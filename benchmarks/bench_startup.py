@@ -101,7 +101,7 @@ def report():
 atexit.register(report)
 import rbcli.cli.app
 mark("import rbcli.cli.app (typer, the command modules)")
-import rbcli.api, rbcli.runner.loop
+import rbcli.api, rbcli.runner.loop, rbcli.runner.simulation
 mark("import rbcli.api, rbcli.runner.loop (numpy, numba, scene, record, runner)")
 def wrap(module, name, before, during):
     inner = getattr(module, name)
@@ -113,7 +113,7 @@ def wrap(module, name, before, during):
             mark(during)
     setattr(module, name, wrapped)
 wrap(rbcli.api, "prepare", "typer: parse the command line, rich", "prepare: read, validate, compile the scene")
-wrap(rbcli.runner.loop, "warm_up", "check the output", "warm_up: load (or compile) the kernels, first step")
+wrap(rbcli.runner.simulation, "warm_up", "check the output", "warm_up: load (or compile) the kernels, first step")
 wrap(rbcli.api, "run_to_file", "between", "run_to_file: the steps, the sink's imports, the .mcap")
 sys.argv = ["rbsim", "run", *sys.argv[1:]]
 rbcli.cli.app.main()

@@ -4,10 +4,11 @@ typer 0.29 converts every command-line value through a pydantic TypeAdapter buil
 (`typer._coercion.build_runtime_param`): importing pydantic and building the adapters cost ~0.05-0.1 s
 of every command, a tenth of a short `rbsim run` (docs/performance.md, "Start-up"). For a parameter
 typed str, int, float, bool or Path (or Optional of one) without typer's extras (a parser, bounds,
-choices), `install()` converts here a value that is already of its type, or a string that is plainly
-one: `int` of `-?[0-9]+`, `float` of a decimal number such as 1e-3, Path of a non-empty string (which
-then passes typer's own path checks, `coerce_cli_path`). pydantic's lax mode converts those strings to
-the same values. Anything else (`inf`, `1_000`, `abc`, an enum, a list) goes through typer's own
+choices), or a list of one (`rbsim validate FILE...`), `install()` converts here a value that is already
+of its type, or a string that is plainly one: `int` of `-?[0-9]+`, `float` of a decimal number such as
+1e-3, Path of a non-empty string (which then passes typer's own path checks, `coerce_cli_path`).
+pydantic's lax mode converts those strings to the same values. Anything else (`inf`, `1_000`, `abc`, an
+enum, a list of anything else, a list with one such item) goes through typer's own
 conversion, which gives its result or its error message, as before. With a typer whose internals differ,
 nothing is changed. tests/cli/test_coercion.py holds the cases.
 """
@@ -86,31 +87,46 @@ def install() -> None:
         return
 
     class PlainRuntimeParam(RuntimeParam):  # a frozen dataclass: fields set through __init__ below
-        def __init__(self, parameter: Any, kind: type) -> None:  # noqa: ANN401
+        def __init__(self, parameter: Any, kind: type, many: bool) -> None:  # noqa: ANN401
             super().__init__(parameter_info=parameter.type_descriptor.parameter_info, annotation=kind)
             object.__setattr__(self, "kind", kind)
+            object.__setattr__(self, "many", many)  # a list[kind] parameter: its values come as a sequence
             object.__setattr__(self, "parameter", parameter)
 
         def _coerce_value(self, value: Any, param: Any, ctx: Any) -> Any:  # noqa: ANN401
-            done, result = convert(self.kind, value)  # type: ignore[attr-defined]
+            kind = self.kind  # type: ignore[attr-defined]
+            if self.many:  # type: ignore[attr-defined]
+                items = value if isinstance(value, (list, tuple)) else None
+                converted = [convert(kind, item) for item in items] if items is not None else [(False, None)]
+                done = all(ok for ok, _ in converted)
+                result = [item for _, item in converted]
+            else:
+                done, result = convert(kind, value)
             if not done:  # typer's own conversion: its value, or its error message
                 typer_own = build_runtime_param(self.parameter.type_descriptor)  # type: ignore[attr-defined]
                 return typer_own._coerce_value(value, param=param, ctx=ctx)
-            if self.kind is Path:  # type: ignore[attr-defined]
-                return coerce_cli_path(result, self.parameter_info, path_type=Path, param=param, ctx=ctx)
+            if kind is Path:
+                check = [result] if not self.many else result  # type: ignore[attr-defined]
+                check = [coerce_cli_path(p, self.parameter_info, path_type=Path, param=param, ctx=ctx) for p in check]
+                return check if self.many else check[0]  # type: ignore[attr-defined]
             return result
 
     def get_runtime_param(self: Any) -> Any:  # noqa: ANN401
         if self._runtime_param is None:
             descriptor = self.type_descriptor
-            kind = plain_type(descriptor.annotation, descriptor.parameter_info)
+            annotation, many = descriptor.annotation, get_origin(descriptor.annotation) is list
+            if many:  # list[plain]: typer hands over the values as one sequence (nargs -1 or multiple)
+                members = get_args(annotation)
+                annotation = members[0] if len(members) == 1 else None
+            kind = plain_type(annotation, descriptor.parameter_info) if annotation is not None else None
             if descriptor.file_annotation is not None:  # typer opens files for these
                 kind = None
             if kind is str and routes_to_path(str, descriptor.parameter_info):  # a str with path checks
                 kind = None
-            if kind is None or getattr(self, "multiple", False) or getattr(self, "nargs", 1) != 1:
+            multi_value = getattr(self, "multiple", False) or getattr(self, "nargs", 1) != 1
+            if kind is None or kind is bool and many or multi_value != many:
                 return ordinary(self)
-            self._runtime_param = PlainRuntimeParam(self, kind)
+            self._runtime_param = PlainRuntimeParam(self, kind, many)
         return self._runtime_param
 
     _TyperParameter.get_runtime_param = get_runtime_param  # type: ignore[method-assign]

@@ -14,12 +14,15 @@ import signal
 import subprocess
 import sys
 import time
+import urllib.parse
+import urllib.request
 from pathlib import Path
 
 import distributed
 import psutil
 from sweep_cases import rows_without_wall_time
 
+from rbcli.sweeps import dask_runner
 from rbcli.sweeps.load import load_sweep
 from rbcli.sweeps.run import run_sweep
 
@@ -92,7 +95,8 @@ def test_the_local_cluster_listens_on_loopback_and_takes_in_workers_that_join(tm
     """The sweep's own LocalCluster: every endpoint (scheduler, its HTTP server, nannies, workers) on
     127.0.0.1, where Dask's dashboard default listened on every interface. A worker added while the
     sweep runs is counted in: the slots the batches are sized for become 2, and the rows stay the
-    serial run's."""
+    serial run's. bokeh is installed with the test extras, so the sweep reports its dashboard's link, which
+    answers on 127.0.0.1 while the sweep runs."""
     scene = (ROOT / "scenes" / "verification" / "intermediate_axis.yaml").resolve()
     sweep = tmp_path / "flip.sweep.yaml"
     # 16 variants of 100,000 split2 steps
@@ -106,12 +110,29 @@ def test_the_local_cluster_listens_on_loopback_and_takes_in_workers_that_join(tm
 
     def ready(total: int, done: int, cluster) -> None:  # noqa: ANN001 - ClusterInfo
         seen["listening"] = _listening_addresses()
+        seen["dashboard"] = cluster.dashboard
+        with urllib.request.urlopen(cluster.dashboard, timeout=30) as page:  # the status page, from bokeh
+            seen["dashboard_status"] = page.status
         client = distributed.Client.current()  # the sweep's own: this module makes no other
         client.cluster.scale(2)  # a second worker joins, after the sweep counted its slots
         client.wait_for_workers(2, timeout=60)
 
     on_dask = run_sweep(spec, workers=1, use_folder=False, on_start=ready)
     assert seen["listening"] and seen["listening"] <= {"127.0.0.1"}, seen
+    assert urllib.parse.urlsplit(seen["dashboard"]).hostname == "127.0.0.1" and seen["dashboard_status"] == 200
     assert on_dask.cluster.workers == 2 and on_dask.cluster.slots == 2 and on_dask.cluster.joined == 1
     serial = run_sweep(spec, scheduler="serial", use_folder=False)
     assert rows_without_wall_time(on_dask.table) == rows_without_wall_time(serial.table)
+
+
+def test_without_bokeh_there_is_no_dashboard_link(monkeypatch):
+    """Dask serves its dashboard only with bokeh: without it the sweep names none (no dead link)."""
+
+    class Client:
+        dashboard_link = "http://127.0.0.1:8787/status"
+
+    real = dask_runner.importlib.util.find_spec
+    monkeypatch.setattr(dask_runner.importlib.util, "find_spec", lambda n, *a: None if n == "bokeh" else real(n, *a))
+    assert dask_runner._dashboard(Client()) is None
+    monkeypatch.undo()
+    assert dask_runner._dashboard(Client()) == Client.dashboard_link
