@@ -16,6 +16,7 @@ from rbcli.scene.load import load_scene_text
 def _overlapping(collide: str, cloud: bool) -> str:
     """Balls a and b (r = 0.1 m) 0.15 m apart, ball-jointed at their midpoint, and ball c overlapping b
     (0.15 m apart too), not jointed; no gravity. cloud: each ball a 3-sphere cloud (the body level on)."""
+
     def body(name: str, x: float) -> str:
         if cloud:
             geometry = "positions: [[0, 0, 0], [0, 0.01, 0], [0, 0, 0.01]], masses: [0.3, 0.3, 0.3], radius: 0.1"

@@ -61,7 +61,8 @@ def test_an_impulse_on_a_free_floating_chain_changes_its_momentum_by_the_impulse
             joints.append(f"  - {{type: ball, bodies: [r{k - 1}, r{k}], anchor: [{0.5 * k - 0.25}, 0, 0]}}")
     text = ("simulation: {dt: 0.001, steps: 10, integrator: split2}\ngravity: [0, 0, 0]\nbodies:\n"
             + "\n".join(rods) + "\njoints:\n" + "\n".join(joints) + "\nforces:\n"
-            "  - {type: impulse, body: r0, time: 0.05, point: [-0.25, 0, 0], vector: [0, 2, 1], frame: world}\n")  # fmt: skip
+            "  - {type: impulse, body: r0, time: 0.05, point: [-0.25, 0, 0], vector: [0, 2, 1],"
+            " frame: world}\n")  # fmt: skip
     sim = rbcli.Simulation(load_scene_text(text))
     J = np.array([0.0, 2.0, 1.0])
     tip = np.array([-0.25, 0.0, 0.0])
