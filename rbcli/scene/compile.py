@@ -129,6 +129,8 @@ def compile_model(spec: SceneSpec) -> CompiledModel:
     _check_initial_state(spec, state)
     body_index = {name: i for i, name in enumerate(model.body_names)}
     contact, summary = compile_contact(spec, model, centres) if spec.contact is not None else (None, None)
+    if contact is not None and spec.joints:  # a joint's two bodies do not collide unless it asks
+        contact = contact._replace(excluded_pair=_jointed_pairs(spec, body_index, model.body_mass.shape[0]))
     motions = kinematic_rows(spec, model, state) if spec.contact is not None else []
     forces = compile_force_tables(spec.gravity, spec.forces, model, body_index, centres, contact, motions)
     kinematic_initial_state(forces, model, state)
@@ -140,6 +142,15 @@ def compile_model(spec: SceneSpec) -> CompiledModel:
         joints = compile_joints(spec.joints, spec.bodies, model, centres, state, has_contact=spec.contact is not None)
         forces = forces._replace(joint=joints)
     return CompiledModel(model, forces, state, summary)
+
+
+def _jointed_pairs(spec: SceneSpec, body_index: dict[str, int], body_count: int) -> np.ndarray:
+    """ContactTable.excluded_pair: the body pairs of the joints without `collide: true` (docs/joints.md)."""
+    from rbcli.physics.contact.tables import excluded_pair_keys
+
+    pairs = [(body_index[j.bodies[0]], body_index[j.bodies[1]]) for j in spec.joints
+             if not j.collide and all(name in body_index for name in j.bodies)]  # fmt: skip
+    return excluded_pair_keys(pairs, body_count)
 
 
 # Recordings store times as whole nanoseconds: int64 in .rrd, uint64 in .mcap; the smaller bound [s]

@@ -5,8 +5,8 @@ r = E^T (p_user - centre_user), u = E^T u_user (E = user-from-principal, as comp
 given as one world point / world axis at the initial poses they become r = R0^T (p - x0), u = R0^T u
 for each end (R0 world-from-principal at t = 0). What only the compiled bodies show is refused here,
 located at the key at fault: anchors or axes that disagree with the initial poses (saying by how
-much), a joint whose both ends are static (or static and the world), and what this slice does not yet
-hold (limits, joints together with contact: docs/joints.md says what is next).
+much), a joint whose both ends are static (or static and the world), and hinge limits past a half turn.
+Contact: the compiled ContactTable skips the pairs of jointed bodies (scene/compile.py `_jointed_pairs`).
 """
 
 from __future__ import annotations
@@ -99,13 +99,6 @@ def _joint_row(
             "bodies",
             f"both ends are fixed (a static or kinematic body and {what}): the joint holds nothing",
             "at least one end a moving (dynamic) body",
-        )
-    if has_contact:
-        raise _Invalid(
-            "type",
-            "joints in a scene with contact are not supported yet (the jointed bodies' "
-            "collision exclusion comes with a later slice of issue 27)",
-            "a scene with joints and no `contact:` section",
         )
     R = quat_to_matrix(state.q)  # world-from-principal at t = 0
     E = quat_to_matrix(model.body_frame_q)  # user-from-principal

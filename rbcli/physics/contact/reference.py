@@ -13,6 +13,12 @@ from rbcli.physics.contact.tables import PLANE_PARTNER_BASE, ContactTable
 from rbcli.physics.rotation import quat_multiply, quat_rotate, quat_rotate_inverse
 
 
+def _excluded(contact: ContactTable, a: int, b: int) -> bool:
+    """Whether bodies a and b never collide (a joint's two bodies), by a plain scan of the pair keys."""
+    n = contact.body_inv_contact_mass.shape[0]
+    return any(int(k) == min(a, b) * n + max(a, b) for k in contact.excluded_pair)
+
+
 def sphere_positions_numpy(contact: ContactTable, x: np.ndarray, q: np.ndarray) -> np.ndarray:
     """World centres of the contact spheres, (sphere_count, 3)."""
     b = contact.sphere_body
@@ -92,6 +98,8 @@ def contact_wrench_history_numpy(
             a, b = body[i], body[j]
             if a == b or (contact.body_inv_contact_mass[a] == 0.0 and contact.body_inv_contact_mass[b] == 0.0):
                 continue
+            if _excluded(contact, a, b):
+                continue
             d = pos[i] - pos[j]
             dist = float(np.linalg.norm(d))
             overlap = r[i] + r[j] - dist
@@ -134,7 +142,7 @@ def contact_energy_numpy(contact: ContactTable, x: np.ndarray, q: np.ndarray, hi
     for i in range(len(r)):
         for j in range(i + 1, len(r)):
             a, b = body[i], body[j]
-            if a == b or (inv[a] == 0.0 and inv[b] == 0.0):
+            if a == b or (inv[a] == 0.0 and inv[b] == 0.0) or _excluded(contact, a, b):
                 continue
             dist = float(np.linalg.norm(pos[i] - pos[j]))
             overlap = r[i] + r[j] - dist

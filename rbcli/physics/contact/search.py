@@ -11,7 +11,8 @@ p_j + (r_j - d / 2) n). The owner is the lower sphere index whichever sphere's w
 (p_i - p_j is exactly -(p_j - p_i) in floating point, so the numbers do not depend on the finder).
 Materials mix as tables.py says: k in series (a plane: the body's plane stiffness), the smaller zeta,
 mu = sqrt(mu_a) sqrt(mu_b). Skipped: spheres of one body, pairs of two bodies that cannot move
-(static or kinematic: inverse contact mass 0), coincident centres (no normal).
+(static or kinematic: inverse contact mass 0), pairs of two bodies a joint connects (unless it says
+`collide: true`: ContactTable.excluded_pair), coincident centres (no normal).
 
 Which spheres are searched comes first from the body level (body_phase.py, through sphere_positions):
 planes only for spheres of bodies whose box meets them, pairs only among spheres of bodies whose boxes
@@ -32,6 +33,7 @@ from __future__ import annotations
 import math
 
 import numba
+import numpy as np
 
 from rbcli.physics.contact.body_phase import body_phase, place_spheres, whole_grid_hashed
 from rbcli.physics.contact.broad_phase import HALF_SHELL, bucket_of, build_grid_of
@@ -131,6 +133,16 @@ def _plane_contacts(contact, work, sink) -> None:  # noqa: ANN001
 
 
 @numba.njit(cache=True, inline="always")
+def excluded(contact, bi, bj) -> bool:  # noqa: ANN001
+    """Whether bodies bi and bj never collide (two bodies of a joint: ContactTable.excluded_pair), by a
+    binary search of the sorted keys."""
+    keys = contact.excluded_pair
+    key = min(bi, bj) * contact.body_inv_contact_mass.shape[0] + max(bi, bj)
+    k = np.searchsorted(keys, key)
+    return k < keys.shape[0] and keys[k] == key
+
+
+@numba.njit(cache=True, inline="always")
 def _pair(contact, work, sink, i, j, d0, d1, d2, dist2, reach) -> None:  # noqa: ANN001
     """The contact of spheres i and j, overlapping (d = p_i - p_j, |d|^2 = dist2 < reach^2)."""
     pos = work.sphere_position
@@ -138,6 +150,8 @@ def _pair(contact, work, sink, i, j, d0, d1, d2, dist2, reach) -> None:  # noqa:
     if bi == bj:
         return
     if contact.body_inv_contact_mass[bi] == 0.0 and contact.body_inv_contact_mass[bj] == 0.0:
+        return
+    if contact.excluded_pair.shape[0] and excluded(contact, bi, bj):
         return
     if j < i:  # the owner is the lower index: one history per pair whichever sphere found it
         i, j, bi, bj = j, i, bj, bi

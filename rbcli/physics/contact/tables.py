@@ -98,6 +98,10 @@ class ContactTable(NamedTuple):
     # [s] the smallest stable step of the contacts the scene can form (parameters.stable_step; inf: none
     # can collide): adaptive stepping never steps longer (physics/adaptive.py)
     stable_step: float = math.inf
+    # int64 sorted keys a * body_count + b (a < b) of the body pairs that never collide: the two bodies
+    # of a joint without `collide: true` (docs/joints.md); empty for a scene without joints, where the
+    # pair search pays one length test per overlapping pair
+    excluded_pair: np.ndarray = np.zeros(0, dtype=np.int64)
 
 
 class ContactWork(NamedTuple):
@@ -178,6 +182,7 @@ def contact_table(
     plane_friction=(),  # noqa: ANN001
     tangential_ratio: float = 2.0 / 7.0,
     stable_step: float = math.inf,
+    excluded_pair=(),  # noqa: ANN001
 ) -> ContactTable:
     """A ContactTable with consistent dtypes (all empty: a scene without contact)."""
     radius = _ro(sphere_radius, np.float64)
@@ -221,7 +226,15 @@ def contact_table(
         tangential_ratio=float(tangential_ratio),
         bucket_count=int(buckets),
         stable_step=float(stable_step),
+        excluded_pair=excluded_pair_keys(excluded_pair, bodies),
     )
+
+
+def excluded_pair_keys(pairs: object, body_count: int) -> np.ndarray:
+    """The sorted, unique keys min * body_count + max of body pairs (k, 2) (ContactTable.excluded_pair)."""
+    p = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    keys = np.unique(np.minimum(p[:, 0], p[:, 1]) * body_count + np.maximum(p[:, 0], p[:, 1]))
+    return _ro(keys, np.int64)
 
 
 def body_boxes_numpy(
