@@ -95,21 +95,18 @@ def install() -> None:
 
         def _coerce_value(self, value: Any, param: Any, ctx: Any) -> Any:  # noqa: ANN401
             kind = self.kind  # type: ignore[attr-defined]
-            if self.many:  # type: ignore[attr-defined]
-                items = value if isinstance(value, (list, tuple)) else None
-                converted = [convert(kind, item) for item in items] if items is not None else [(False, None)]
-                done = all(ok for ok, _ in converted)
-                result = [item for _, item in converted]
-            else:
-                done, result = convert(kind, value)
-            if not done:  # typer's own conversion: its value, or its error message
+            many: bool = self.many  # type: ignore[attr-defined]
+            items: list[Any] = list(value) if many and isinstance(value, (list, tuple)) else [value]
+            converted = [convert(kind, item) for item in items]
+            if not all(ok for ok, _ in converted) or many and not isinstance(value, (list, tuple)):
                 typer_own = build_runtime_param(self.parameter.type_descriptor)  # type: ignore[attr-defined]
-                return typer_own._coerce_value(value, param=param, ctx=ctx)
+                return typer_own._coerce_value(value, param=param, ctx=ctx)  # its value, or its error message
+            results: list[Any] = [item for _, item in converted]
             if kind is Path:
-                check = [result] if not self.many else result  # type: ignore[attr-defined]
-                check = [coerce_cli_path(p, self.parameter_info, path_type=Path, param=param, ctx=ctx) for p in check]
-                return check if self.many else check[0]  # type: ignore[attr-defined]
-            return result
+                results = [
+                    coerce_cli_path(p, self.parameter_info, path_type=Path, param=param, ctx=ctx) for p in results
+                ]
+            return results if many else results[0]
 
     def get_runtime_param(self: Any) -> Any:  # noqa: ANN401
         if self._runtime_param is None:
