@@ -1,5 +1,6 @@
-"""Determinism guard: every integrator on every verification and force scene (and two contact scenes) gives bitwise the
-trajectories stored in trajectory_hashes.json (Box2D's determinism hash, one per scene and integrator).
+"""Determinism guard: every integrator on the free-body scenes and on one scene with every force term, split2 on
+each single-force scene, and the contact scenes give bitwise the trajectories stored in
+trajectory_hashes.json (Box2D's determinism hash, one per scene and integrator).
 
 Why: a refactor of the step (stages, Model/Data, chunk loops) must not change a single bit of any
 result. A later change to an integrator's numerics regenerates the file in its own commit, saying why:
@@ -30,10 +31,15 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 STORE = Path(__file__).with_name("trajectory_hashes.json")
 
-SCENES = (
-    "verification/intermediate_axis.yaml",
-    "verification/fast_spin.yaml",
-    "verification/thin_rod.yaml",
+# Each scene kind (the combination of force types, contact, joints) compiles its own chunk loop per
+# integrator (forces/tables.py), and the compile is what this file costs (~5-10 s a loop, cold). So every
+# integrator runs on the free-body kind (three verification scenes, one kind) and on one scene with every
+# force term (tests/physics/scenes/every_force.yaml: each force stage inside each integrator), and each
+# single-force scene, a kind of its own, with split2 only (its stage alone in the default loop). Issue 30
+# measured 526 s for the 99 cases of one kind per force scene and integrator.
+FREE_SCENES = ("verification/intermediate_axis.yaml", "verification/fast_spin.yaml", "verification/thin_rod.yaml")
+EVERY_FORCE = "tests/physics/scenes/every_force.yaml"
+FORCE_SCENES = (
     "verification/spring_tether.yaml",
     "forces/impulse_kick.yaml",  # impulse at t = 0.5 s
     "forces/pushed_box.yaml",  # scheduled force and torque
@@ -49,12 +55,15 @@ CONTACT_SCENES = {"verification/contact_pile.yaml": 400, "contact/box_drop.yaml"
 CONTACT_INTEGRATORS = ("split2", "semi-implicit", "rk4")
 FIXED = ("euler-matrix", "euler-quat", "semi-implicit", "semi-implicit-gyro", "rk4", "split2", "split4", "exact",
          "exact4", "dopri5")  # fmt: skip
-STEPS = 600  # enough to pass the impulse (t = 0.5 s at dt = 1 ms); short enough for the suite
+STEPS = 600  # enough to pass the impulses (t = 0.3 s and 0.5 s at dt = 1 ms); short enough for the suite
 RECORD_EVERY = 20
 
-CASES = [(scene, name, None) for scene in SCENES for name in FIXED] + [
-    (scene, "dopri5", 1e-8) for scene in ("verification/intermediate_axis.yaml", "forces/pushed_box.yaml")
-]
+CASES = [(scene, name, None) for scene in (*FREE_SCENES, EVERY_FORCE) for name in FIXED]
+CASES += [(scene, "split2", None) for scene in FORCE_SCENES]
+# adaptive: not on EVERY_FORCE, whose torque window opens at 0.1 s: a force jump makes the error per unit
+# step independent of h, and dopri5 at 1e-8 stops with "step below 1e-12 t" (a known fault, the note of
+# issue 30; contact has its step floor for that, schedules not yet)
+CASES += [(scene, "dopri5", 1e-8) for scene in ("verification/intermediate_axis.yaml", "forces/pushed_box.yaml")]
 CASES += [(scene, name, None) for scene in CONTACT_SCENES for name in CONTACT_INTEGRATORS]
 CASES += [("contact/box_drop.yaml", "dopri5", 1e-6)]
 
@@ -70,7 +79,7 @@ def case_id(scene: str, integrator: str, tolerance: float | None) -> str:
 def run_case(scene: str, integrator: str, tolerance: float | None):  # noqa: ANN201
     from rbcli.api import load_scene, simulate
 
-    spec = load_scene(ROOT / "scenes" / scene)
+    spec = load_scene(ROOT / scene if scene.startswith("tests/") else ROOT / "scenes" / scene)
     duration = CONTACT_SCENES.get(scene, STEPS) * spec.simulation.dt
     return simulate(
         spec, integrator=integrator, duration=duration, record_every=RECORD_EVERY, tolerance=tolerance,
@@ -108,9 +117,16 @@ def test_trajectory_is_bitwise_unchanged(store, scene, integrator, tolerance):
 
 def regenerate(missing_only: bool = False) -> None:
     """Rewrite this platform's hashes (and the final states when none are stored yet); with
-    missing_only, compute only the cases this platform has no hash for (new cases) and keep the rest."""
+    missing_only, compute only the cases this platform has no hash for (new cases) and keep the rest.
+    Cases no longer in CASES are dropped from every platform's hashes and from the final states."""
     store = json.loads(STORE.read_text()) if STORE.exists() else {"hashes": {}, "final_state": {}}
-    hashes, finals = dict(store["hashes"].get(platform_key(), {})) if missing_only else {}, store["final_state"]
+    current = {case_id(*case) for case in CASES}
+    for platform_hashes in store["hashes"].values():
+        for key in set(platform_hashes) - current:
+            del platform_hashes[key]
+    finals = {key: value for key, value in store["final_state"].items() if key in current}
+    store["final_state"] = finals
+    hashes = dict(store["hashes"].get(platform_key(), {})) if missing_only else {}
     for case in CASES:
         if case_id(*case) in hashes:
             continue
