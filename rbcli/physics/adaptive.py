@@ -49,7 +49,10 @@ the stable step is allowed the error of a step that long (error per step below i
 criterion): the step across a jump shrinks to ~tol / (c v_n) relative and is accepted, and the few short
 steps around each touch-down add a few per cent of the tolerance each to the global error (measured: see
 docs/integrators.md). Tolerances much below 1e-9 then still fail at touch-down, the jump step falling
-under 1e-12 t.
+under 1e-12 t. A schedule's window edge (a force or torque switched on or off at `start`, `stop`) is
+the same jump, so in a scene with schedules a step shorter than forces/schedule.py SCHEDULE_STEP_FLOOR dt is judged the
+same way (issue 30: a torque window opening at 0.1 s stopped dopri5 at 1e-8 with "step below 1e-12 t");
+each edge then adds at most tolerance * SCHEDULE_STEP_FLOOR dt / duration to the error.
 """
 
 from __future__ import annotations
@@ -69,6 +72,7 @@ STEP_MIN_RELATIVE = 1e-12  # far above round-off of t (1e-16 |t|), far below any
 # with contact, a step shorter than this fraction of the contacts' stable step is allowed the error of
 # one that long (module docstring: the step across a touch-down)
 CONTACT_STEP_FLOOR = 0.1
+# with schedules: forces/schedule.py SCHEDULE_STEP_FLOOR (module docstring)
 
 # control: float64 (2,)
 CONTROL_STEP = 0  # the step size [s] proposed for the next attempt; <= 0: choose one from the rates

@@ -276,7 +276,9 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
     land = end  # the next grid index a step-start stage needs the loop to stand on
     t = step0 * dt
     h_max = contact_step_limit(forces)  # inf without contact
-    h_floor = CONTACT_STEP_FLOOR * h_max if h_max < np.inf else 0.0
+    # steps shorter than h_floor are allowed the error of one that long: the step across a touch-down
+    # or a schedule's window edge (adaptive.py)
+    h_floor = max(CONTACT_STEP_FLOOR * h_max if h_max < np.inf else 0.0, schedule_step_floor(forces, dt))
     h_next = control[CONTROL_STEP]  # the step the controller proposes for the next attempt
     rejected_last = control[CONTROL_REJECTED_LAST] > 0.0
     per_time = tolerance / max(adaptive.duration, dt)  # error budget per second of simulated time
@@ -343,7 +345,7 @@ _ADAPTIVE_IMPORTS = {
         "CONTACT_STEP_FLOOR", "CONTROL_REJECTED_LAST", "CONTROL_STEP", "COUNT_ACCEPTED", "COUNT_REJECTED",
         "FAC_MAX", "FAC_MIN", "SAFETY", "STATUS_STEP_TOO_SMALL", "STEP_MIN_RELATIVE", "initial_step",
     },
-    "rbcli.physics.forces.stages": {"contact_step_limit"},
+    "rbcli.physics.forces.stages": {"contact_step_limit", "schedule_step_floor"},
     "rbcli.physics.step": {"CHUNK_KERNEL", "STATUS_OK", "chunk_status"},
 }  # fmt: skip
 _ADAPTIVE_METHOD = ("accept", "advance", "begin", "error_norm", "restore")  # the integrator module's kernels

@@ -29,6 +29,7 @@ from rbcli.physics.forces.stages import (
     kinematic_begin_stage,
     kinematic_end_stage,
     next_impulse_step_stage,
+    schedule_step_floor,
 )
 from rbcli.physics.integrators.dopri5 import accept, advance, begin, error_norm, restore
 from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, chunk_status, record_if_due
@@ -59,7 +60,9 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
     land = end  # the next grid index a step-start stage needs the loop to stand on
     t = step0 * dt
     h_max = contact_step_limit(forces)  # inf without contact
-    h_floor = CONTACT_STEP_FLOOR * h_max if h_max < np.inf else 0.0
+    # steps shorter than h_floor are allowed the error of one that long: the step across a touch-down
+    # or a schedule's window edge (adaptive.py)
+    h_floor = max(CONTACT_STEP_FLOOR * h_max if h_max < np.inf else 0.0, schedule_step_floor(forces, dt))
     h_next = control[CONTROL_STEP]  # the step the controller proposes for the next attempt
     rejected_last = control[CONTROL_REJECTED_LAST] > 0.0
     per_time = tolerance / max(adaptive.duration, dt)  # error budget per second of simulated time

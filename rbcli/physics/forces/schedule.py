@@ -21,7 +21,12 @@ from rbcli.physics.forces.tables import (
 
 kernel_cache.install()  # before this module's kernels first run: their cache is keyed on the physics sources
 
-__all__ = ["schedule_integral", "schedule_value", "schedule_values_numpy"]
+__all__ = ["SCHEDULE_STEP_FLOOR", "schedule_integral", "schedule_value", "schedule_values_numpy"]
+
+# A window edge (s jumps at start or stop) is a jump of the force: adaptive stepping judges a step
+# shorter than SCHEDULE_STEP_FLOOR dt by its error per step (physics/adaptive.py). Steps of smooth
+# motion at useful tolerances are far longer, so only the steps closing in on an edge are affected.
+SCHEDULE_STEP_FLOOR = 0.01
 
 
 @numba.njit(cache=True)

@@ -38,6 +38,7 @@ from numba.extending import overload
 from rbcli.physics.contact.force import begin_contact_step, commit_contacts
 from rbcli.physics.contact.state import record_contact_state
 from rbcli.physics.forces.impulse import NO_IMPULSE_STEP, apply_impulses, next_impulse_step
+from rbcli.physics.forces.schedule import SCHEDULE_STEP_FLOOR
 from rbcli.physics.kinematic import kinematic_begin, kinematic_end
 from rbcli.physics.step import STEP_KERNEL
 
@@ -231,5 +232,24 @@ def _contact_step_limit(forces):  # noqa: ANN001, ANN202
 
     def run(forces):  # noqa: ANN001, ANN202
         return forces.contact.stable_step
+
+    return run
+
+
+def schedule_step_floor(forces, dt) -> float:  # noqa: ANN001
+    """The step [s] below which adaptive stepping judges a step by its error per step, not per unit
+    step: SCHEDULE_STEP_FLOOR dt when the scene has schedules (a window edge is a jump of the force),
+    0 without (physics/adaptive.py)."""
+    _kernel_only()
+    return 0.0
+
+
+@overload(schedule_step_floor, jit_options=_OPTIONS)
+def _schedule_step_floor(forces, dt):  # noqa: ANN001, ANN202
+    if _absent(_member(forces, "schedule")):
+        return lambda forces, dt: 0.0
+
+    def run(forces, dt):  # noqa: ANN001, ANN202
+        return SCHEDULE_STEP_FLOOR * dt if forces.schedule.kind.shape[0] > 0 else 0.0  # full tables: 0 rows
 
     return run
