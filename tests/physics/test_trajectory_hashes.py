@@ -32,7 +32,7 @@ ROOT = Path(__file__).resolve().parents[2]
 STORE = Path(__file__).with_name("trajectory_hashes.json")
 
 # Each scene kind (the combination of force types, contact, joints) compiles its own chunk loop per
-# integrator (forces/tables.py), and the compile is what this file costs (~5-10 s a loop, cold). So every
+# integrator (forces/tables.py), and the compile is what this file costs (~10-20 s a loop, cold). So every
 # integrator runs on the free-body kind (three verification scenes, one kind) and on one scene with every
 # force term (tests/physics/scenes/every_force.yaml: each force stage inside each integrator), and each
 # single-force scene, a kind of its own, with split2 only (its stage alone in the default loop). Issue 30
