@@ -1,5 +1,5 @@
 """Determinism guard: every integrator on the free-body scenes and on one scene with every force term, split2 on
-each single-force scene, and the contact scenes give bitwise the trajectories stored in
+each single-force scene, and the contact and joint scenes give bitwise the trajectories stored in
 trajectory_hashes.json (Box2D's determinism hash, one per scene and integrator).
 
 Why: a refactor of the step (stages, Model/Data, chunk loops) must not change a single bit of any
@@ -53,6 +53,10 @@ FORCE_SCENES = (
 # left to advance in the commit) and adaptive dopri5 on the brick (rejected attempts, the step limit)
 CONTACT_SCENES = {"verification/contact_pile.yaml": 400, "contact/box_drop.yaml": 400}  # scene: steps
 CONTACT_INTEGRATORS = ("split2", "semi-implicit", "rk4")
+# joints (issue 27; split2 only, the one integrator that takes them): a pendulum (gravity and a hinge)
+# and the ragdoll (ball joints, hinges with limits, contact with the ground: it lands at ~0.36 s);
+# no loops, whose redundant rows are dropped by pivots near the tolerance (docs/joint_solver.md)
+JOINT_SCENES = {"joints/pendulum.yaml": 600, "joints/ragdoll.yaml": 1000}  # scene: steps
 FIXED = ("euler-matrix", "euler-quat", "semi-implicit", "semi-implicit-gyro", "rk4", "split2", "split4", "exact",
          "exact4", "dopri5")  # fmt: skip
 STEPS = 600  # enough to pass the impulses (t = 0.3 s and 0.5 s at dt = 1 ms); short enough for the suite
@@ -65,6 +69,7 @@ CASES += [(scene, "dopri5", 1e-8) for scene in ("verification/intermediate_axis.
                                                  EVERY_FORCE)]  # fmt: skip
 CASES += [(scene, name, None) for scene in CONTACT_SCENES for name in CONTACT_INTEGRATORS]
 CASES += [("contact/box_drop.yaml", "dopri5", 1e-6)]
+CASES += [(scene, "split2", None) for scene in JOINT_SCENES]
 
 
 def platform_key() -> str:
@@ -79,7 +84,7 @@ def run_case(scene: str, integrator: str, tolerance: float | None):  # noqa: ANN
     from rbcli.api import load_scene, simulate
 
     spec = load_scene(ROOT / scene if scene.startswith("tests/") else ROOT / "scenes" / scene)
-    duration = CONTACT_SCENES.get(scene, STEPS) * spec.simulation.dt
+    duration = {**CONTACT_SCENES, **JOINT_SCENES}.get(scene, STEPS) * spec.simulation.dt
     return simulate(
         spec, integrator=integrator, duration=duration, record_every=RECORD_EVERY, tolerance=tolerance,
         on_diverge="return",
