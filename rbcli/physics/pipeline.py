@@ -123,7 +123,7 @@ STEP_STAGES: tuple[Stage, ...] = (
         "joint_begin",
         "joint_begin: velocities that break the joints (a kick, or given so) projected: the exact impulsive reaction",
         ("from rbcli.physics.joints.stages import joint_begin_stage",),
-        "joint_begin_stage(model, forces, force_data, x, q, P, L)",
+        "joint_begin_stage(model, forces.joint, force_data.joint, x, q, P, L)",
         integrators=("split2",),
         loops=(FIXED,),  # joints refuse a tolerance (integrators.check_integrator)
     ),
@@ -161,7 +161,7 @@ STEP_STAGES: tuple[Stage, ...] = (
         "joint_position",
         "joint_position: the joints' impulse at the kick that puts the end configuration on g = 0 (RATTLE)",
         ("from rbcli.physics.joints.stages import joint_position_stage",),
-        "joint_position_stage(model, forces, force_data, h, x, q, P, L)",
+        "joint_position_stage(model, forces.joint, force_data.joint, h, x, q, P, L)",
         substep=True,
         integrators=("split2",),
         loops=(FIXED,),  # joints refuse a tolerance (integrators.check_integrator)
@@ -170,7 +170,7 @@ STEP_STAGES: tuple[Stage, ...] = (
         "joint_velocity",
         "joint_velocity: the momenta projected so that the joints' rows have zero rate, G V = 0",
         ("from rbcli.physics.joints.stages import joint_velocity_stage",),
-        "joint_velocity_stage(model, forces, force_data, h, x, q, P, L)",
+        "joint_velocity_stage(model, forces.joint, force_data.joint, h, x, q, P, L)",
         substep=True,
         integrators=("split2",),
         loops=(FIXED,),  # joints refuse a tolerance (integrators.check_integrator)

@@ -73,28 +73,27 @@ def find_contacts(contact, work, sink) -> int:  # noqa: ANN001
     for a in range(gridded):
         ci, cj, ck = cell[a, 0], cell[a, 1], cell[a, 2]
         p0, p1, p2, ra = sp[a, 0], sp[a, 1], sp[a, 2], sp[a, 3]
-        own = work.sphere_bucket[order[a]]
-        for e in range(a + 1, start[own + 1]):  # later spheres of the same bucket, same cell
-            if dense or (cell[e, 0] == ci and cell[e, 1] == cj and cell[e, 2] == ck):
-                candidates += 1
-                d0, d1, d2 = p0 - sp[e, 0], p1 - sp[e, 1], p2 - sp[e, 2]
-                reach = ra + sp[e, 3]
-                dist2 = d0 * d0 + d1 * d1 + d2 * d2
-                if dist2 < reach * reach and dist2 > 0.0:  # coincident centres: no normal, skipped
-                    _pair(contact, work, sink, order[a], order[e], d0, d1, d2, dist2, reach)
-        for n in range(HALF_SHELL.shape[0]):
-            ni, nj, nk = ci + HALF_SHELL[n, 0], cj + HALF_SHELL[n, 1], ck + HALF_SHELL[n, 2]
-            b = bucket_of(ni, nj, nk, grid)
-            if b < 0:
-                continue
-            for e in range(start[b], start[b + 1]):
+        # n = -1: the later spheres of its own bucket (its cell); then the 13 cells of its half shell.
+        # One walk with one call of the pair's code: each call inlines the sink's (the force law), and
+        # two copies of it doubled the search's compile time for every sink
+        for n in range(-1, HALF_SHELL.shape[0]):
+            if n < 0:
+                ni, nj, nk = ci, cj, ck
+                first, last = a + 1, start[work.sphere_bucket[order[a]] + 1]
+            else:
+                ni, nj, nk = ci + HALF_SHELL[n, 0], cj + HALF_SHELL[n, 1], ck + HALF_SHELL[n, 2]
+                b = bucket_of(ni, nj, nk, grid)
+                if b < 0:
+                    continue
+                first, last = start[b], start[b + 1]
+            for e in range(first, last):
                 # dense: a bucket is one cell; hashed: other cells may share it
                 if dense or (cell[e, 0] == ni and cell[e, 1] == nj and cell[e, 2] == nk):
                     candidates += 1
                     d0, d1, d2 = p0 - sp[e, 0], p1 - sp[e, 1], p2 - sp[e, 2]
                     reach = ra + sp[e, 3]
                     dist2 = d0 * d0 + d1 * d1 + d2 * d2
-                    if dist2 < reach * reach and dist2 > 0.0:
+                    if dist2 < reach * reach and dist2 > 0.0:  # coincident centres: no normal, skipped
                         _pair(contact, work, sink, order[a], order[e], d0, d1, d2, dist2, reach)
     return candidates
 

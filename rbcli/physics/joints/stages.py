@@ -162,20 +162,25 @@ def _project(model, table, work, x, q, P, L) -> None:  # noqa: ANN001
 
 
 # ---- the pipeline's dispatchers: compiled to nothing for a scene without joints ---------------------
+# They take the joint table and work themselves, not the scene's ForceTables: their implementation then
+# has the same argument types in every jointed scene, so it is compiled once (per process, and cached),
+# not once per scene kind. Each per-kind compile links and re-optimises the whole joint solver below it
+# (~2 s per stage, measured: numba links a callee's IR into every caller's module), and the chunk loop
+# of each kind does that once already.
 
 
-def joint_begin_stage(model, forces, force_data, x, q, P, L) -> None:  # noqa: ANN001
-    """`joint_begin` when the scene has joints (forces.joint is not None)."""
+def joint_begin_stage(model, table, work, x, q, P, L) -> None:  # noqa: ANN001
+    """`joint_begin` when the scene has joints (table and work not None)."""
     raise TypeError("a stage dispatcher runs in compiled kernels only (physics/joints/stages.py)")
 
 
 @overload(joint_begin_stage, jit_options=_OPTIONS)
-def _joint_begin_stage(model, forces, force_data, x, q, P, L):  # noqa: ANN001, ANN202
-    if _absent(_member(forces, "joint"), _member(force_data, "joint")):
-        return lambda model, forces, force_data, x, q, P, L: None
+def _joint_begin_stage(model, table, work, x, q, P, L):  # noqa: ANN001, ANN202
+    if _absent(table, work):
+        return lambda model, table, work, x, q, P, L: None
 
-    def run(model, forces, force_data, x, q, P, L):  # noqa: ANN001, ANN202
-        joint_begin(model, forces.joint, force_data.joint, x, q, P, L)
+    def run(model, table, work, x, q, P, L):  # noqa: ANN001, ANN202
+        joint_begin(model, table, work, x, q, P, L)
 
     return run
 
@@ -184,37 +189,33 @@ def _absent(*argument_types: types.Type) -> bool:
     return any(isinstance(t, types.NoneType) for t in argument_types)
 
 
-def _member(tuple_type: Any, name: str) -> types.Type:  # noqa: ANN401 - a numba NamedTuple type
-    return dict(zip(tuple_type.fields, tuple_type.types, strict=True))[name]
-
-
-def joint_position_stage(model, forces, force_data, h, x, q, P, L) -> None:  # noqa: ANN001
-    """`joint_position` when the scene has joints (forces.joint is not None)."""
+def joint_position_stage(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
+    """`joint_position` when the scene has joints (table and work not None)."""
     raise TypeError("a stage dispatcher runs in compiled kernels only (physics/joints/stages.py)")
 
 
 @overload(joint_position_stage, jit_options=_OPTIONS)
-def _joint_position_stage(model, forces, force_data, h, x, q, P, L):  # noqa: ANN001, ANN202
-    if _absent(_member(forces, "joint"), _member(force_data, "joint")):
-        return lambda model, forces, force_data, h, x, q, P, L: None
+def _joint_position_stage(model, table, work, h, x, q, P, L):  # noqa: ANN001, ANN202
+    if _absent(table, work):
+        return lambda model, table, work, h, x, q, P, L: None
 
-    def run(model, forces, force_data, h, x, q, P, L):  # noqa: ANN001, ANN202
-        joint_position(model, forces.joint, force_data.joint, h, x, q, P, L)
+    def run(model, table, work, h, x, q, P, L):  # noqa: ANN001, ANN202
+        joint_position(model, table, work, h, x, q, P, L)
 
     return run
 
 
-def joint_velocity_stage(model, forces, force_data, h, x, q, P, L) -> None:  # noqa: ANN001
-    """`joint_velocity` when the scene has joints (forces.joint is not None)."""
+def joint_velocity_stage(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
+    """`joint_velocity` when the scene has joints (table and work not None)."""
     raise TypeError("a stage dispatcher runs in compiled kernels only (physics/joints/stages.py)")
 
 
 @overload(joint_velocity_stage, jit_options=_OPTIONS)
-def _joint_velocity_stage(model, forces, force_data, h, x, q, P, L):  # noqa: ANN001, ANN202
-    if _absent(_member(forces, "joint"), _member(force_data, "joint")):
-        return lambda model, forces, force_data, h, x, q, P, L: None
+def _joint_velocity_stage(model, table, work, h, x, q, P, L):  # noqa: ANN001, ANN202
+    if _absent(table, work):
+        return lambda model, table, work, h, x, q, P, L: None
 
-    def run(model, forces, force_data, h, x, q, P, L):  # noqa: ANN001, ANN202
-        joint_velocity(model, forces.joint, force_data.joint, h, x, q, P, L)
+    def run(model, table, work, h, x, q, P, L):  # noqa: ANN001, ANN202
+        joint_velocity(model, table, work, h, x, q, P, L)
 
     return run
