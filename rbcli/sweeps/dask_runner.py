@@ -15,10 +15,13 @@ Nothing is lost when workers die:
   LOST_TRIES times; then its variants are rows with status "lost", which resuming runs again): never the
   variant's own failure.
 - A task that took down worker after worker (Dask's KilledWorker, after the scheduler's
-  `allowed-failures` + 1 deaths, 4 with Dask's default) is split: its variants run one per task, and a
-  variant that takes its worker down on each of its own allowed-failures + 1 tries is a row with status
-  "crashed" (out of memory, a crash in compiled code) while the others complete. So a variant is tried at
-  most 2 x (allowed-failures + 1) times (8 by default), once alone.
+  `allowed-failures` + 1 deaths, 4 with Dask's default) is split: its variants run one per task. A single
+  variant's KilledWorker does not yet say it was the culprit: Dask blames every task a dying worker held,
+  queued ones too (the memory test recorded its innocent 250-step variant "crashed" in 3 of 8 runs here).
+  So it runs once more isolated, when nothing else is in flight, and only a variant that takes its worker
+  down on each of those allowed-failures + 1 tries is a row with status "crashed" (out of memory, a crash
+  in compiled code) while the others complete. A variant is tried at most 3 x (allowed-failures + 1)
+  times (12 by default), the last of them alone.
 Rows come back to the client, which writes each batch's part as it arrives (table.write_part): a part is
 never written by a worker.
 """
@@ -338,11 +341,12 @@ def _warm_workers(client: Any, shared: Any, values: tuple[Any, ...], addresses: 
 @dataclass
 class SweepTask:
     """A task's variants and how often the cluster lost it; `alone`: split out of a task that killed
-    its workers."""
+    its workers; `isolated`: a single variant whose task did, run again with nothing else in flight."""
 
     group: list[Variant]
     lost: int = 0  # times the cluster lost this group's task so far
     alone: bool = False  # split out of a task that killed its workers
+    isolated: bool = False  # one variant whose task killed its workers: runs with nothing else in flight
 
 
 class _Batches:
@@ -368,14 +372,20 @@ class _Batches:
         self.again: deque[SweepTask] = deque()  # lost or split tasks, submitted before new groups
         self.known = known
         self.polled = time.monotonic()
+        self.isolating = False  # an isolated task is in flight: nothing else is submitted meanwhile
 
     def run(self) -> None:
         from distributed import as_completed
 
+        # workers that joined since the slots were counted (while the caller's on_ready ran, or during the
+        # warm-up) are taken in before the first batches are sized: a short sweep may end before the first
+        # timed poll, and it then ran on the workers of the start alone
+        self.poll_workers(force=True)
         queue = as_completed([f for _ in range(IN_FLIGHT_PER_SLOT * self.info.slots) for f in self.submit()])
         for future in queue:
             task = self.tasks.pop(future.key)
             self.futures.remove(future)
+            self.isolating = self.isolating and not task.isolated
             rows = self.outcome(task, future)
             future.release()  # the scheduler may forget it: a worker lost later must not run it again
             self.poll_workers()
@@ -388,12 +398,22 @@ class _Batches:
         self.info.tasks = len(self.batcher.sizes)
 
     def submit(self) -> list[Any]:
-        task = self.again.popleft() if self.again else None
+        """Submit the next task: one to run again, else a new batch, else (once nothing else is in
+        flight) an isolated variant; [] when there is none, or an isolated one runs."""
+        if self.isolating:
+            return []
+        task = next((t for t in self.again if not t.isolated), None)
         if task is None:
             group = self.batcher.next_group()
-            if not group:
+            if group:
+                task = SweepTask(group)
+            elif self.again and not self.futures:
+                task = self.again.popleft()
+                self.isolating = True
+            else:
                 return []
-            task = SweepTask(group)
+        else:
+            self.again.remove(task)
         future = self.client.submit(run_batch, self.job.current(), task.group, pure=False)
         self.tasks[future.key] = task
         self.futures.append(future)
@@ -410,11 +430,11 @@ class _Batches:
             self.info.resubmitted += sum(len(t.group) for t in again)
             return rows
 
-    def poll_workers(self) -> None:
+    def poll_workers(self, force: bool = False) -> None:
         """Take in workers that joined: count their slots (the batches and the tasks in flight follow) and
-        check their versions; forget those that left."""
+        check their versions; forget those that left. At most every WORKERS_POLL_SECONDS unless `force`."""
         now = time.monotonic()
-        if now - self.polled < WORKERS_POLL_SECONDS:
+        if not force and now - self.polled < WORKERS_POLL_SECONDS:
             return
         self.polled = now
         slots_by_worker = self.client.nthreads()
@@ -429,14 +449,17 @@ class _Batches:
 
 def settle_failure(task: SweepTask, exc: BaseException) -> tuple[Rows, list[SweepTask]]:
     """What follows a task that gave no rows: (rows, tasks to submit again). A task the scheduler gave up
-    on after it killed allowed-failures + 1 workers (KilledWorker) is split into one task per variant, and a single
-    variant's is a "crashed" row; anything else (cancelled, data lost with a worker, a connection) is the
-    cluster's doing: the task runs again, up to LOST_TRIES times, then its variants are "lost" rows."""
+    on after it killed allowed-failures + 1 workers (KilledWorker) is split into one task per variant, a
+    single variant's runs again isolated (module docstring), and an isolated variant's is a "crashed" row;
+    anything else (cancelled, data lost with a worker, a connection) is the cluster's doing: the task runs
+    again, up to LOST_TRIES times, then its variants are "lost" rows."""
     from distributed import KilledWorker
 
     if isinstance(exc, KilledWorker):
         if len(task.group) > 1:  # one variant (or more) kills its worker: find which, one per task
             return [], [SweepTask([variant], alone=True) for variant in task.group]
+        if not task.isolated:  # it may have been queued on the culprit's worker: try it with nothing beside it
+            return [], [SweepTask(task.group, alone=True, isolated=True)]
         return failed_rows(task.group, STATUS_CRASHED, _crash_message(exc, int(exc.allowed_failures) + 1)), []
     task.lost += 1
     if task.lost < LOST_TRIES:
@@ -451,7 +474,8 @@ def failed_rows(group: list[Variant], status: str, message: str) -> Rows:
 
 def _crash_message(exc: BaseException, tries: int) -> str:
     return (
-        f"the variant took down its worker on each of its {tries} tries (out of memory, or a crash); "
+        f"the variant took down its worker on each of its {tries} tries with nothing else running (out of "
+        f"memory, or a crash); "
         f"{type(exc).__name__}: {exc}"
     )
 

@@ -68,11 +68,36 @@ def test_a_fixed_batch_is_kept():
     assert [len(g) for g in hand_out(10, 2, 0.5, fixed=3)] == [3, 3, 3, 1]
 
 
+def test_an_isolated_variant_is_submitted_only_when_nothing_else_is_in_flight():
+    """dask_runner._Batches: a variant to run isolated waits for every task in flight (and for every new
+    batch) and then runs with nothing beside it, so a worker's death can be blamed on it alone."""
+    from rbcli.sweeps.dask_runner import ClusterInfo, SweepTask, _Batches
+
+    submitted: list[tuple] = []
+
+    class Client:
+        def submit(self, fn, job, group, pure):  # noqa: ANN001, ANN202
+            submitted.append(tuple(index for index, _ in group))
+            return SimpleNamespace(key=f"task-{len(submitted)}")
+
+    job = SimpleNamespace(current=lambda: None)
+    info = ClusterInfo(workers=1, slots=1, dashboard=None, startup_s=0.0, warmup_s=0.0)
+    batches = _Batches(Client(), job, [(0, ()), (1, ())], lambda rows: None, info, 1, [], {"w"})
+    batches.again.append(SweepTask([(9, ())], alone=True, isolated=True))
+    assert batches.submit() and batches.submit() and submitted == [(0,), (1,)]  # the new batches first
+    assert batches.submit() == []  # the isolated one waits: two tasks are in flight
+    batches.futures.clear()
+    assert batches.submit() and submitted[-1] == (9,) and batches.isolating
+    batches.again.append(SweepTask([(7, ())]))  # lost meanwhile: it waits until the isolated one is done
+    assert batches.submit() == [] and submitted[-1] == (9,)
+
+
 def test_a_failed_task_is_run_again_or_recorded_never_dropped():
     """What follows a Dask task that gave no rows (dask_runner.settle_failure): every variant of it either
-    runs again or gets a row saying why; a KilledWorker splits a batch into single variants and makes a
-    single variant "crashed"; any other failure (the cluster's) runs the task again LOST_TRIES - 1 times,
-    then its variants are "lost" rows."""
+    runs again or gets a row saying why; a KilledWorker splits a batch into single variants, runs a single
+    variant again isolated (Dask blames the tasks queued on a dying worker too) and makes an isolated one
+    "crashed"; any other failure (the cluster's) runs the task again LOST_TRIES - 1 times, then its
+    variants are "lost" rows."""
     from distributed import KilledWorker
     from distributed.client import FutureCancelledError
 
@@ -81,6 +106,8 @@ def test_a_failed_task_is_run_again_or_recorded_never_dropped():
     killed = KilledWorker("run_batch-1", SimpleNamespace(address="tcp://127.0.0.1:1"), 3)  # allowed-failures 3
     rows, again = settle_failure(SweepTask([(4, (1.0,)), (5, (2.0,))]), killed)
     assert rows == [] and [t.group for t in again] == [[(4, (1.0,))], [(5, (2.0,))]] and all(t.alone for t in again)
+    rows, again = settle_failure(again[0], killed)
+    assert rows == [] and [t.group for t in again] == [[(4, (1.0,))]] and again[0].isolated
     rows, again = settle_failure(again[0], killed)
     assert again == [] and [(r["variant"], r["status"]) for r in rows] == [(4, "crashed")]
     assert "on each of its 4 tries" in rows[0]["message"]
