@@ -29,6 +29,7 @@ never written by a worker.
 from __future__ import annotations
 
 import contextlib
+import gc
 import importlib.util
 import logging
 import os
@@ -39,7 +40,7 @@ import uuid
 from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 from rbcli.sweeps.batches import Batcher
 from rbcli.sweeps.execute import (
@@ -138,7 +139,24 @@ def run_on_dask(
 ) -> ClusterInfo:
     """Run every pending variant in batches; `on_rows` gets each batch's rows as it finishes (in the
     client's thread). scheduler: None (a LocalCluster of `workers` listening on `host`, default
-    127.0.0.1), an address, or a distributed.Client. Raises ClusterRefused for a mismatched worker."""
+    127.0.0.1), an address, or a distributed.Client. Raises ClusterRefused for a mismatched worker.
+    A stop signal (Ctrl-C, SIGTERM, SIGHUP) raises in the caller's thread as its handler says, and is
+    never lost (_StopSignals)."""
+    with _StopSignals() as stops:
+        return _run(job, pending, on_rows, stops, scheduler, workers, batch, on_ready, host)
+
+
+def _run(
+    job: SweepJob,
+    pending: list[Variant],
+    on_rows: Callable[[Rows], None],
+    stops: _StopSignals,
+    scheduler: Any,
+    workers: int | None,
+    batch: int | None,
+    on_ready: Callable[[ClusterInfo], None] | None,
+    host: str | None,
+) -> ClusterInfo:
     from distributed import Client
 
     started = time.perf_counter()
@@ -156,6 +174,7 @@ def run_on_dask(
         else:
             interrupts.enter_context(_workers_ignore_interrupts())  # until the cluster is closed
             cluster, client = _start_local_cluster(workers or default_workers(), host or LOCAL_HOST)
+        stops.check()
         if cluster is None:
             client.wait_for_workers(1, timeout=60)
         slots_by_worker = client.nthreads()
@@ -173,10 +192,13 @@ def run_on_dask(
             shared = _ClusterJob(client, job)
             _warm_workers(client, shared.future, pending[0][1], list(slots_by_worker))
             info.warmup_s = time.perf_counter() - warming
+        stops.check()
         if on_ready is not None:
             on_ready(info)
         if shared is not None:
-            _Batches(client, shared, pending, on_rows, info, batch, futures, set(slots_by_worker)).run()
+            batches = _Batches(client, shared, pending, on_rows, info, batch, futures, set(slots_by_worker))
+            batches.run(stops.check)
+        stops.check()
         return info
     finally:
         closing = time.perf_counter()
@@ -215,6 +237,86 @@ def _start_local_cluster(workers: int, host: str) -> tuple[Any, Any]:
             cluster.close()
             raise
     return cluster, client
+
+
+class _StopSignals:
+    """While a sweep runs on Dask, SIGINT, SIGTERM and SIGHUP (main thread, where their handlers are Python
+    functions: Python's own KeyboardInterrupt for Ctrl-C, the CLI's for the others) are noted before
+    their handler runs, and `check()` runs the handler again for a signal whose exception did not end
+    the sweep.
+
+    Why: a handler's exception is raised wherever the main thread happens to be, and Python swallows an
+    exception raised inside a garbage-collection callback or a finaliser with an "Exception ignored"
+    line. distributed installs a gc callback (distributed.gc.GCDiagnosis), and a Ctrl-C landing in it
+    while the cluster warmed up was lost: the sweep printed that traceback, ran to the end and exited 0
+    (measured: 1 in ~10 Ctrl-Cs 0.4 s into the start-up). So a signal that finds the main thread inside a
+    gc callback or a __del__ is noted and sent again REDELIVER_SECONDS later (then it finds ordinary
+    code), and as a last guard the checks (after the start, after the warm-up, at each task's end and at
+    the end) run the handler for a noted signal whose exception did not end the sweep."""
+
+    def __init__(self) -> None:
+        self.pending: list[int] = []
+        self._previous: dict[int, Callable[[int, Any], Any]] = {}  # the handlers noted signals go on to
+
+    def __enter__(self) -> _StopSignals:
+        if threading.current_thread() is threading.main_thread():
+            for name in ("SIGINT", "SIGTERM", "SIGHUP"):
+                if not hasattr(signal, name):  # pragma: no cover - SIGHUP off POSIX
+                    continue
+                number = int(getattr(signal, name))
+                handler = signal.getsignal(number)
+                if callable(handler):
+                    self._previous[number] = cast(Callable[[int, Any], Any], handler)
+                    signal.signal(number, self._note)
+        return self
+
+    def _note(self, signum: int, frame: Any) -> None:
+        if _in_finaliser(frame):  # its exception would be swallowed here: deliver it again in a moment
+            self.pending.append(signum)
+            threading.Timer(REDELIVER_SECONDS, _redeliver, (signum,)).start()
+            return
+        self.pending.clear()
+        self.pending.append(signum)
+        self._previous[signum](signum, frame)
+        self.pending.remove(signum)  # the handler returned without raising: nothing to deliver again
+
+    def check(self) -> None:
+        """Run the handler again for the first noted signal (its exception was swallowed), if any."""
+        if self.pending:
+            signum = self.pending.pop(0)
+            self.pending.clear()
+            self._previous[signum](signum, None)
+
+    def __exit__(self, *exc: object) -> None:
+        for number, handler in self._previous.items():
+            signal.signal(number, handler)
+
+
+# a stop signal that landed in a gc callback or a finaliser is sent again after this long [s]
+REDELIVER_SECONDS = 0.01
+
+
+def _in_finaliser(frame: Any) -> bool:  # noqa: ANN401 - a frame
+    """Whether `frame` runs inside a gc callback or a __del__ method (Python swallows their exceptions)."""
+    callbacks = {getattr(getattr(cb, "__func__", cb), "__code__", None) for cb in gc.callbacks}
+    for _ in range(64):
+        if frame is None:
+            return False
+        if frame.f_code in callbacks or frame.f_code.co_name == "__del__":
+            return True
+        frame = frame.f_back
+    return False
+
+
+def _redeliver(signum: int) -> None:
+    """The signal again, to the main thread (it wakes a blocking wait there, as the first one did)."""
+    main = threading.main_thread().ident  # the thread Python runs signal handlers in
+    if main is not None and hasattr(signal, "pthread_kill"):
+        signal.pthread_kill(main, signum)
+    else:  # pragma: no cover - not POSIX
+        import _thread
+
+        _thread.interrupt_main(signal.Signals(signum))
 
 
 @contextlib.contextmanager
@@ -374,7 +476,9 @@ class _Batches:
         self.polled = time.monotonic()
         self.isolating = False  # an isolated task is in flight: nothing else is submitted meanwhile
 
-    def run(self) -> None:
+    def run(self, check_stops: Callable[[], None]) -> None:
+        """Submit and collect until every variant has rows; `check_stops` at each task's end (a stop
+        signal whose exception was swallowed is raised there: _StopSignals)."""
         from distributed import as_completed
 
         # workers that joined since the slots were counted (while the caller's on_ready ran, or during the
@@ -383,6 +487,7 @@ class _Batches:
         self.poll_workers(force=True)
         queue = as_completed([f for _ in range(IN_FLIGHT_PER_SLOT * self.info.slots) for f in self.submit()])
         for future in queue:
+            check_stops()
             task = self.tasks.pop(future.key)
             self.futures.remove(future)
             self.isolating = self.isolating and not task.isolated

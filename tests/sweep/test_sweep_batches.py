@@ -4,6 +4,7 @@ slots finish together, and sized from every measured row rather than the first."
 
 from __future__ import annotations
 
+import signal
 from types import SimpleNamespace
 
 import pytest
@@ -119,3 +120,50 @@ def test_a_failed_task_is_run_again_or_recorded_never_dropped():
     rows, again = settle_failure(task, cancelled)
     assert again == [] and [(r["variant"], r["status"]) for r in rows] == [(7, "lost"), (8, "lost")]
     assert "FutureCancelledError" in rows[0]["message"] and f"{LOST_TRIES} times" in rows[0]["message"]
+
+
+def test_a_ctrl_c_that_lands_in_a_gc_callback_is_delivered_again_not_swallowed():
+    """Python swallows an exception raised inside a gc callback ("Exception ignored in ..."), and
+    distributed installs one: a Ctrl-C landing there while a sweep's cluster warmed up was lost (the sweep
+    ran on and exited 0). Inside dask_runner._StopSignals it is sent again a moment later and raises in
+    ordinary code; without it the sleep below runs to its end."""
+    import gc
+    import time
+
+    from rbcli.sweeps.dask_runner import _StopSignals
+
+    fired: list[bool] = []
+
+    def interrupt_inside_gc(phase: str, info: dict) -> None:
+        if phase == "start" and not fired:
+            fired.append(True)
+            signal.raise_signal(signal.SIGINT)  # its handler runs here, inside the callback
+
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    gc.callbacks.append(interrupt_inside_gc)
+    try:
+        with _StopSignals(), pytest.raises(KeyboardInterrupt):
+            gc.collect()
+            assert fired
+            deadline = time.monotonic() + 5.0
+            while time.monotonic() < deadline:
+                time.sleep(0.01)
+    finally:
+        gc.callbacks.remove(interrupt_inside_gc)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_a_stop_whose_exception_was_swallowed_is_raised_at_the_next_check():
+    """The last guard of _StopSignals: a noted signal whose exception did not end the sweep (swallowed
+    where no frame shows it) runs its handler again at the next check."""
+    from rbcli.sweeps.dask_runner import _StopSignals
+
+    with _StopSignals() as stops:
+        stops.check()  # nothing noted: nothing happens
+        try:
+            stops._note(signal.SIGINT, None)  # the handler raises, and the exception is lost
+        except KeyboardInterrupt:
+            pass
+        with pytest.raises(KeyboardInterrupt):
+            stops.check()
+        stops.check()  # delivered once
