@@ -25,7 +25,8 @@ A step from grid index n (t = n dt) to n + 1 runs, in this order (STEP_STAGES):
 Each optional stage is present only when the scene needs it, decided when numba compiles the loop, not
 at run time: the loop takes `ForceTables.kernel()`, in which a force type's table is None when the scene
 has none of it, and calls the stage through a dispatcher of forces/stages.py (a `numba.extending.
-overload`) that compiles to nothing for a None table and to the stage otherwise. A run-time test
+overload`) that compiles to nothing for a None table and to the stage otherwise (the joint stages
+prune themselves instead: joints/stages.py). A run-time test
 (`if forces.impulse.body.shape[0]:`, as these loops had) skips the work but still compiles the stage
 (numba compiles both sides of a branch), so a gravity-only scene's first run compiled the impulses and
 the contact stage too. A scene always gets the same combination of None and tables, so numba's cache
@@ -80,7 +81,9 @@ class Stage:
     time (ts + h; in the adaptive loop exactly the grid time it lands on), `{reached}` the grid index a
     step-end stage follows (index + 1; in the adaptive loop the index it landed on), `{recording}`
     whether that index is a recording step, `{due}` (fixed loops' materialise only). A stage that
-    only some scenes have calls a dispatcher (forces/stages.py) that compiles to nothing without it.
+    only some scenes have calls a dispatcher (forces/stages.py) that compiles to nothing without it, or
+    a function that takes its table itself and prunes its body when numba types that table as None
+    (`if table is None: return`, joints/stages.py: no compiled level between the loop and the stage).
 
     Which loops have it, in one place: `loops` (FIXED, ADAPTIVE or BOTH) and `integrators` (the modules
     whose loops have it; empty: every one). In the ADAPTIVE loop (physics/adaptive.py has the method)
@@ -122,8 +125,8 @@ STEP_STAGES: tuple[Stage, ...] = (
     Stage(
         "joint_begin",
         "joint_begin: velocities that break the joints (a kick, or given so) projected: the exact impulsive reaction",
-        ("from rbcli.physics.joints.stages import joint_begin_stage",),
-        "joint_begin_stage(model, forces.joint, force_data.joint, x, q, P, L)",
+        ("from rbcli.physics.joints.stages import joint_begin",),
+        "joint_begin(model, forces.joint, force_data.joint, x, q, P, L)",
         integrators=("split2",),
         loops=(FIXED,),  # joints refuse a tolerance (integrators.check_integrator)
     ),
@@ -160,8 +163,8 @@ STEP_STAGES: tuple[Stage, ...] = (
     Stage(
         "joint_position",
         "joint_position: the joints' impulse at the kick that puts the end configuration on g = 0 (RATTLE)",
-        ("from rbcli.physics.joints.stages import joint_position_stage",),
-        "joint_position_stage(model, forces.joint, force_data.joint, h, x, q, P, L)",
+        ("from rbcli.physics.joints.stages import joint_position",),
+        "joint_position(model, forces.joint, force_data.joint, h, x, q, P, L)",
         substep=True,
         integrators=("split2",),
         loops=(FIXED,),  # joints refuse a tolerance (integrators.check_integrator)
@@ -169,8 +172,8 @@ STEP_STAGES: tuple[Stage, ...] = (
     Stage(
         "joint_velocity",
         "joint_velocity: the momenta projected so that the joints' rows have zero rate, G V = 0",
-        ("from rbcli.physics.joints.stages import joint_velocity_stage",),
-        "joint_velocity_stage(model, forces.joint, force_data.joint, h, x, q, P, L)",
+        ("from rbcli.physics.joints.stages import joint_velocity",),
+        "joint_velocity(model, forces.joint, force_data.joint, h, x, q, P, L)",
         substep=True,
         integrators=("split2",),
         loops=(FIXED,),  # joints refuse a tolerance (integrators.check_integrator)

@@ -66,8 +66,8 @@ def test_stage_list_is_impulses_contact_update_record():
     joint_stages = {name: ("split2",) for name in ("joint_begin", "joint_position", "joint_velocity")}
     assert owned == {"materialise": ("exact",), **joint_stages}
     assert "materialise(" in chunk_source("exact", "exact") and "materialise(" not in chunk_source("split2", "split2")
-    assert "joint_position_stage(" in chunk_source("split2", "split2")
-    assert "joint_position_stage(" not in chunk_source("split4", "split4")
+    assert "joint_position(" in chunk_source("split2", "split2")
+    assert "joint_position(" not in chunk_source("split4", "split4")
     assert [stage.name for stage in STEP_STAGES if stage.substep] == names[2:9]
     # which loops have which stage: one field per stage; materialise (exact's) and the joint stages
     # (split2's: joints refuse a tolerance) are fixed-step only

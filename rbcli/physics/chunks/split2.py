@@ -15,7 +15,7 @@ from rbcli.physics.forces.stages import (
 )
 from rbcli.physics.integrators.split2 import SCRATCH_WIDTH
 from rbcli.physics.integrators.split2 import step as integrator_step
-from rbcli.physics.joints.stages import joint_begin_stage, joint_position_stage, joint_velocity_stage
+from rbcli.physics.joints.stages import joint_begin, joint_position, joint_velocity
 from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, chunk_status, record_if_due
 
 __all__ = ["SCRATCH_WIDTH", "integrator_step", "run_chunk"]
@@ -41,7 +41,7 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
         # impulses: exact jumps of P and L at the start of the step that holds them
         impulse_stage(model, forces, force_data, t, t + dt, x, q, P, L)
         # joint_begin: velocities that break the joints (a kick, or given so) projected: the exact impulsive reaction
-        joint_begin_stage(model, forces.joint, force_data.joint, x, q, P, L)
+        joint_begin(model, forces.joint, force_data.joint, x, q, P, L)
         for sub in range(substeps):
             ts = t + sub * h
             # contact_begin: the contact springs measure time from the start of this (sub-)step
@@ -53,9 +53,9 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
             # kinematic_end: kinematic bodies at their exact state at the end of the (sub-)step (closed form)
             kinematic_end_stage(model, forces, ts + h, x, q, P, L)
             # joint_position: the joints' impulse at the kick that puts the end configuration on g = 0 (RATTLE)
-            joint_position_stage(model, forces.joint, force_data.joint, h, x, q, P, L)
+            joint_position(model, forces.joint, force_data.joint, h, x, q, P, L)
             # joint_velocity: the momenta projected so that the joints' rows have zero rate, G V = 0
-            joint_velocity_stage(model, forces.joint, force_data.joint, h, x, q, P, L)
+            joint_velocity(model, forces.joint, force_data.joint, h, x, q, P, L)
             # contact_commit: the (sub-)step is complete: its last evaluation's contacts become the history
             contact_commit_stage(model, contact, contact_work, x, q, P, L)
         # contact_record: on recording steps, the state's contact count, deepest overlap and energy

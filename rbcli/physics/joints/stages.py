@@ -30,15 +30,20 @@ the period error is second order with the energy error bounded.
 
 Static and kinematic bodies act as the world (W = 0, nothing applied to them) but their anchors move
 with their pose; a kinematic body's velocity enters G V. Stats go to work.stats (tables.STAT_*).
+
+The chunk loop calls the three stages directly with the joint table and work (ForceTables.joint,
+ForceData.joint), which are None in a scene without joints. Each stage begins with `if table is None or
+work is None: return`, and numba prunes a branch on an argument's `is None` when it compiles (its
+dead-branch pruning, before typing): in a jointless scene each stage compiles to an empty function and
+none of the rows, solver or drive kernels is compiled. Not through a `numba.extending.overload`
+dispatcher, as the force stages are: the dispatcher's implementation was a compiled level of its own
+between the loop and the stage, and each level links and re-optimises the whole solver below it (~2 s
+of LLVM per stage, measured: 5.7 s of the pendulum's first compile).
 """
 
 from __future__ import annotations
 
-from typing import Any
-
 import numba
-from numba.core import types
-from numba.extending import overload
 
 from rbcli.physics.joints.drives import drive_velocities, limit_positions
 from rbcli.physics.joints.impulses import (
@@ -52,7 +57,6 @@ from rbcli.physics.joints.impulses import (
 from rbcli.physics.joints.rows import joint_rows
 from rbcli.physics.joints.solver import factor_rows, solve_rows
 from rbcli.physics.joints.tables import STAT_ITERATIONS, STAT_POSITION, STAT_REDUNDANT, STAT_VELOCITY
-from rbcli.physics.step import STEP_KERNEL
 
 # the Newton iteration stops when |g| falls by less than this factor in one iteration (round-off
 # reached), or after NEWTON_ITERATIONS (a step far too long for its joints: the stats show it)
@@ -66,13 +70,13 @@ LIMIT_ROUNDS = 8
 # regard to the joints leaves orders of magnitude more
 VELOCITY_SLACK = 1e-12
 
-_OPTIONS: Any = STEP_KERNEL
-
 
 @numba.njit(cache=True)
 def joint_position(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
     """The position stage: the midpoint impulse that puts the end configuration on g = 0 (module
     docstring), then each violated limit pushed back onto its bound the same way (drives.py)."""
+    if table is None or work is None:  # no joints: numba prunes the rest (module docstring)
+        return
     half = 0.5 * h
     for b in range(x.shape[0]):  # the midpoint configuration of the step just taken
         inv_m = 1.0 / model.body_mass[b]
@@ -127,6 +131,8 @@ def _newton(table, work, h, x, q, P, L):  # noqa: ANN001, ANN202
 def joint_velocity(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
     """The velocity stage: (P, L) -= G^T mu with G V = 0 after it, G at the end configuration; then the
     motors and dampers, then the limits that are reached (drives.py)."""
+    if table is None or work is None:
+        return
     _project(model, table, work, x, q, P, L)
     drive_velocities(model, table, work, h, x, q, P, L)
     work.stats[STAT_VELOCITY] = row_velocities(model, table, work, q, P, L)
@@ -139,6 +145,8 @@ def joint_begin(model, table, work, x, q, P, L) -> None:  # noqa: ANN001
     ideal joints that projection is the exact impulsive reaction (the W-orthogonal projection of the
     velocity onto the joints' tangent space: the momenta change only along G^T), so a kick on a jointed
     body acts as the joints would take it. Otherwise (every step after the first) it checks G V only."""
+    if table is None or work is None:
+        return
     joint_rows(table, x, q, work.jac_a, work.jac_b, work.residual, True)
     if row_velocities(model, table, work, q, P, L) > VELOCITY_SLACK:
         _project(model, table, work, x, q, P, L)
@@ -159,63 +167,3 @@ def _project(model, table, work, x, q, P, L) -> None:  # noqa: ANN001
         work.impulse[r] += work.delta[r]
     gather_impulses(table, work, work.delta)
     apply_body_impulses(table, work, 0.0, x, q, P, L)
-
-
-# ---- the pipeline's dispatchers: compiled to nothing for a scene without joints ---------------------
-# They take the joint table and work themselves, not the scene's ForceTables: their implementation then
-# has the same argument types in every jointed scene, so it is compiled once (per process, and cached),
-# not once per scene kind. Each per-kind compile links and re-optimises the whole joint solver below it
-# (~2 s per stage, measured: numba links a callee's IR into every caller's module), and the chunk loop
-# of each kind does that once already.
-
-
-def joint_begin_stage(model, table, work, x, q, P, L) -> None:  # noqa: ANN001
-    """`joint_begin` when the scene has joints (table and work not None)."""
-    raise TypeError("a stage dispatcher runs in compiled kernels only (physics/joints/stages.py)")
-
-
-@overload(joint_begin_stage, jit_options=_OPTIONS)
-def _joint_begin_stage(model, table, work, x, q, P, L):  # noqa: ANN001, ANN202
-    if _absent(table, work):
-        return lambda model, table, work, x, q, P, L: None
-
-    def run(model, table, work, x, q, P, L):  # noqa: ANN001, ANN202
-        joint_begin(model, table, work, x, q, P, L)
-
-    return run
-
-
-def _absent(*argument_types: types.Type) -> bool:
-    return any(isinstance(t, types.NoneType) for t in argument_types)
-
-
-def joint_position_stage(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
-    """`joint_position` when the scene has joints (table and work not None)."""
-    raise TypeError("a stage dispatcher runs in compiled kernels only (physics/joints/stages.py)")
-
-
-@overload(joint_position_stage, jit_options=_OPTIONS)
-def _joint_position_stage(model, table, work, h, x, q, P, L):  # noqa: ANN001, ANN202
-    if _absent(table, work):
-        return lambda model, table, work, h, x, q, P, L: None
-
-    def run(model, table, work, h, x, q, P, L):  # noqa: ANN001, ANN202
-        joint_position(model, table, work, h, x, q, P, L)
-
-    return run
-
-
-def joint_velocity_stage(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
-    """`joint_velocity` when the scene has joints (table and work not None)."""
-    raise TypeError("a stage dispatcher runs in compiled kernels only (physics/joints/stages.py)")
-
-
-@overload(joint_velocity_stage, jit_options=_OPTIONS)
-def _joint_velocity_stage(model, table, work, h, x, q, P, L):  # noqa: ANN001, ANN202
-    if _absent(table, work):
-        return lambda model, table, work, h, x, q, P, L: None
-
-    def run(model, table, work, h, x, q, P, L):  # noqa: ANN001, ANN202
-        joint_velocity(model, table, work, h, x, q, P, L)
-
-    return run
