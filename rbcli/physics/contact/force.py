@@ -146,7 +146,7 @@ def hold_static_bodies(contact, F, tau) -> None:  # noqa: ANN001
 def accumulate_contact(model, contact, work, t, x, q, P, L, F, tau) -> None:  # noqa: ANN001
     """Add every contact's force and torque to F and tau (world frame, about each centre of mass)."""
     body_velocities(model, work, x, q, P, L)
-    sphere_positions(contact, work, x, q)  # the two-level broad phase: flags the bodies that may touch
+    flagged = sphere_positions(contact, work, x, q)  # the two-level broad phase: flags the bodies that may touch
     # trial contacts cleared only where the last evaluation could have left some (body_phase.py)
     start = contact.body_sphere_start
     for body in range(work.body_trial.shape[0]):
@@ -157,7 +157,8 @@ def accumulate_contact(model, contact, work, t, x, q, P, L, F, tau) -> None:  # 
     work.counters[COUNT_EVALUATIONS] += 1
     s = t - work.clock[0]
     work.clock[2] = s
-    work.counters[COUNT_CANDIDATES] += find_contacts(contact, work, ContactForceSink(x, s, F, tau))
+    if flagged:  # else nothing can touch: no search (search.py)
+        work.counters[COUNT_CANDIDATES] += find_contacts(contact, work, ContactForceSink(x, s, F, tau))
 
 
 # not inline="always": numba 0.68's IR inlining of this overload lost the writes to sink.F and sink.tau

@@ -42,9 +42,9 @@ def contact_points(model, contact, work, x, q, P, L, point, force) -> int:  # no
     [m, world] and force (capacity,) [N], in search order; returns how many there are (call again with
     larger arrays when that exceeds the capacity: only the first `capacity` are written)."""
     body_velocities(model, work, x, q, P, L)
-    sphere_positions(contact, work, x, q)
     found = np.zeros(1, dtype=np.int64)
-    find_contacts(contact, work, ContactPointSink(x, point, force, found))
+    if sphere_positions(contact, work, x, q):  # else nothing can touch (search.py)
+        find_contacts(contact, work, ContactPointSink(x, point, force, found))
     return found[0]
 
 

@@ -26,6 +26,11 @@ candidates touch neighbouring memory; sphere and body arrays are read only for r
 Sinks: `contact_found(sink, ...)` is a stub; each sink module registers a numba `overload` of it for
 its own sink type (a NamedTuple), so a search compiled for one sink inlines that sink's code and no
 other: the force stage pays nothing for the recorded streams, and numba caches each combination.
+`find_contacts` is a compiled function of its own (one per sink type), called only when the body phase
+flagged some body: inlined into each caller at numba's IR level, as it was, the search was ~4-5 s of
+each caller's first compile (numba's pass events), and a call passes the contact table and work by
+value (~100 ns: the far case of benchmarks/bench_contact.py), which only a search with something to
+find now pays. `sphere_positions` stays inlined: it runs on every evaluation.
 """
 
 from __future__ import annotations
@@ -38,6 +43,7 @@ import numpy as np
 from rbcli.physics.contact.body_phase import body_phase, place_spheres, whole_grid_hashed
 from rbcli.physics.contact.broad_phase import HALF_SHELL, bucket_of, build_grid_of
 from rbcli.physics.contact.tables import ACTIVE_PLANE, PLANE_PARTNER_BASE, SWEEP_SPHERES
+from rbcli.physics.step import STEP_KERNEL
 
 
 def contact_found(sink, contact, work, owner, partner, ba, bb, n0, n1, n2, overlap, c0, c1, c2, k, zeta, mu):  # noqa: ANN001, ANN201
@@ -49,16 +55,22 @@ def contact_found(sink, contact, work, owner, partner, ba, bb, n0, n1, n2, overl
 
 
 @numba.njit(cache=True, inline="always")
-def sphere_positions(contact, work, x, q) -> None:  # noqa: ANN001
+def sphere_positions(contact, work, x, q) -> int:  # noqa: ANN001
     """The two-level broad phase's first half (body_phase.py): the bodies whose boxes meet another's or
     a plane's flagged, and p = x_b + R r0 of their contact spheres into work.sphere_position (no rotation
     for a sphere at its body's centre); the spheres of bodies in body pairs listed for the grid. The
-    other spheres keep stale positions: find_contacts reads only flagged ones."""
+    other spheres keep stale positions: find_contacts reads only flagged ones. Returns the number of
+    flagged bodies: with none, find_contacts has nothing to find and its callers skip it."""
     body_phase(contact, work, x, q, work.body_pair_none)
     place_spheres(contact, work, x, q)
+    flagged = 0
+    for b in range(work.body_active.shape[0]):
+        if work.body_active[b]:
+            flagged += 1
+    return flagged
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(**STEP_KERNEL)
 def find_contacts(contact, work, sink) -> int:  # noqa: ANN001
     """Every contact of the sphere positions in work.sphere_position, plane contacts first (by sphere,
     then plane), then the pairs in walk order, each handed to `contact_found(sink, ...)`; returns the

@@ -47,8 +47,8 @@ def record_contact_state(contact, work, x, q, out, row) -> None:  # noqa: ANN001
     Overwrites work's search arrays (positions, grid): every force evaluation rebuilds them."""
     for k in range(out.shape[1]):
         out[row, k] = 0.0
-    sphere_positions(contact, work, x, q)
-    find_contacts(contact, work, ContactStateSink(out, row))
+    if sphere_positions(contact, work, x, q):  # else nothing can touch (search.py)
+        find_contacts(contact, work, ContactStateSink(out, row))
     out[row, STAT_OVERFLOW] = work.counters[COUNT_OVERFLOW]
 
 
