@@ -7,6 +7,7 @@
     sim.set_state(omega=...)       # in the user's frames; the internal principal-frame state follows
     sim.reset()
     saved = sim.checkpoint()       # everything carried between steps; sim.restore(saved) continues bitwise
+    sim.joint_reactions["hinge"]   # (2, 6): the last step's force [N] and torque [N m] of a joint on its bodies
     summary = sim.run(2.0, sinks=[...])   # the CLI's run: chunks, recording, interrupts
 
 A Simulation owns the compiled scene (constant Model and force tables, runner settings) and one Data
@@ -193,6 +194,22 @@ class Simulation:
             P=s.P.copy(),
             L=s.L.copy(),
         )
+
+    @property
+    def joint_reactions(self) -> dict[str, np.ndarray]:
+        """What each joint did to its bodies over the last step: joint name -> (2, 6), row 0 for its
+        first body and row 1 for its second (zeros for the world), each the force [N] and the torque
+        about that body's centre of mass [N m], world frame, as the mean over the step (the step's
+        impulse of the joint's rows, motor, damper and limit, divided by the step; with contact
+        sub-steps, the last sub-step's). Zeros before the first step; {} in a scene without joints.
+        A kick's reaction (an impulse on a jointed body, or initial velocities that break a joint: the
+        step's joint_begin projection) is not in it: it is an impulse, not a force over the step."""
+        work = self.data.force.joint
+        if work is None:
+            return {}
+        h = self.settings.dt / self.data.substeps
+        names = [joint.name for joint in self.compiled.spec.joints]
+        return {name: work.joint_impulse[j].reshape(2, 6) / h for j, name in enumerate(names)}
 
     def set_state(
         self,

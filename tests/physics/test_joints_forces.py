@@ -5,13 +5,14 @@ holds; an impulse on a free-floating jointed system changes its total momentum b
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 
 import rbcli
 from rbcli.physics.joints.reference import joint_rows_numpy
 from rbcli.scene.load import load_scene_text
-from tests.physics.joint_scenes import G, pendulum_text
+from tests.physics.joint_scenes import G, angle_and_rate, pendulum_text
 
 
 def _rows(sim: rbcli.Simulation) -> float:
@@ -118,3 +119,57 @@ def test_a_spring_on_a_slider_oscillates_at_sqrt_k_over_m_at_second_order():
         errors.append(abs(sim.state.x[0, 0] - (-0.2 + 0.2 * math.cos(omega * steps * dt))))
     order = math.log2(errors[0] / errors[1])
     assert 1.8 < order < 2.2, (errors, order)
+
+
+def _reaction_balance(sim: rbcli.Simulation, steps: int, track: list | None = None) -> tuple[float, float]:
+    """Over `steps` single steps (after a first one): the largest gap between each moving body's momentum
+    change and gravity's plus its joints' reported reactions (Simulation.joint_reactions) times dt, in
+    P [N s] and in L [N m s] (gravity acts at the centre of mass: no torque). split2 changes P and L by
+    the forces' kick and the joints' impulses alone, so the gap is round-off when every joint's rows,
+    motor, damper and limit are in its reaction."""
+    table, dt = sim.forces.joint, sim.dt
+    mass, g = sim.model.body_mass, np.asarray(sim.forces.gravity)
+    sim.step(1)
+    gap_p = gap_l = 0.0
+    for _ in range(steps):
+        before = sim.state
+        sim.step(1)
+        after, reactions = sim.state, list(sim.joint_reactions.values())
+        if track is not None:
+            track.append(angle_and_rate(after.x[0], after.v[0])[0])
+        dP = after.P - before.P - dt * mass[:, None] * g
+        dL = after.L - before.L
+        for j, wrench in enumerate(reactions):
+            for end, body in enumerate((table.body_a[j], table.body_b[j])):
+                if body >= 0:
+                    dP[body] -= dt * wrench[end, :3]
+                    dL[body] -= dt * wrench[end, 3:]
+        moving = ~np.asarray(table.body_ground)
+        gap_p = max(gap_p, float(np.abs(dP[moving]).max()))
+        gap_l = max(gap_l, float(np.abs(dL[moving]).max()))
+    return gap_p, gap_l
+
+
+def test_joint_reactions_account_for_every_bodys_momentum_change():
+    """Simulation.joint_reactions: the pendulum (a hinge to the world), the double pendulum (a joint
+    between two bodies: its forces on them are equal and opposite), a pendulum swinging into a hinge limit,
+    and the motor-driven four-bar (a loop whose redundant rows are dropped): each body's momentum change
+    over a step is gravity's and its joints' reactions, to round-off."""
+    pendulum = pendulum_text(math.pi / 3.0, 0.001, steps=10)
+    limited = pendulum.replace("type: hinge, axis: [0, 1, 0]", "type: hinge, axis: [0, 1, 0], limits: [-0.8, 0.8]")
+    scenes = {"pendulum": load_scene_text(pendulum), "limit": load_scene_text(limited)}
+    root = Path(__file__).resolve().parents[2] / "scenes" / "joints"
+    scenes |= {name: root / f"{name}.yaml" for name in ("double_pendulum", "four_bar")}
+    for name, scene in scenes.items():
+        sim = rbcli.Simulation(scene)
+        assert set(sim.joint_reactions) == {j.name for j in sim.compiled.spec.joints}
+        angles: list[float] = []
+        gap_p, gap_l = _reaction_balance(sim, 800 if name == "limit" else 300, angles)
+        assert gap_p < 1e-13 and gap_l < 1e-13, (name, gap_p, gap_l)
+        if name == "limit":  # free, it would swing 2.09 rad from its start: the limit stopped it at 0.8
+            swing = np.abs(np.array(angles) - math.pi / 3.0)
+            assert 0.8 - 1e-3 < swing.max() < 0.8 + 1e-6, swing.max()
+        if name == "double_pendulum":  # the elbow pulls the two arms equally and oppositely
+            elbow = sim.joint_reactions["elbow"]
+            np.testing.assert_allclose(elbow[1, :3], -elbow[0, :3], rtol=0, atol=1e-12 * np.abs(elbow).max())
+    assert rbcli.Simulation(root.parent / "tutorial.yaml").joint_reactions == {}

@@ -140,17 +140,20 @@ def effective_inverse(table, work, a, b, ja, jb) -> float:  # noqa: ANN001
 
 
 @numba.njit(cache=True)
-def _push(table, work, a, b, ja, jb, impulse, drift, x, q, P, L) -> None:  # noqa: ANN001
-    """lambda J^T on the joint's bodies and -lambda G^T y on every row (so G V stays as it was), applied
-    to P, L (and with drift > 0 to x, q: the position stage); y from `effective_inverse`."""
+def _push(table, work, j, a, b, ja, jb, impulse, drift, x, q, P, L) -> None:  # noqa: ANN001
+    """lambda J^T on joint j's bodies and -lambda G^T y on every row (so G V stays as it was), applied
+    to P, L (and with drift > 0 to x, q: the position stage); y from `effective_inverse`. The J^T part
+    is joint j's in work.joint_impulse (the rows' parts go to their joints: gather_impulses)."""
     for r in range(work.delta.shape[0]):
         work.delta[r] = -work.delta[r] * impulse
         work.impulse[r] += work.delta[r]
     gather_impulses(table, work, work.delta)
     for c in range(6):
         work.impulse_body[a, c] += ja[c] * impulse
+        work.joint_impulse[j, c] += ja[c] * impulse
         if b >= 0:
             work.impulse_body[b, c] += jb[c] * impulse
+            work.joint_impulse[j, 6 + c] += jb[c] * impulse
     apply_body_impulses(table, work, drift, x, q, P, L)
 
 
@@ -189,7 +192,7 @@ def drive_velocities(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
                     rate += k_inv * impulse
                 if damper:
                     impulse += rate * (math.exp(-table.damping[j] * k_inv * h) - 1.0) / k_inv
-                _push(table, work, a, b, ja, jb, impulse, 0.0, x, q, P, L)
+                _push(table, work, j, a, b, ja, jb, impulse, 0.0, x, q, P, L)
         if bounded:
             at_upper = c >= table.limit_upper[j] - LIMIT_CONTACT
             at_lower = c <= table.limit_lower[j] + LIMIT_CONTACT
@@ -199,7 +202,7 @@ def drive_velocities(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
                 if work.limit_hit[j] or (at_upper and rate > 0.0) or (at_lower and rate < 0.0):
                     k_inv = effective_inverse(table, work, a, b, ja, jb)
                     if k_inv > 0.0:
-                        _push(table, work, a, b, ja, jb, -rate / k_inv, 0.0, x, q, P, L)
+                        _push(table, work, j, a, b, ja, jb, -rate / k_inv, 0.0, x, q, P, L)
 
 
 @numba.njit(cache=True)
@@ -223,7 +226,7 @@ def limit_positions(table, work, h, x, q, P, L) -> bool:  # noqa: ANN001
         k_inv = effective_inverse(table, work, a, b, ja, jb)
         if not k_inv > 0.0:
             continue
-        _push(table, work, a, b, ja, jb, -2.0 / h * (c - bound) / k_inv, 0.5 * h, x, q, P, L)
+        _push(table, work, j, a, b, ja, jb, -2.0 / h * (c - bound) / k_inv, 0.5 * h, x, q, P, L)
         work.limit_hit[j] = 1.0
         moved = True
     return moved

@@ -70,8 +70,9 @@ def body_omega(model, q, L, b):  # noqa: ANN001, ANN202
 
 @numba.njit(cache=True)
 def gather_impulses(table, work, multipliers) -> None:  # noqa: ANN001
-    """impulse_body = G^T multipliers per body (ground bodies and the world get nothing)."""
-    impulse = work.impulse_body
+    """impulse_body = G^T multipliers per body (ground bodies and the world get nothing); each joint's part
+    is also added to work.joint_impulse (its bodies' momentum change by this joint, for the reactions)."""
+    impulse, by_joint = work.impulse_body, work.joint_impulse
     impulse[:, :] = 0.0
     for j in range(table.kind.shape[0]):
         a, b = table.body_a[j], table.body_b[j]
@@ -79,8 +80,10 @@ def gather_impulses(table, work, multipliers) -> None:  # noqa: ANN001
             m = multipliers[r]
             for c in range(6):
                 impulse[a, c] += work.jac_a[r, c] * m
+                by_joint[j, c] += work.jac_a[r, c] * m
                 if b >= 0:
                     impulse[b, c] += work.jac_b[r, c] * m
+                    by_joint[j, 6 + c] += work.jac_b[r, c] * m
 
 
 @numba.njit(cache=True)

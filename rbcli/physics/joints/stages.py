@@ -92,6 +92,7 @@ def joint_position(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
     redundant = factor_rows(table.graph, work.solver, table.row_start, table.row_count, table.body_a, table.body_b,
                             work.jac_a, work.jac_b, work.inv_mass, work.inv_inertia)  # fmt: skip
     work.impulse[:] = 0.0
+    work.joint_impulse[:, :] = 0.0
     work.limit_hit[:] = 0.0
     worst, iterations = _newton(table, work, h, x, q, P, L)
     for _ in range(LIMIT_ROUNDS):  # limits reached in this step: onto the bound, then the joints again

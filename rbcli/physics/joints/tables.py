@@ -85,6 +85,11 @@ class JointWork(NamedTuple):
     inv_inertia: np.ndarray  # [1/(kg m^2)] (N, 3, 3), world frame: R I0^-1 R^T, 0 for ground bodies
     impulse_body: np.ndarray  # [N s, N m s] (N, 6): one solve's momentum change per body
     limit_hit: np.ndarray  # (J,): 1 where this step's position stage pushed a coordinate back onto a limit
+    # [N s, N m s] (J, 12), world frame: each joint's impulse on its bodies over the last (sub-)step, its
+    # rows', motor's, damper's and limit's summed: [0:3] linear and [3:6] angular (about the centre of
+    # mass) on body_a, [6:12] on body_b (zero for the world); / h it is the joint's reaction force and
+    # torque (Simulation.joint_reactions)
+    joint_impulse: np.ndarray
     stats: np.ndarray  # (STAT_COUNT,): see STAT_*
     solver: SolverWork
 
@@ -151,5 +156,6 @@ def make_joint_work(table: JointTable) -> JointWork:
     return JointWork(
         np.zeros((rows, 6)), np.zeros((rows, 6)), np.zeros(rows), np.zeros(rows), np.zeros(rows), np.zeros(rows),
         np.zeros((bodies, 3)), np.zeros((bodies, 4)), np.zeros(bodies), np.zeros((bodies, 3, 3)),
-        np.zeros((bodies, 6)), np.zeros(table.kind.shape[0]), np.zeros(STAT_COUNT), make_solver_work(table.graph),
+        np.zeros((bodies, 6)), np.zeros(table.kind.shape[0]), np.zeros((table.kind.shape[0], 12)),
+        np.zeros(STAT_COUNT), make_solver_work(table.graph),
     )  # fmt: skip
