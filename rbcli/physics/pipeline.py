@@ -73,9 +73,11 @@ class Stage:
     Names the code may use: model, forces, data (KernelData), x, q, P, L, F, tau, scratch (data's
     arrays), force_data (data.force), contact and contact_work (forces.contact and force_data.contact,
     None without contact), dt, index (the grid step being taken), t = index * dt, frames, filled,
-    record_every, status; `integrator_step` is the integrator's update. Use the names, not `data.F` or
-    `data.force`: the loop takes them out of their tuples once, before it starts (each `data.force`
-    inside the loop increfs and decrefs every array the tuple holds, every step). Consecutive sub-step
+    record_every, status; `integrator_step` is the integrator's update; joint and joint_work
+    (forces.joint and force_data.joint, None without joints: fixed-step loops only). Use the names,
+    not `data.F`, `data.force` or `forces.joint`: the loop takes them out of their tuples once, before
+    it starts (each `data.force` inside the loop increfs and decrefs every array the tuple holds, every
+    step). Consecutive sub-step
     stages form one loop run data.substeps times (contact sub-stepping, 1 otherwise), where ts and h are
     the sub-step's start time and length. Placeholders, filled per loop: `{te}` the sub-step's end
     time (ts + h; in the adaptive loop exactly the grid time it lands on), `{reached}` the grid index a
@@ -126,7 +128,7 @@ STEP_STAGES: tuple[Stage, ...] = (
         "joint_begin",
         "joint_begin: velocities that break the joints (a kick, or given so) projected: the exact impulsive reaction",
         ("from rbcli.physics.joints.stages import joint_begin",),
-        "joint_begin(model, forces.joint, force_data.joint, x, q, P, L)",
+        "joint_begin(model, joint, joint_work, x, q, P, L)",
         integrators=("split2",),
         loops=(FIXED,),  # joints refuse a tolerance (integrators.check_integrator)
     ),
@@ -164,7 +166,7 @@ STEP_STAGES: tuple[Stage, ...] = (
         "joint_position",
         "joint_position: the joints' impulse at the kick that puts the end configuration on g = 0 (RATTLE)",
         ("from rbcli.physics.joints.stages import joint_position",),
-        "joint_position(model, forces.joint, force_data.joint, h, x, q, P, L)",
+        "joint_position(model, joint, joint_work, h, x, q, P, L)",
         substep=True,
         integrators=("split2",),
         loops=(FIXED,),  # joints refuse a tolerance (integrators.check_integrator)
@@ -173,7 +175,7 @@ STEP_STAGES: tuple[Stage, ...] = (
         "joint_velocity",
         "joint_velocity: the momenta projected so that the joints' rows have zero rate, G V = 0",
         ("from rbcli.physics.joints.stages import joint_velocity",),
-        "joint_velocity(model, forces.joint, force_data.joint, h, x, q, P, L)",
+        "joint_velocity(model, joint, joint_work, h, x, q, P, L)",
         substep=True,
         integrators=("split2",),
         loops=(FIXED,),  # joints refuse a tolerance (integrators.check_integrator)
@@ -232,7 +234,7 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
     x, q, P, L, F, tau, scratch = data.x, data.q, data.P, data.L, data.F, data.tau, data.scratch
     force_data, contact = data.force, forces.contact
     contact_work = force_data.contact
-    substeps = data.substeps
+{joints}    substeps = data.substeps
     h = dt / substeps
     for k in range(n_steps):
         index = step0 + k
@@ -421,7 +423,8 @@ def chunk_source(module: str, name: str, stages: tuple[Stage, ...] = STEP_STAGES
         body.append(_indent(code, depth))
     own = f"rbcli.physics.integrators.{module}"
     names = {"rbcli.physics.step": {"CHUNK_KERNEL", "chunk_status"}, own: {"SCRATCH_WIDTH"}}
-    head = _HEADER.format(name=name, imports=_import_lines(names, stages, "".join(body), own))
+    joints = "    joint, joint_work = forces.joint, force_data.joint\n" if "joint_work" in "".join(body) else ""
+    head = _HEADER.format(name=name, imports=_import_lines(names, stages, "".join(body), own), joints=joints)
     return head + "".join(body) + _FOOTER
 
 

@@ -33,6 +33,7 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
     x, q, P, L, F, tau, scratch = data.x, data.q, data.P, data.L, data.F, data.tau, data.scratch
     force_data, contact = data.force, forces.contact
     contact_work = force_data.contact
+    joint, joint_work = forces.joint, force_data.joint
     substeps = data.substeps
     h = dt / substeps
     for k in range(n_steps):
@@ -41,7 +42,7 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
         # impulses: exact jumps of P and L at the start of the step that holds them
         impulse_stage(model, forces, force_data, t, t + dt, x, q, P, L)
         # joint_begin: velocities that break the joints (a kick, or given so) projected: the exact impulsive reaction
-        joint_begin(model, forces.joint, force_data.joint, x, q, P, L)
+        joint_begin(model, joint, joint_work, x, q, P, L)
         for sub in range(substeps):
             ts = t + sub * h
             # contact_begin: the contact springs measure time from the start of this (sub-)step
@@ -53,9 +54,9 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
             # kinematic_end: kinematic bodies at their exact state at the end of the (sub-)step (closed form)
             kinematic_end_stage(model, forces, ts + h, x, q, P, L)
             # joint_position: the joints' impulse at the kick that puts the end configuration on g = 0 (RATTLE)
-            joint_position(model, forces.joint, force_data.joint, h, x, q, P, L)
+            joint_position(model, joint, joint_work, h, x, q, P, L)
             # joint_velocity: the momenta projected so that the joints' rows have zero rate, G V = 0
-            joint_velocity(model, forces.joint, force_data.joint, h, x, q, P, L)
+            joint_velocity(model, joint, joint_work, h, x, q, P, L)
             # contact_commit: the (sub-)step is complete: its last evaluation's contacts become the history
             contact_commit_stage(model, contact, contact_work, x, q, P, L)
         # contact_record: on recording steps, the state's contact count, deepest overlap and energy

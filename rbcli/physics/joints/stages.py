@@ -35,10 +35,12 @@ The chunk loop calls the three stages directly with the joint table and work (Fo
 ForceData.joint), which are None in a scene without joints. Each stage begins with `if table is None or
 work is None: return`, and numba prunes a branch on an argument's `is None` when it compiles (its
 dead-branch pruning, before typing): in a jointless scene each stage compiles to an empty function and
-none of the rows, solver or drive kernels is compiled. Not through a `numba.extending.overload`
-dispatcher, as the force stages are: the dispatcher's implementation was a compiled level of its own
-between the loop and the stage, and each level links and re-optimises the whole solver below it (~2 s
-of LLVM per stage, measured: 5.7 s of the pendulum's first compile).
+none of the rows, solver or drive kernels is compiled. The three take the step kernels' options
+(STEP_KERNEL: no reference counting), as the dispatchers' implementations did: compiled with numba's
+defaults they halved a 10-link chain's rate (hinge 4.0e5 -> 2.3e5 link-steps/s). Not through a
+`numba.extending.overload` dispatcher, as the force stages are: the dispatcher's implementation was a
+compiled level of its own between the loop and the stage, and each level links and re-optimises the
+whole solver below it (~2 s of LLVM per stage, measured: 5.7 s of the pendulum's first compile).
 """
 
 from __future__ import annotations
@@ -57,6 +59,7 @@ from rbcli.physics.joints.impulses import (
 from rbcli.physics.joints.rows import joint_rows
 from rbcli.physics.joints.solver import factor_rows, solve_rows
 from rbcli.physics.joints.tables import STAT_ITERATIONS, STAT_POSITION, STAT_REDUNDANT, STAT_VELOCITY
+from rbcli.physics.step import STEP_KERNEL
 
 # the Newton iteration stops when |g| falls by less than this factor in one iteration (round-off
 # reached), or after NEWTON_ITERATIONS (a step far too long for its joints: the stats show it)
@@ -71,7 +74,7 @@ LIMIT_ROUNDS = 8
 VELOCITY_SLACK = 1e-12
 
 
-@numba.njit(cache=True)
+@numba.njit(**STEP_KERNEL)
 def joint_position(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
     """The position stage: the midpoint impulse that puts the end configuration on g = 0 (module
     docstring), then each violated limit pushed back onto its bound the same way (drives.py)."""
@@ -128,7 +131,7 @@ def _newton(table, work, h, x, q, P, L):  # noqa: ANN001, ANN202
     return worst, iterations
 
 
-@numba.njit(cache=True)
+@numba.njit(**STEP_KERNEL)
 def joint_velocity(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
     """The velocity stage: (P, L) -= G^T mu with G V = 0 after it, G at the end configuration; then the
     motors and dampers, then the limits that are reached (drives.py)."""
@@ -139,7 +142,7 @@ def joint_velocity(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
     work.stats[STAT_VELOCITY] = row_velocities(model, table, work, q, P, L)
 
 
-@numba.njit(cache=True)
+@numba.njit(**STEP_KERNEL)
 def joint_begin(model, table, work, x, q, P, L) -> None:  # noqa: ANN001
     """Before a step: velocities that break the joints' rows (initial velocities given without regard to
     the joints, or an impulse just applied) are projected onto G V = 0 at the current configuration. For
