@@ -70,22 +70,21 @@ UPDATE = "update"  # the integrator's own stage: a step in FIXED loops, an error
 class Stage:
     """One stage of a step, as code inside the chunk loops.
 
-    Names the code may use: model, forces, data (KernelData), x, q, P, L, F, tau, scratch (data's
-    arrays), force_data (data.force), contact and contact_work (forces.contact and force_data.contact,
-    None without contact), dt, index (the grid step being taken), t = index * dt, frames, filled,
-    record_every, status; `integrator_step` is the integrator's update; joint and joint_work
-    (forces.joint and force_data.joint, None without joints: fixed-step loops only). Use the names,
-    not `data.F`, `data.force` or `forces.joint`: the loop takes them out of their tuples once, before
-    it starts (each `data.force` inside the loop increfs and decrefs every array the tuple holds, every
-    step). Consecutive sub-step
-    stages form one loop run data.substeps times (contact sub-stepping, 1 otherwise), where ts and h are
-    the sub-step's start time and length. Placeholders, filled per loop: `{te}` the sub-step's end
-    time (ts + h; in the adaptive loop exactly the grid time it lands on), `{reached}` the grid index a
-    step-end stage follows (index + 1; in the adaptive loop the index it landed on), `{recording}`
-    whether that index is a recording step, `{due}` (fixed loops' materialise only). A stage that
-    only some scenes have calls a dispatcher (forces/stages.py) that compiles to nothing without it, or
-    a function that takes its table itself and prunes its body when numba types that table as None
-    (`if table is None: return`, joints/stages.py: no compiled level between the loop and the stage).
+    Names the code may use: model, forces, data (KernelData), x, q, P, L, F, tau, scratch (data's arrays),
+    force_data (data.force), contact and contact_work (forces.contact and force_data.contact, None without
+    contact), dt, index (the grid step being taken), t = index * dt, frames, filled, record_every, status;
+    `integrator_step` is the integrator's update; joint and joint_work (forces.joint and force_data.joint,
+    None without joints: fixed-step loops only). Use the names, not `data.F`, `data.force` or
+    `forces.joint`: the loop takes them out of their tuples once, before it starts (each `data.force` inside
+    the loop increfs and decrefs every array the tuple holds, every step). Consecutive sub-step stages form
+    one loop run data.substeps times (contact sub-stepping, 1 otherwise), where ts and h are the sub-step's
+    start time and length. Placeholders, filled per loop: `{te}` the sub-step's end time (ts + h; in the
+    adaptive loop exactly the grid time it lands on), `{reached}` the grid index a step-end stage follows
+    (index + 1; in the adaptive loop the index it landed on), `{recording}` whether that index is a
+    recording step, `{due}` (fixed loops' materialise only). A stage that only some scenes have calls a
+    dispatcher (forces/stages.py) that compiles to nothing without it, or a function that takes its table
+    itself and prunes its body when numba types that table as None (`if table is None: return`,
+    joints/stages.py: no compiled level between the loop and the stage).
 
     Which loops have it, in one place: `loops` (FIXED, ADAPTIVE or BOTH) and `integrators` (the modules
     whose loops have it; empty: every one). In the ADAPTIVE loop (physics/adaptive.py has the method)

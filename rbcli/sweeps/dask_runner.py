@@ -257,13 +257,11 @@ class _StopSignals:
     def __init__(self) -> None:
         self.pending: list[int] = []
         self._previous: dict[int, Callable[[int, Any], Any]] = {}  # the handlers noted signals go on to
+        self._redeliveries: list[threading.Timer] = []  # cancelled once a stop is delivered: one stop, once
 
     def __enter__(self) -> _StopSignals:
         if threading.current_thread() is threading.main_thread():
-            for name in ("SIGINT", "SIGTERM", "SIGHUP"):
-                if not hasattr(signal, name):  # pragma: no cover - SIGHUP off POSIX
-                    continue
-                number = int(getattr(signal, name))
+            for number in _stop_signals():
                 handler = signal.getsignal(number)
                 if callable(handler):
                     self._previous[number] = cast(Callable[[int, Any], Any], handler)
@@ -273,27 +271,42 @@ class _StopSignals:
     def _note(self, signum: int, frame: Any) -> None:
         if _in_finaliser(frame):  # its exception would be swallowed here: deliver it again in a moment
             self.pending.append(signum)
-            threading.Timer(REDELIVER_SECONDS, _redeliver, (signum,)).start()
+            timer = threading.Timer(REDELIVER_SECONDS, _redeliver, (signum,))
+            self._redeliveries.append(timer)
+            timer.start()
             return
-        self.pending.clear()
-        self.pending.append(signum)
-        self._previous[signum](signum, frame)
-        self.pending.remove(signum)  # the handler returned without raising: nothing to deliver again
+        self._deliver(signum, frame, noted=True)
 
     def check(self) -> None:
         """Run the handler again for the first noted signal (its exception was swallowed), if any."""
         if self.pending:
-            signum = self.pending.pop(0)
-            self.pending.clear()
-            self._previous[signum](signum, None)
+            self._deliver(self.pending[0], None, noted=False)
+
+    def _deliver(self, signum: int, frame: Any, noted: bool) -> None:
+        """Run the handler for signum, with no redelivery left due (it would raise a second time, maybe in
+        the caller's own handling of the first); `noted`: kept in `pending` while the handler runs, for a
+        check to raise again if its exception is swallowed (a check's own raise propagates)."""
+        for timer in self._redeliveries:
+            timer.cancel()
+        self._redeliveries.clear()
+        self.pending[:] = [signum] if noted else []
+        self._previous[signum](signum, frame)
+        self.pending.clear()  # the handler returned without raising: nothing to deliver again
 
     def __exit__(self, *exc: object) -> None:
+        for timer in self._redeliveries:
+            timer.cancel()
         for number, handler in self._previous.items():
             signal.signal(number, handler)
 
 
 # a stop signal that landed in a gc callback or a finaliser is sent again after this long [s]
 REDELIVER_SECONDS = 0.01
+
+
+def _stop_signals() -> list[int]:
+    """SIGINT, SIGTERM and SIGHUP, those this platform has."""
+    return [int(getattr(signal, name)) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name)]
 
 
 def _in_finaliser(frame: Any) -> bool:  # noqa: ANN401 - a frame
@@ -332,10 +345,8 @@ def _signals_deferred() -> Iterator[None]:
     def hold(signum: int, frame: Any) -> None:
         arrived.append(signum)
 
-    for name in ("SIGINT", "SIGTERM", "SIGHUP"):
-        if hasattr(signal, name):
-            number = getattr(signal, name)
-            previous[number] = signal.signal(number, hold)
+    for number in _stop_signals():
+        previous[number] = signal.signal(number, hold)
     try:
         yield
     finally:
