@@ -16,6 +16,8 @@ import typer
 
 from rbcli.cli import messages
 from rbcli.cli.exit_codes import ExitCode, signal_exit
+from rbcli.runner.threads import ENV as THREADS_ENV
+from rbcli.runner.threads import PARALLEL_MIN_BODIES, parse_threads
 
 _STOP_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")  # each ends a run at a step boundary (_stop_signals)
 COMPRESSIONS = ("zstd", "lz4", "none")  # as schemas/scene.schema.json's record.compression
@@ -78,6 +80,14 @@ def run(
     allow_large: bool = typer.Option(
         False, "--allow-large", help=f"Run even when the run plans more than {MAX_BODY_STEPS:.0e} body-steps"
     ),
+    threads: str | None = typer.Option(
+        None,
+        "--threads",
+        metavar="N",
+        help="Threads for the step (a positive integer or 'all'); scenes under "
+        f"{PARALLEL_MIN_BODIES} bodies and integrators other than split2 run on one "
+        "[default: $RBSIM_THREADS, else every core]",
+    ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar and no summary line"),
     resume: Path | None = typer.Option(
         None,
@@ -97,6 +107,12 @@ def run(
     )
     from rbcli.scene.spec import SceneError
 
+    if threads is not None:  # checked first, then this process's RBSIM_THREADS: every run path reads it there
+        try:
+            count = parse_threads(threads, "--threads")
+        except ValueError as exc:
+            raise messages.fail(str(exc), code=ExitCode.USAGE) from None
+        os.environ[THREADS_ENV] = str(count)
     if resume is not None:
         overrides = {"dt": dt, "duration": duration, "integrator": integrator, "record_every": record_every}
         fixed = [f"--{k.replace('_', '-')}" for k, v in {**overrides, "tolerance": tolerance}.items() if v is not None]

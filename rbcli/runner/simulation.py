@@ -28,6 +28,7 @@ from rbcli.physics.data import make_data
 from rbcli.physics.frames import body_angular_velocity, internal_orientation, user_orientation
 from rbcli.physics.integrators import get_integrator
 from rbcli.physics.rotation import quat_rotate, quat_rotate_inverse
+from rbcli.runner.threads import chunk_threads, resolve_threads
 from rbcli.scene.compile import CompiledScene
 
 if TYPE_CHECKING:
@@ -79,6 +80,7 @@ class Simulation:
         record_every: int | None = None,
         tolerance: float | None = None,
         compression: str | None = None,
+        threads: int | str | None = None,
     ) -> None:
         if isinstance(scene, CompiledScene):
             given = (dt, duration, integrator, record_every, tolerance, compression)
@@ -102,6 +104,7 @@ class Simulation:
         info = get_integrator(self.settings.integrator)
         tolerance = self.settings.tolerance
         self.adaptive = tolerance is not None
+        self.threads = 1  # the threads the chunk loop runs on (1: the serial loop)
         if tolerance is not None:  # the error-controlled loop, generated from the same stages (physics/adaptive.py)
             self._chunk = info.adaptive_chunk().run_chunk
             self.data = make_data(
@@ -109,7 +112,16 @@ class Simulation:
                 duration=self.settings.steps * self.settings.dt,
             )  # fmt: skip
         else:
-            chunk = info.chunk()
+            # threads (runner/threads.py): the loop whose passes over the bodies run on threads, for a
+            # scene large enough to gain; bitwise the serial loop's results at any thread count
+            count = resolve_threads(threads)
+            contact = compiled.contact is not None
+            self.threads = chunk_threads(count, info.parallel, compiled.model.body_count, contact)
+            if self.threads > 1:  # numba launches at most NUMBA_NUM_THREADS (sweep workers: 1)
+                import numba
+
+                self.threads = min(self.threads, numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
+            chunk = info.parallel_chunk() if self.threads > 1 else info.chunk()
             self._chunk = chunk.run_chunk
             self.data = make_data(
                 compiled.initial_state, self.forces, chunk.SCRATCH_WIDTH, substeps=self.settings.substeps
@@ -173,6 +185,10 @@ class Simulation:
         The caller adds the steps done to `data.state.step` (the runner does, between chunks)."""
         if frames is None:
             frames, record_every = self._no_frames, NEVER
+        if self.threads > 1:  # per calling thread in numba; launches its pool on the first call
+            import numba
+
+            numba.set_num_threads(self.threads)
         return self._chunk(
             self._kmodel, self._kforces, self._kdata, self.settings.dt, self.data.state.step, n_steps,
             record_every, frames, filled,

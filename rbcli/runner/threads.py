@@ -1,9 +1,10 @@
 """How many threads a run's kernels may use: `--threads N` / Simulation(threads=N), else the
 RBSIM_THREADS environment variable, else every core this process may run on.
 
-Issue 28 item 1 (docs/performance.md, "Threads"). This module only resolves and validates the count; it
-imports neither numba nor numpy, so resolving it starts no thread pool (numba's threading layer is
-launched by the first parallel region, never by `numba.set_num_threads` before one). Sweeps' Dask
+Issue 28 item 1 (docs/performance.md, "Threads"). This module resolves and validates the count and says
+whether a run uses it (`chunk_threads`); it imports neither numba nor numpy, so resolving it starts no
+thread pool (numba launches its threading layer at `numba.set_num_threads` or the first parallel
+region, which only a run on the threaded loop reaches). Sweeps' Dask
 workers get RBSIM_THREADS=1 (`WORKER_ENV`): each worker process is single-threaded already
 (threads_per_worker=1), and a worker per core each running all cores would oversubscribe the machine.
 """
@@ -13,6 +14,15 @@ from __future__ import annotations
 import os
 
 ENV = "RBSIM_THREADS"
+# Below this many bodies a run keeps the serial chunk loop whatever the thread count: the threaded
+# step's two fork/joins cost ~4 us per step on 2 threads, which free bodies repay from ~170 bodies on
+# (split2 with gravity, measured on 2 cores: 0.74x the serial rate at 100 bodies, 1.22x at 300, 1.60x
+# at 1,000, 1.89x at 10,000; docs/performance.md, "Threads")
+PARALLEL_MIN_BODIES = 256
+# Scenes with contact keep the serial loop: their contact stages run serially between the threaded
+# passes, and the 1,000-ball pile ran 0.91x its serial rate on 2 threads (bench_threads.py). The threaded
+# loop gives them the same bits (tests/physics/test_threaded_loop.py sets this to check it).
+THREADED_CONTACT = False
 WORKER_ENV = {ENV: "1"}  # what a sweep's worker processes get unless the caller set RBSIM_THREADS itself
 
 
@@ -49,3 +59,14 @@ def resolve_threads(threads: int | str | None = None, environ: dict[str, str] | 
     else:
         count = available_cores()
     return min(count, available_cores())
+
+
+def chunk_threads(threads: int, has_parallel_loop: bool, body_count: int, contact: bool = False) -> int:
+    """The threads a run's chunk loop uses: `threads` for an integrator with a threaded loop and a scene
+    of at least PARALLEL_MIN_BODIES bodies without contact (THREADED_CONTACT), else 1 (the serial loop:
+    no thread pool is started)."""
+    if threads <= 1 or not has_parallel_loop or body_count < PARALLEL_MIN_BODIES:
+        return 1
+    if contact and not THREADED_CONTACT:
+        return 1
+    return threads

@@ -26,12 +26,17 @@ def _short(name: str) -> str:
 
 
 ADAPTIVE_NAMES = [name for name, info in INTEGRATORS.items() if info.adaptive]
+PARALLEL_NAMES = [name for name, info in INTEGRATORS.items() if info.parallel]
 
 
 def regenerate() -> None:
     for name in INTEGRATORS:
         path = CHUNKS / f"{_short(name)}.py"
         path.write_text(chunk_source(_short(name), name))
+        print("wrote", path)
+    for name in PARALLEL_NAMES:
+        path = CHUNKS / f"{_short(name)}_parallel.py"
+        path.write_text(chunk_source(_short(name), name, parallel=True))
         print("wrote", path)
     for name in ADAPTIVE_NAMES:
         path = CHUNKS / f"{_short(name)}_adaptive.py"
@@ -46,6 +51,18 @@ def test_committed_chunk_loops_are_generated_from_the_stage_list(name):
     path = CHUNKS / f"{_short(name)}.py"
     assert path.read_text() == chunk_source(_short(name), name), f"{path} is stale: run this file with --regenerate"
     assert INTEGRATORS[name].chunk().run_chunk is not None
+
+
+@pytest.mark.parametrize("name", PARALLEL_NAMES)
+def test_committed_parallel_loops_are_generated_from_the_stage_list(name):
+    """The threaded loop is the serial one but for the step it calls (docs/performance.md, "Threads")."""
+    path = CHUNKS / f"{_short(name)}_parallel.py"
+    source = chunk_source(_short(name), name, parallel=True)
+    assert path.read_text() == source, f"{path} is stale: run this file with --regenerate"
+    serial = chunk_source(_short(name), name)
+    assert "import step_parallel as integrator_step" in source and "import step as integrator_step" in serial
+    body = source.split("def run_chunk", 1)[1]
+    assert body == serial.split("def run_chunk", 1)[1], "the threaded loop must run the serial loop's stages"
 
 
 @pytest.mark.parametrize("name", ADAPTIVE_NAMES)

@@ -9,7 +9,9 @@ physics/pipeline.py into physics/chunks/<module>.py (`IntegratorInfo.chunk`).
 `kinematics.py` holds the per-body kernels they share (not a method).
 Adaptive time stepping (a tolerance instead of dt) is `rbcli.physics.adaptive` (the method) and
 physics/chunks/<module>_adaptive.py (its loop, generated from the same stages), for the methods
-flagged `adaptive`. docs/integrators.md has the measured orders, errors and costs.
+flagged `adaptive`; physics/chunks/<module>_parallel.py, the loop calling `step_parallel` (the passes
+over the bodies on threads), for those flagged `parallel`. docs/integrators.md has the measured orders,
+errors and costs.
 """
 
 from __future__ import annotations
@@ -43,6 +45,9 @@ class IntegratorInfo:
     adaptive: bool = False
     demonstration: bool = False
     joints: bool = False  # holds joints (physics/joints/: its loop runs the joint stages; docs/joints.md)
+    # has `step_parallel` (its passes over the bodies on threads) and a chunk loop that calls it,
+    # physics/chunks/<module>_parallel.py (`parallel_chunk`; docs/performance.md, "Threads")
+    parallel: bool = False
 
     def load(self) -> ModuleType:
         """Import the integrator's module: step, step_numpy, SCRATCH_WIDTH (pulls in numba)."""
@@ -57,6 +62,13 @@ class IntegratorInfo:
         """Import the generated chunk loop: run_chunk(model, forces, data, dt, step0, n_steps,
         record_every, frames, filled) and SCRATCH_WIDTH."""
         return importlib.import_module(self.chunk_module)
+
+    def parallel_chunk(self) -> ModuleType:
+        """Import the generated chunk loop that calls `step_parallel`: `chunk`'s interface; bitwise its
+        results at any thread count (numba.set_num_threads before the call)."""
+        if not self.parallel:
+            raise ValueError(f"{self.name!r} has no threaded step")
+        return importlib.import_module(f"{self.chunk_module}_parallel")
 
     def adaptive_chunk(self) -> ModuleType:
         """Import the generated error-controlled loop of an `adaptive` method (physics/adaptive.py):
@@ -130,6 +142,7 @@ INTEGRATORS: dict[str, IntegratorInfo] = {
             summary="Symplectic splitting: leapfrog for the centre of mass, exact turns about the "
             "principal axes (McLachlan 1993, Reich 1994, Dullweber et al. 1997). The default choice.",
             joints=True,
+            parallel=True,
         ),
         IntegratorInfo(
             "split4",

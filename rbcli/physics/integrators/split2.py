@@ -98,6 +98,17 @@ def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:
     compose(model, forces, force_data, t, dt, WEIGHTS, x, q, P, L, F, tau, scratch, False)
 
 
+@numba.njit(**STEP_KERNEL, parallel=True)
+def step_parallel(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001
+    """`step` with its two passes over the bodies (`_drift_to_first_kick`, `_kick_and_drift`: prange
+    loops, inlined here) spread over numba's threads; the force evaluation and the stages around the
+    step stay serial. Each body's arithmetic is the serial step's, nothing is summed across bodies, so
+    any thread count gives the same bits as `step` (tests/physics/test_threaded_loop.py). A function of its
+    own, not `numba.njit(parallel=True)(step.py_func)`: numba's cache is keyed on the function's name
+    and line, and the two would overwrite each other's cached code. docs/performance.md, "Threads"."""
+    compose(model, forces, force_data, t, dt, WEIGHTS, x, q, P, L, F, tau, scratch, False)
+
+
 # compose and its two passes are inlined at numba level: a call boundary costs a reference-count
 # update per array argument (the model and force tables hold dozens), measured 2.25 -> 1.65 us per
 # step for one body, and 93 -> 88 ns per body-step at 100 bodies.
@@ -172,8 +183,9 @@ def _momentum_change_to_body(model, has_torque, torque_body, q, L, scratch) -> N
 @numba.njit(cache=True, inline="always")
 def _drift_to_first_kick(model, h, x, q, P, L, scratch, compensate) -> None:  # noqa: ANN001
     """D_x(h/2) T_a(h/2) T_b(h/2) T_c(h/2); leaves m and T_c's (cos, sin) in scratch.
-    An isotropic body (a ball) turns by its exact free rotation T(h/2) instead (`_turn_isotropic`)."""
-    for b in range(x.shape[0]):
+    An isotropic body (a ball) turns by its exact free rotation T(h/2) instead (`_turn_isotropic`).
+    prange: a plain range in `step`, a loop over threads in `step_parallel` (each body on its own)."""
+    for b in numba.prange(x.shape[0]):
         inv0, inv1, inv2 = model.body_inertia_inv[b, 0], model.body_inertia_inv[b, 1], model.body_inertia_inv[b, 2]
         drift = 0.5 * h / model.body_mass[b]
         x[b, 0] += drift * P[b, 0]
@@ -213,7 +225,7 @@ def _kick_and_drift(
     torque_body flags; the others have tau = 0, so their m_c is unchanged and T_c reuses the turn
     of the previous pass (the very same (cos, sin): bitwise the result of the torque path with tau = 0).
     """
-    for b in range(x.shape[0]):
+    for b in numba.prange(x.shape[0]):
         inv0, inv1, inv2 = model.body_inertia_inv[b, 0], model.body_inertia_inv[b, 1], model.body_inertia_inv[b, 2]
         if inv0 == inv1 and inv1 == inv2:  # K(h_prev), then T((h_prev + h_next)/2) D_x((h_prev + h_next)/2)
             h_mid = 0.5 * (h_prev + h_next)

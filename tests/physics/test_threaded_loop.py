@@ -1,0 +1,130 @@
+"""The threaded chunk loop (issue 28 item 1): bitwise the serial loop at any thread count, really split over
+threads, and chosen only where a scene is large enough (runner/threads.py, docs/performance.md "Threads").
+
+split2's step_parallel spreads its two passes over the bodies (the drifts and turns, the kicks) over
+numba's threads; each body's arithmetic is the serial step's and nothing is summed across bodies, so
+the trajectories must be equal bit for bit, with forces between bodies (springs) and contact (evaluated
+serially between the passes) as well as free bodies. The size threshold is lowered here so that small
+scenes take the threaded loop (each scene kind compiles its threaded loop once: small scenes run fast).
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numba
+import numpy as np
+import pytest
+from conftest import make_scene, random_bodies
+
+import rbcli.runner.threads as threads_module
+from rbcli.runner.simulation import Simulation
+
+ROOT = Path(__file__).resolve().parents[2]
+
+# the process's numba pool must hold two threads (NUMBA_NUM_THREADS defaults to the machine's cores)
+two_threads = pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="numba has one thread on this machine")
+
+CLOUD_PILE = """
+name: cloud-pile
+simulation: {dt: 0.002, duration: 0.8, integrator: split2}
+gravity: [0, 0, -9.81]
+contact:
+  container: {min: [-0.3, -0.3, 0], max: [0.3, 0.3, 2]}
+bodies:
+  - grid:
+      name: cloud
+      count: [3, 3, 3]
+      spacing: [0.16, 0.16, 0.16]
+      origin: [-0.16, -0.16, 0.3]
+      jitter: [0.01, 0.01, 0]
+      seed: 1
+      template:
+        particles:
+          positions: [[0, 0, 0], [0.05, 0, 0], [0, 0.04, 0], [0, 0, 0.03]]
+          masses: [0.3, 0.1, 0.1, 0.1]
+          radius: [0.03, 0.02, 0.02, 0.02]
+        angular_momentum: [0.001, -0.002, 0.0005]
+"""
+
+
+@pytest.fixture
+def small_threshold(monkeypatch):
+    """Small scenes take the threaded loop."""
+    monkeypatch.setattr(threads_module, "PARALLEL_MIN_BODIES", 2)
+    monkeypatch.setattr(threads_module, "THREADED_CONTACT", True)  # contact scenes keep the serial loop in runs
+    monkeypatch.delenv(threads_module.ENV, raising=False)
+
+
+def _state(sim: Simulation) -> tuple[np.ndarray, ...]:
+    s = sim.data.state
+    return s.x.copy(), s.q.copy(), s.P.copy(), s.L.copy()
+
+
+def _assert_bitwise(serial: Simulation, threaded: Simulation) -> None:
+    for name, a, b in zip("xqPL", _state(serial), _state(threaded), strict=True):
+        assert np.array_equal(a, b), f"{name} differs by up to {np.max(np.abs(a - b)):.3g}"
+
+
+def _scenes(tmp_path: Path) -> dict[str, object]:
+    cloud = tmp_path / "cloud_pile.yaml"
+    cloud.write_text(CLOUD_PILE)
+    free = make_scene(random_bodies(40, seed=3), integrator="split2", gravity=np.array([0.0, 0.0, -9.81]))
+    return {
+        "free bodies": free,
+        "spring chain": ROOT / "scenes/forces/spring_chain.yaml",
+        "ball pile": ROOT / "scenes/verification/contact_pile.yaml",
+        "cloud pile": cloud,
+    }
+
+
+@two_threads
+@pytest.mark.parametrize("name", ["free bodies", "spring chain", "ball pile", "cloud pile"])
+def test_two_threads_give_the_bits_of_one(name, tmp_path, small_threshold):
+    scene = _scenes(tmp_path)[name]
+    serial = Simulation(scene, threads=1, integrator="split2")
+    threaded = Simulation(scene, threads=2, integrator="split2")
+    assert serial.threads == 1 and threaded.threads == 2
+    assert threaded._chunk is not serial._chunk
+    for steps in (1, 60, 139):  # the pile lands at ~0.23 s: steps 115-200 are full of new contacts
+        serial.step(steps)
+        threaded.step(steps)
+        _assert_bitwise(serial, threaded)
+    one = Simulation(scene, threads=2, integrator="split2")  # the threaded loop on one thread: the same bits
+    numba.set_num_threads(1)
+    try:
+        one._chunk(one._kmodel, one._kforces, one._kdata, one.settings.dt, 0, 200, 2**62, one._no_frames, 0)
+    finally:
+        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    _assert_bitwise(serial, one)
+
+
+@two_threads
+def test_the_threaded_step_runs_on_a_second_thread(small_threshold):
+    """Another thread does part of the work: the process's CPU time outgrows the calling thread's (CPU
+    time, not wall time, so a loaded machine does not change the split). A loop that lost its prange
+    (or whose loop numba could not parallelise) would leave the second thread idle."""
+    scene = make_scene(random_bodies(2000, seed=5), integrator="split2", gravity=np.array([0.0, 0.0, -9.81]))
+    sim = Simulation(scene, threads=2)
+    sim.step(2)
+    process, own = time.process_time(), time.thread_time()
+    sim.step(400)
+    process, own = time.process_time() - process, time.thread_time() - own
+    assert process - own > 0.25 * process, f"other threads used {process - own:.3f} s of {process:.3f} s CPU"
+
+
+def test_small_scenes_contact_one_thread_and_other_integrators_keep_the_serial_loop(monkeypatch):
+    monkeypatch.delenv(threads_module.ENV, raising=False)
+    small = make_scene(random_bodies(threads_module.PARALLEL_MIN_BODIES - 1), integrator="split2")
+    assert Simulation(small, threads=2).threads == 1
+    large = make_scene(random_bodies(threads_module.PARALLEL_MIN_BODIES), integrator="split2")
+    assert Simulation(large, threads=1).threads == 1
+    monkeypatch.setenv(threads_module.ENV, "1")
+    assert Simulation(large).threads == 1
+    assert Simulation(large, integrator="rk4", threads=2).threads == 1
+    assert Simulation(large, integrator="dopri5", tolerance=1e-6, threads=2).threads == 1
+    assert threads_module.chunk_threads(2, True, threads_module.PARALLEL_MIN_BODIES) == 2
+    assert threads_module.chunk_threads(2, True, threads_module.PARALLEL_MIN_BODIES, contact=True) == 1
+    pile = ROOT / "scenes/contact/sphere_pile.yaml"  # 1,000 balls: contact keeps the serial loop
+    assert Simulation(pile, threads=2).threads == 1
