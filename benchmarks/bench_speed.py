@@ -8,7 +8,9 @@ Body-steps per second (bodies x steps / wall second) for, all in one process, on
     `run_chunk`: (a) the compiled chunk alone (`kernel.run_chunk`, record_every = steps: one frame
     copied at the end) and (b) the runner path (`rbcli.runner.simulation.run` into a SinkMemory plus
     `trajectory()`, record_every = steps: frame 0 and the final frame, as `rbcli.simulate` does after
-    compiling the scene); the numpy vectorised tutorial step (`euler_matrix.step_numpy`) as baseline;
+    compiling the scene; on the threads a run gets, RBSIM_THREADS else every core: split2's threaded
+    loop from 256 bodies, benchmarks/bench_threads.py); the numpy vectorised tutorial step
+    (`euler_matrix.step_numpy`) as baseline;
   MuJoCo on the same bodies (same mass, principal inertia, initial state; a sphere geom with contype=0
     conaffinity=0; Euler; same dt), timed as `mj_step(m, d, nstep=steps)` (the loop in C) and as a
     Python loop of `mj_step`; the faster is the reference of every ratio. `mujoco.rollout` is not used:

@@ -357,10 +357,11 @@ def _simulate(compiled: CompiledScene) -> Trajectory:
 def time_run(compiled: CompiledScene, min_time: float) -> KernelTiming:
     """Per-step time of the compiled scene's chunk loop (`kernel_timing.time_kernel`): one Simulation
     reused across repeats, recording at the scene's cadence into reused buffers, no sink. The kernel
-    must be compiled already (`runner.simulation.warm_up`) or the first untimed run compiles it."""
+    must be compiled already (`runner.simulation.warm_up`) or the first untimed run compiles it. On one
+    thread: the clock is the calling thread's CPU time, and integrators are compared on equal terms."""
     from rbcli.runner.simulation import Simulation
 
-    sim = Simulation(compiled)
+    sim = Simulation(compiled, threads=1)
     return time_kernel(sim.reset, simulation_advance(sim, compiled.settings.record_every), compiled.settings.steps,
                        min_time)  # fmt: skip
 
@@ -391,7 +392,7 @@ def measure_cost(name: str, body_count: int, steps: int, *, repeats: int = 3, se
         )
     simulation = SimulationSpec(dt=1e-3, duration=1.0, integrator=name, record=RecordSpec(1, ("bodies",)))
     spec = SceneSpec(name="cost", simulation=simulation, bodies=tuple(bodies), gravity=np.array([0.0, 0.0, -9.81]))
-    sim = Simulation(spec)
+    sim = Simulation(spec, threads=1)  # the cost on one core, as docs/integrators.md compares them
     sim.advance(2)
     best = float("inf")
     for _ in range(repeats):  # advance, not step: a demonstration method may blow up here, harmlessly
