@@ -12,6 +12,22 @@ HANDLE_POSITIONS = np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.2, 0.0], 
 HANDLE_MASSES = np.array([1.0, 0.5, 0.5, 0.25])
 
 
+# Test files that compile the same heavy kernels run on one xdist worker (pyproject's `--dist loadgroup`):
+# the joint solver's stack (~40 s of numba compile) and the contact search's (~25 s) are compiled once and
+# then loaded from numba's cache, where two workers starting them at once both compiled them (the joint
+# files alone: 229 CPU-s on two workers against 195 s on one, measured). Every other file is a group of its
+# own, as `--dist loadfile` made it.
+KERNEL_FAMILIES = ("joint", "contact")
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist's own hook, which reads the marks into the node ids
+def pytest_collection_modifyitems(config, items):  # noqa: ANN001, ANN201
+    for item in items:
+        name = item.path.name
+        family = next((f for f in KERNEL_FAMILIES if f in name), None)
+        item.add_marker(pytest.mark.xdist_group(f"kernels-{family}" if family else str(item.path)))
+
+
 def make_body(name: str = "b", **overrides) -> BodySpec:
     fields = dict(
         name=name,
