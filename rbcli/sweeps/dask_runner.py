@@ -34,6 +34,7 @@ import importlib.util
 import logging
 import os
 import signal
+import sys
 import threading
 import time
 import uuid
@@ -251,13 +252,19 @@ class _StopSignals:
     while the cluster warmed up was lost: the sweep printed that traceback, ran to the end and exited 0
     (measured: 1 in ~10 Ctrl-Cs 0.4 s into the start-up). So a signal that finds the main thread inside a
     gc callback or a __del__ is noted and sent again REDELIVER_SECONDS later (then it finds ordinary
-    code), and as a last guard the checks (after the start, after the warm-up, at each task's end and at
-    the end) run the handler for a noted signal whose exception did not end the sweep."""
+    code). Python swallows exceptions in other places that no frame shows (a weakref callback that a
+    collection runs: WeakValueDictionary's `remove`, seen in a CI run), and reports each to
+    `sys.unraisablehook`: while a stop is being delivered, that hook sends a swallowed stop again the
+    same way instead of printing it. As a last guard the checks (after the start, after the warm-up, at
+    each task's end and at the end) run the handler for a noted signal whose exception did not end the
+    sweep."""
 
     def __init__(self) -> None:
         self.pending: list[int] = []
         self._previous: dict[int, Callable[[int, Any], Any]] = {}  # the handlers noted signals go on to
         self._redeliveries: list[threading.Timer] = []  # cancelled once a stop is delivered: one stop, once
+        self._unraisable_hook: Callable[[Any], Any] | None = None  # the hook installed before ours
+        self._delivering: BaseException | None = None  # what the handler being delivered raised
 
     def __enter__(self) -> _StopSignals:
         if threading.current_thread() is threading.main_thread():
@@ -266,16 +273,31 @@ class _StopSignals:
                 if callable(handler):
                     self._previous[number] = cast(Callable[[int, Any], Any], handler)
                     signal.signal(number, self._note)
+            self._unraisable_hook = sys.unraisablehook
+            sys.unraisablehook = self._unraisable
         return self
 
     def _note(self, signum: int, frame: Any) -> None:
         if _in_finaliser(frame):  # its exception would be swallowed here: deliver it again in a moment
-            self.pending.append(signum)
-            timer = threading.Timer(REDELIVER_SECONDS, _redeliver, (signum,))
-            self._redeliveries.append(timer)
-            timer.start()
+            self._send_again(signum)
             return
         self._deliver(signum, frame, noted=True)
+
+    def _send_again(self, signum: int) -> None:
+        self.pending.append(signum)
+        timer = threading.Timer(REDELIVER_SECONDS, _redeliver, (signum,))
+        self._redeliveries.append(timer)
+        timer.start()
+
+    def _unraisable(self, unraisable: Any) -> None:  # noqa: ANN401 - sys.UnraisableHookArgs
+        """sys.unraisablehook while installed: the stop exception being delivered, swallowed where Python
+        cannot raise it, is sent again; anything else goes to the previous hook."""
+        if self._delivering is not None and unraisable.exc_value is self._delivering and self.pending:
+            self._delivering = None
+            self._send_again(self.pending[0])
+            return
+        previous = self._unraisable_hook or sys.__unraisablehook__
+        previous(unraisable)
 
     def check(self) -> None:
         """Run the handler again for the first noted signal (its exception was swallowed), if any."""
@@ -290,7 +312,11 @@ class _StopSignals:
             timer.cancel()
         self._redeliveries.clear()
         self.pending[:] = [signum] if noted else []
-        self._previous[signum](signum, frame)
+        try:
+            self._previous[signum](signum, frame)
+        except BaseException as exc:  # the stop: noted for the unraisable hook, should it be swallowed
+            self._delivering = exc
+            raise
         self.pending.clear()  # the handler returned without raising: nothing to deliver again
 
     def __exit__(self, *exc: object) -> None:
@@ -298,6 +324,9 @@ class _StopSignals:
             timer.cancel()
         for number, handler in self._previous.items():
             signal.signal(number, handler)
+        if self._unraisable_hook is not None:
+            sys.unraisablehook = self._unraisable_hook
+            self._unraisable_hook = None
 
 
 # a stop signal that landed in a gc callback or a finaliser is sent again after this long [s]

@@ -153,6 +153,32 @@ def test_a_ctrl_c_that_lands_in_a_gc_callback_is_delivered_again_not_swallowed()
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
+def test_a_ctrl_c_swallowed_in_a_weakref_callback_is_delivered_again():
+    """Python swallows an exception raised in a weakref callback too, and no frame shows that it will (a CI
+    run lost a Ctrl-C in WeakValueDictionary's `remove`, which a collection ran inside the gc test
+    above): the handler's exception reaches sys.unraisablehook, and _StopSignals sends the signal again."""
+    import time
+    import weakref
+
+    from rbcli.sweeps.dask_runner import _StopSignals
+
+    class Thing:
+        pass
+
+    def interrupt_in_callback(ref: object) -> None:
+        signal.raise_signal(signal.SIGINT)  # its handler runs here, inside the weakref callback
+
+    thing = Thing()
+    ref = weakref.ref(thing, interrupt_in_callback)
+    with _StopSignals(), pytest.raises(KeyboardInterrupt):
+        del thing  # the callback runs now: its KeyboardInterrupt is "ignored" by Python
+        assert ref() is None
+        deadline = time.monotonic() + 5.0
+        while time.monotonic() < deadline:
+            time.sleep(0.01)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
 def test_a_stop_whose_exception_was_swallowed_is_raised_at_the_next_check():
     """The last guard of _StopSignals: a noted signal whose exception did not end the sweep (swallowed
     where no frame shows it) runs its handler again at the next check."""
