@@ -32,6 +32,9 @@ import numpy as np
 from rbcli.physics.forces.tables import ForceData, ForceTables, KernelForceTables, make_force_data
 from rbcli.physics.state import State
 
+# the joints' last (sub-)step impulses in a checkpoint: optional (logs written before it was carried lack it)
+JOINT_REACTIONS = "joint.joint_impulse"
+
 
 class KernelAdaptive(NamedTuple):
     """What the adaptive loop (chunks/dopri5_adaptive.py) reads besides the state: see Data."""
@@ -105,12 +108,17 @@ class Data:
             array = getattr(self, f"adaptive_{name}")
             if array is not None:
                 arrays[f"adaptive.{name}"] = array
+        if self.force.joint is not None:  # read by no step: the last step's reactions, for the first frame
+            arrays[JOINT_REACTIONS] = self.force.joint.joint_impulse  # a resumed run records (joint_forces)
         return arrays
 
     def restore_carried(self, arrays: dict[str, np.ndarray]) -> None:
         """Write arrays taken by `carried` (of a Data of the same scene and run settings) back, bit for
         bit; ValueError naming the first array that is missing, unexpected or of another shape or type."""
         mine = self.carried()
+        if JOINT_REACTIONS in mine and JOINT_REACTIONS not in arrays:  # a log from before it was carried
+            mine[JOINT_REACTIONS][...] = 0.0
+            del mine[JOINT_REACTIONS]
         if set(arrays) != set(mine):
             missing, extra = sorted(set(mine) - set(arrays)), sorted(set(arrays) - set(mine))
             raise ValueError(f"checkpoint arrays do not fit this run: missing {missing}, unexpected {extra}")

@@ -20,6 +20,7 @@ A step from grid index n (t = n dt) to n + 1 runs, in this order (STEP_STAGES):
       joint_velocity  (split2, scenes with joints) momenta projected onto the joints' velocity rows
       contact_commit  the last evaluation's contacts and tangential springs become the history
     contact_record  on recording steps: the step's contact statistics into the next frame
+      joint_record  (split2, scenes with joints) on recording steps: the joints' reactions into the next frame
     record          on recording steps: the divergence check, then the state copied into the next frame
 
 Each optional stage is present only when the scene needs it, decided when numba compiles the loop, not
@@ -199,6 +200,14 @@ STEP_STAGES: tuple[Stage, ...] = (
         "contact_record: on recording steps, the state's contact count, deepest overlap and energy",
         ("from rbcli.physics.forces.stages import contact_record_stage",),
         "contact_record_stage(contact, contact_work, x, q, frames, filled, {recording})",
+    ),
+    Stage(
+        "joint_record",
+        "joint_record: on recording steps, each joint's reaction over the last (sub-)step into the next frame",
+        ("from rbcli.physics.joints.stages import joint_record",),
+        "joint_record(joint, joint_work, h, frames, filled, {recording})",
+        integrators=("split2",),
+        loops=(FIXED,),  # joints refuse a tolerance (integrators.check_integrator)
     ),
     Stage(
         "record",
@@ -396,7 +405,7 @@ def _state_due(later: tuple[Stage, ...]) -> str:
     """When `materialise` must write a deferred state: on recording steps and at the chunk's end, or at
     every step when a stage after it (other than the recording ones, which read it only when due) may
     read or write the state, as a stage added to the list would."""
-    if all(stage.name in ("contact_record", "record") for stage in later):
+    if all(stage.name in ("contact_record", "joint_record", "record") for stage in later):
         return "(index + 1) % record_every == 0 or k + 1 == n_steps"
     return "True"
 

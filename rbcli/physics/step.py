@@ -49,10 +49,12 @@ CHUNK_KERNEL: dict[str, Any] = {"cache": True, "nogil": True, "error_model": "nu
 
 
 class FrameBuffers(NamedTuple):
-    """Preallocated recorded frames: step (K,) int64, x (K,N,3), q (K,N,4), P (K,N,3), L (K,N,3), and
+    """Preallocated recorded frames: step (K,) int64, x (K,N,3), q (K,N,4), P (K,N,3), L (K,N,3),
     contact (K, CONTACT_STATS): the contact statistics of each recorded state (zeros without contact;
     contact/tables.py STAT_*, contact/state.py: contacts, deepest overlap [m], energy in the contact
-    springs [J], and the run's contact history overflows so far)."""
+    springs [J], and the run's contact history overflows so far), and joint (K, J, 12): each joint's
+    reaction over the (sub-)step that ended at the frame [N, N m] (joints/stages.py joint_record; J = 0
+    when the buffers do not record them)."""
 
     step: np.ndarray
     x: np.ndarray
@@ -60,10 +62,11 @@ class FrameBuffers(NamedTuple):
     P: np.ndarray
     L: np.ndarray
     contact: np.ndarray
+    joint: np.ndarray
 
 
-def empty_buffers(capacity: int, body_count: int) -> FrameBuffers:
-    """Frame buffers for `run_chunk`."""
+def empty_buffers(capacity: int, body_count: int, joint_count: int = 0) -> FrameBuffers:
+    """Frame buffers for `run_chunk`; joint_count > 0 records the joints' reactions (the joint_forces stream)."""
     return FrameBuffers(
         np.zeros(capacity, dtype=np.int64),
         np.zeros((capacity, body_count, 3)),
@@ -71,6 +74,7 @@ def empty_buffers(capacity: int, body_count: int) -> FrameBuffers:
         np.zeros((capacity, body_count, 3)),
         np.zeros((capacity, body_count, 3)),
         np.zeros((capacity, CONTACT_STATS)),
+        np.zeros((capacity, joint_count, 12)),
     )
 
 

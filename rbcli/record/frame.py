@@ -41,6 +41,7 @@ class RunHeader:
     rbsim_version: str
     seed: int = 0
     invariant_names: tuple[str, ...] = ()
+    joint_names: tuple[str, ...] = ()  # the joints whose reactions are recorded (the joint_forces stream)
     tolerance: float | None = None  # [-] adaptive runs' error budget (None: fixed step)
     units: str = "SI (m, kg, s, rad)"
     quaternion_order: str = "wxyz"
@@ -66,6 +67,7 @@ class RunHeader:
             "body_names": json.dumps(list(self.body_names)),
             "body_mass": json.dumps([float(m) for m in np.asarray(self.body_mass, dtype=np.float64)]),
             "invariant_names": json.dumps(list(self.invariant_names)),
+            "joint_names": json.dumps(list(self.joint_names)),
             "tolerance": "" if self.tolerance is None else repr(float(self.tolerance)),
         }
 
@@ -95,6 +97,10 @@ class FrameBlock:
     particle_position: (K, particle_count, 3) world [m], present only when the particles stream is on.
     contact_point, contact_force: per frame, the (n_k, 3) contact points [m, world] and the (n_k,)
     normal force magnitudes [N] there (physics/contact/points.py), present only with the contacts stream.
+    joint_force: (K, J, 12) each joint's reaction over the (sub-)step that ended at the frame, world
+    frame: [0:3] force [N] and [3:6] torque about the centre of mass [N m] on its first body, [6:12] on
+    its second (zeros for the world); NaN where no step led to the frame (a run's first frame); present
+    only with the joint_forces stream (Simulation.joint_reactions' values, docs/joints.md).
     """
 
     step: np.ndarray
@@ -109,6 +115,7 @@ class FrameBlock:
     particle_position: np.ndarray | None = None
     contact_point: list[np.ndarray] | None = None
     contact_force: list[np.ndarray] | None = None
+    joint_force: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.t.shape[0])

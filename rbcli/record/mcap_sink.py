@@ -56,6 +56,7 @@ TOPIC_INVARIANTS = "/rbsim/invariants"
 TOPIC_PARTICLES = "/particles"
 TOPIC_CONTACTS = "/contacts"
 TOPIC_CHECKPOINT = "/rbsim/checkpoint"
+TOPIC_JOINT_FORCES = "/rbsim/joint_forces"
 TOPIC_BODY_PARTICLES = "/bodies/particles"  # every body's cloud, when one channel per body would not fit
 WORLD_FRAME = "world"
 METADATA_RUN = "rbsim"
@@ -75,8 +76,8 @@ STATE_FIELDS = (
 
 
 # Channels besides the per-body clouds: /rbsim/state, /tf, /rbsim/invariants, /particles, /contacts,
-# /rbsim/checkpoint.
-FIXED_CHANNELS = 6
+# /rbsim/checkpoint, /rbsim/joint_forces.
+FIXED_CHANNELS = 7
 BODY_CHANNELS_MAX = MAX_ID - FIXED_CHANNELS  # 65,529 bodies still get a channel each
 
 
@@ -183,6 +184,13 @@ def invariants_file_proto(invariant_names: Sequence[str]) -> descriptor_pb2.File
         (f, 3 + i, _FDP.TYPE_DOUBLE, _FDP.LABEL_OPTIONAL) for i, f in enumerate(invariant_field_names(invariant_names))
     ]
     return _file_proto("rbsim/invariants.proto", "Invariants", fields)
+
+
+def joint_forces_file_proto() -> descriptor_pb2.FileDescriptorProto:
+    """rbsim/joint_forces.proto as a descriptor (text: schemas/rbsim_joint_forces.proto)."""
+    fields = [("step", 1, _FDP.TYPE_UINT64, _FDP.LABEL_OPTIONAL), ("time", 2, _FDP.TYPE_DOUBLE, _FDP.LABEL_OPTIONAL)]
+    fields += [("reaction", 3, _FDP.TYPE_DOUBLE, _FDP.LABEL_REPEATED)]
+    return _file_proto("rbsim/joint_forces.proto", "JointForces", fields)
 
 
 def message_class(fdp: descriptor_pb2.FileDescriptorProto) -> Any:
@@ -295,6 +303,17 @@ class InvariantsEncoder:
             rec[f"v{i}"] = np.asarray(block.invariants[name], dtype=np.float64)
         heads = _step_time_heads(block.step, block.t)
         return [heads[k] + rec[k].tobytes() for k in range(k_count)]
+
+
+def encode_joint_forces(block: FrameBlock) -> list[bytes]:
+    """rbsim.JointForces bytes for every frame of a block (block.joint_force (K, J, 12)): step and time
+    as canonical proto3, then `reaction` packed (key, byte length, raw little-endian float64)."""
+    assert block.joint_force is not None
+    k_count = len(block)
+    flat = np.ascontiguousarray(block.joint_force, dtype="<f8").reshape(k_count, -1)
+    head = (_key(3, 2) + _varint(8 * flat.shape[1])) if flat.shape[1] else b""
+    heads = _step_time_heads(block.step, block.t)
+    return [heads[k] + head + flat[k].tobytes() for k in range(k_count)]
 
 
 def _timestamp_payloads(ns: np.ndarray) -> list[bytes]:
@@ -476,6 +495,10 @@ class SinkMcap:
         self._ch_particles: int | None = None
         self._ch_contacts: int | None = None
         self._ch_checkpoint: int | None = None
+        self._ch_joint_forces: int | None = None
+        if header.joint_names:
+            meta = {"joint_names": json.dumps(list(header.joint_names))}
+            self._ch_joint_forces = self._channel(TOPIC_JOINT_FORCES, joint_forces_file_proto(), meta)
         w.add_metadata(METADATA_RUN, run_metadata(header))
         w.add_attachment(0, 0, SCENE_ATTACHMENT, "application/yaml", header.scene_text.encode())
         shared: int | None = None
@@ -517,6 +540,9 @@ class SinkMcap:
         contacts, forces = block.contact_point, block.contact_force
         if contacts is not None and self._ch_contacts is None:
             self._ch_contacts = self._channel(TOPIC_CONTACTS, PointCloud)
+        joints = (
+            encode_joint_forces(block) if block.joint_force is not None and self._ch_joint_forces is not None else None
+        )
         for k in range(k_count):
             seq = steps[k] & 0xFFFFFFFF
             self._add(self._ch_state, ns[k], states[k], seq)
@@ -529,6 +555,8 @@ class SinkMcap:
             if contacts is not None and forces is not None and self._ch_contacts is not None:
                 cloud = _contact_cloud(contacts[k], forces[k], ns[k]).SerializeToString()
                 self._add(self._ch_contacts, ns[k], cloud, seq)
+            if joints is not None and self._ch_joint_forces is not None:
+                self._add(self._ch_joint_forces, ns[k], joints[k], seq)
         self._writer.flush_chunk()  # no frame waits in the open chunk for the next block
         self.frames_written += k_count
 
@@ -622,31 +650,52 @@ def _cloud_points(cloud: Any) -> np.ndarray:
     return np.stack(cols, axis=1).astype(np.float64) if cols[0].size else np.zeros((0, 3))
 
 
+def joint_names_of(summary: Any) -> tuple[str, ...] | None:
+    """The joint names a file's /rbsim/joint_forces channel carries in its metadata; None without it."""
+    for ch in summary.channels.values() if summary else ():
+        if ch.topic == TOPIC_JOINT_FORCES:
+            return tuple(json.loads(ch.metadata.get("joint_names", "[]")))
+    return None
+
+
 def iter_mcap_blocks(path: str | Path, block_frames: int = 256) -> Iterator[FrameBlock]:
-    """FrameBlocks decoded from /rbsim/state and /rbsim/invariants with the file's own schemas."""
+    """FrameBlocks decoded from /rbsim/state, /rbsim/invariants and /rbsim/joint_forces with the file's
+    own schemas (joint_force None in a file without the joint_forces stream)."""
     with open(path, "rb") as f:
         reader = _reader(f)
-        inv_names = _invariant_names(reader.get_summary())
+        summary = reader.get_summary()
+        inv_names = _invariant_names(summary)
         inv_fields = invariant_field_names(inv_names)
+        joints = joint_names_of(summary)
         rows: list[Any] = []
         inv_rows: dict[int, Any] = {}
+        joint_rows: dict[int, Any] | None = {} if joints is not None else None
         for _, channel, _, msg in reader.iter_decoded_messages(
-            topics=[TOPIC_STATE, TOPIC_INVARIANTS], log_time_order=False
+            topics=[TOPIC_STATE, TOPIC_INVARIANTS, TOPIC_JOINT_FORCES], log_time_order=False
         ):
             if channel.topic == TOPIC_INVARIANTS:
                 inv_rows[msg.step] = msg
                 continue
+            if channel.topic == TOPIC_JOINT_FORCES:
+                if joint_rows is not None:
+                    joint_rows[msg.step] = msg
+                continue
             # a step's invariants follow its state, so a full block is emitted only at the next state
             if len(rows) == block_frames:
-                yield _block_from_messages(rows, inv_rows, inv_names, inv_fields)
+                yield _block_from_messages(rows, inv_rows, inv_names, inv_fields, joint_rows, joints)
                 rows = []
             rows.append(msg)
         if rows:
-            yield _block_from_messages(rows, inv_rows, inv_names, inv_fields)
+            yield _block_from_messages(rows, inv_rows, inv_names, inv_fields, joint_rows, joints)
 
 
 def _block_from_messages(
-    rows: list[Any], inv_rows: dict[int, Any], names: tuple[str, ...], fields: tuple[str, ...]
+    rows: list[Any],
+    inv_rows: dict[int, Any],
+    names: tuple[str, ...],
+    fields: tuple[str, ...],
+    joint_rows: dict[int, Any] | None = None,
+    joint_names: tuple[str, ...] | None = None,
 ) -> FrameBlock:
     k_count, n = len(rows), len(rows[0].position) // 3
     arrays = {}
@@ -662,7 +711,15 @@ def _block_from_messages(
         inv_rows.pop(s, None)
     t = np.array([m.time for m in rows], dtype=np.float64)
     a = arrays
-    return FrameBlock(steps, t, a["x"], a["q"], a["v"], a["omega"], a["P"], a["L"], invariants=invariants)
+    block = FrameBlock(steps, t, a["x"], a["q"], a["v"], a["omega"], a["P"], a["L"], invariants=invariants)
+    if joint_rows is not None and joint_names is not None:
+        reaction = np.full((k_count, len(joint_names), 12), math.nan)
+        for k, s in enumerate(steps.tolist()):
+            msg = joint_rows.pop(s, None)
+            if msg is not None:
+                reaction[k] = np.asarray(msg.reaction, dtype=np.float64).reshape(len(joint_names), 12)
+        block.joint_force = reaction
+    return block
 
 
 def read_mcap_invariants(path: str | Path) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
@@ -684,7 +741,7 @@ def read_mcap_invariants(path: str | Path) -> tuple[np.ndarray, np.ndarray, dict
 # --- reading a file cut short (a run killed before its summary and index were written) ---------------
 
 # Topics with one message per recorded frame: a frame is complete when each of those present has it.
-FRAME_TOPICS = (TOPIC_STATE, TOPIC_TF, TOPIC_INVARIANTS, TOPIC_PARTICLES)
+FRAME_TOPICS = (TOPIC_STATE, TOPIC_TF, TOPIC_INVARIANTS, TOPIC_PARTICLES, TOPIC_JOINT_FORCES)
 
 
 @dataclass
@@ -993,7 +1050,7 @@ def read_mcap_resume_point(path: str | Path) -> McapResumePoint:
 
 def iter_mcap_frames_before(path: str | Path, step: int, block_frames: int = 256) -> Iterator[FrameBlock]:
     """The recorded frames of an rbsim MCAP log (complete or cut short) with step < `step`, as FrameBlocks
-    decoded from /rbsim/state and /rbsim/invariants: bit for bit what was recorded."""
+    decoded from /rbsim/state, /rbsim/invariants and /rbsim/joint_forces: bit for bit what was recorded."""
     from mcap.records import Channel, Message, Schema
 
     schemas: dict[int, Schema] = {}
@@ -1003,11 +1060,15 @@ def iter_mcap_frames_before(path: str | Path, step: int, block_frames: int = 256
     inv_names: tuple[str, ...] = ()
     rows: list[Any] = []
     inv_rows: dict[int, Any] = {}
+    joint_names: tuple[str, ...] | None = None
+    joint_rows: dict[int, Any] | None = None
     for record in _prefix_records(path, _Cut()):
         if isinstance(record, Channel):
             channels[record.id] = record
             if record.topic == TOPIC_INVARIANTS:
                 inv_names = tuple(json.loads(record.metadata.get("invariant_names", "[]")))
+            if record.topic == TOPIC_JOINT_FORCES:
+                joint_names, joint_rows = tuple(json.loads(record.metadata.get("joint_names", "[]"))), {}
             continue
         if isinstance(record, Schema):
             schemas[record.id] = record
@@ -1015,7 +1076,7 @@ def iter_mcap_frames_before(path: str | Path, step: int, block_frames: int = 256
         if not isinstance(record, Message):
             continue
         channel = channels.get(record.channel_id)
-        if channel is None or channel.topic not in (TOPIC_STATE, TOPIC_INVARIANTS):
+        if channel is None or channel.topic not in (TOPIC_STATE, TOPIC_INVARIANTS, TOPIC_JOINT_FORCES):
             continue
         if record.channel_id not in decoders:
             decoders[record.channel_id] = factory.decoder_for(channel.message_encoding, schemas.get(channel.schema_id))
@@ -1025,9 +1086,15 @@ def iter_mcap_frames_before(path: str | Path, step: int, block_frames: int = 256
         if channel.topic == TOPIC_INVARIANTS:
             inv_rows[msg.step] = msg
             continue
+        if channel.topic == TOPIC_JOINT_FORCES:
+            if joint_rows is not None:
+                joint_rows[msg.step] = msg
+            continue
         if len(rows) == block_frames:  # a step's invariants follow its state: emit at the next state
-            yield _block_from_messages(rows, inv_rows, inv_names, invariant_field_names(inv_names))
+            yield _block_from_messages(
+                rows, inv_rows, inv_names, invariant_field_names(inv_names), joint_rows, joint_names
+            )
             rows = []
         rows.append(msg)
     if rows:
-        yield _block_from_messages(rows, inv_rows, inv_names, invariant_field_names(inv_names))
+        yield _block_from_messages(rows, inv_rows, inv_names, invariant_field_names(inv_names), joint_rows, joint_names)

@@ -21,6 +21,9 @@ class Trajectory:
     t (T,) [s]; step (T,); x (T, N, 3) [m]; q (T, N, 4) wxyz world-from-body (user frame);
     v (T, N, 3) [m/s]; omega (T, N, 3) [rad/s] world; P (T, N, 3) [kg m/s]; L (T, N, 3) [kg m^2/s] world.
     invariants: name -> (T,); particle_position (T, particle_count, 3) when recorded.
+    joint_force (T, J, 12) with the joint_forces stream: each joint's reaction over the step that ended
+    at the frame, [N] and [N m] about each body's centre of mass, world (FrameBlock.joint_force; NaN
+    where no step led to the frame); `joint_reactions` gives it per joint name as (T, 2, 6).
     not_recorded: the names among v, omega, P, L that the source did not hold (a trajectory read from an
     .rrd): those arrays are NaN-filled, of the usual shape, and left out of the CSV.
     """
@@ -39,10 +42,21 @@ class Trajectory:
     header: RunHeader | None = None
     summary: RunSummary | None = None
     not_recorded: tuple[str, ...] = ()
+    joint_force: np.ndarray | None = None
+    joint_names: tuple[str, ...] = ()
 
     @property
     def status(self) -> str:
         return self.summary.status if self.summary else "unknown"
+
+    @property
+    def joint_reactions(self) -> dict[str, np.ndarray]:
+        """Joint name -> (T, 2, 6): per frame, the force [N] and torque [N m] on the joint's first body
+        (row 0) and second (row 1), as Simulation.joint_reactions; {} without the joint_forces stream."""
+        if self.joint_force is None:
+            return {}
+        k_count = self.joint_force.shape[0]
+        return {name: self.joint_force[:, j].reshape(k_count, 2, 6) for j, name in enumerate(self.joint_names)}
 
     def to_npz(self, path: str | Path) -> None:
         """Write every array, the body names, the header and the summary to an uncompressed .npz at `path`
@@ -53,6 +67,8 @@ class Trajectory:
             arrays[f"invariant_{i}"] = np.asarray(self.invariants[name])
         if self.particle_position is not None:
             arrays["particle_position"] = np.asarray(self.particle_position)
+        if self.joint_force is not None:
+            arrays["joint_force"] = np.asarray(self.joint_force)
         header: dict[str, Any] | None = None
         if self.header is not None:
             offsets = self.header.body_particle_offset
@@ -68,6 +84,7 @@ class Trajectory:
             "body_names": list(self.body_names),
             "invariant_names": list(self.invariants),
             "not_recorded": list(self.not_recorded),
+            "joint_names": list(self.joint_names),
             "header": header,
             "summary": None if self.summary is None else _summary_dict(self.summary),
         }
@@ -87,6 +104,7 @@ class Trajectory:
             t, step, x, q, v, omega, P, L = (z[name] for name in _NPZ_ARRAYS)
             invariants = {name: z[f"invariant_{i}"] for i, name in enumerate(meta["invariant_names"])}
             particles = z["particle_position"] if "particle_position" in z.files else None
+            joint_force = z["joint_force"] if "joint_force" in z.files else None
             header = None
             if meta["header"] is not None:
                 counts = z["particle_count"]
@@ -108,6 +126,8 @@ class Trajectory:
             header=header,
             summary=summary,
             not_recorded=tuple(meta["not_recorded"]),
+            joint_force=joint_force,
+            joint_names=tuple(meta.get("joint_names", ())),
         )
 
     def to_csv(self, path: str | Path) -> None:
@@ -186,6 +206,7 @@ def header_from_parameters(
         rbsim_version=p.get("rbsim_version", ""),
         seed=int(p.get("seed", "0")),
         invariant_names=names("invariant_names"),
+        joint_names=names("joint_names"),
         tolerance=float(p["tolerance"]) if p.get("tolerance") else None,
         units=p.get("units", RunHeader.units),
         quaternion_order="wxyz",
@@ -218,6 +239,7 @@ class SinkMemory:
 
         inv_names = blocks[0].invariants.keys() if blocks else ()
         particles = blocks[0].particle_position is not None if blocks else False
+        joints = bool(blocks) and blocks[0].joint_force is not None
         return Trajectory(
             body_names=self.header.body_names,
             t=cat("t"),
@@ -232,4 +254,6 @@ class SinkMemory:
             particle_position=cat("particle_position") if particles else None,
             header=self.header,
             summary=self.summary,
+            joint_force=cat("joint_force") if joints else None,
+            joint_names=self.header.joint_names if joints else (),
         )

@@ -54,6 +54,9 @@ class RecordedRun:
     particle_offset: tuple[np.ndarray, ...] = ()  # per body (n_i, 3) [m], body frame
     message_counts: dict[str, int] = field(default_factory=dict)  # MCAP topic -> messages
     entity_paths: tuple[str, ...] = ()  # RRD entities
+    # MCAP with the joint_forces stream: (T, J, 12) reactions (FrameBlock.joint_force) and the joints' names
+    joint_force: np.ndarray | None = None
+    joint_names: tuple[str, ...] = ()
 
     @property
     def frames(self) -> int:
@@ -127,6 +130,8 @@ def read_mcap(path: str | Path) -> RecordedRun:
         return np.concatenate([getattr(b, attr) for b in blocks], axis=0)
 
     inv_names = contents.invariant_names
+    joints = blocks[0].joint_force is not None if blocks else False
+    joint_names = tuple(_json_list(meta.get("joint_names")))
     return RecordedRun(
         path=Path(path),
         format="mcap",
@@ -145,6 +150,8 @@ def read_mcap(path: str | Path) -> RecordedRun:
         invariants={n: np.concatenate([b.invariants[n] for b in blocks]) if blocks else np.zeros(0) for n in inv_names},
         particle_offset=tuple(contents.particle_offset.get(n, np.zeros((0, 3))) for n in names),
         message_counts=contents.message_counts,
+        joint_force=np.concatenate([b.joint_force for b in blocks]) if joints else None,
+        joint_names=joint_names if joints else (),
     )
 
 
@@ -298,6 +305,8 @@ def trajectory_from_run(run: RecordedRun) -> Trajectory:
         header=header,
         summary=_run_summary(run.summary),
         not_recorded=missing,
+        joint_force=run.joint_force,
+        joint_names=run.joint_names,
     )
 
 

@@ -166,12 +166,15 @@ def run_properties(header: RunHeader) -> dict[str, str]:
     return {**header.parameters(), "quaternion_order": "xyzw in Rerun (rbsim arrays are wxyz)"}
 
 
-def default_blueprint(invariant_names: Sequence[str]) -> rrb.Blueprint:
-    """The 3D view beside the invariant plots (one plot per family: energies, momentum, ...)."""
+def default_blueprint(invariant_names: Sequence[str], joint_names: Sequence[str] = ()) -> rrb.Blueprint:
+    """The 3D view beside the invariant plots (one plot per family: energies, momentum, ...) and, with the
+    joint_forces stream, one plot of the joints' force and torque magnitudes."""
     families: dict[str, list[str]] = {}
     for name in invariant_names:
         families.setdefault(invariant_family(name), []).append(f"invariants/{name}")
     plots = [rrb.TimeSeriesView(name=fam, origin="invariants", contents=paths) for fam, paths in families.items()]
+    if joint_names:
+        plots.append(rrb.TimeSeriesView(name="joint forces", origin="joint_forces", contents=["joint_forces/**"]))
     view3d = rrb.Spatial3DView(
         name="bodies", origin="/", contents=["bodies/**", "trajectories", "particles", "contacts"]
     )
@@ -219,7 +222,7 @@ class SinkRerun:
         self._clouds_logged = False
         # send_properties=False: no wall-clock start time in the file; the name is sent explicitly.
         rec = self._rec = rr.RecordingStream(APPLICATION_ID, recording_id=uuid.uuid4(), send_properties=False)
-        rec.save(self.path, default_blueprint=default_blueprint(header.invariant_names))
+        rec.save(self.path, default_blueprint=default_blueprint(header.invariant_names, header.joint_names))
         rec.send_recording_name(header.scene_name)
         props = run_properties(header)
         # drop_untyped_nones given by name (its default), so mypy does not match **props (str values) against it
@@ -340,8 +343,14 @@ class SinkRerun:
             with np.errstate(over="ignore", invalid="ignore"):
                 cp = [np.asarray(p, dtype=np.float32).reshape(-1, 3) for p in block.contact_point]
             cf = [np.asarray(f, dtype=np.float64) for f in block.contact_force]
+        joints = None
+        if block.joint_force is not None:  # |force|, |torque| on a joint's first body (its second: world first)
+            side_a = np.linalg.norm(block.joint_force[:, :, 0:6], axis=2) > 0.0
+            force = np.where(side_a, *(np.linalg.norm(block.joint_force[:, :, k : k + 3], axis=2) for k in (0, 6)))
+            torque = np.where(side_a, *(np.linalg.norm(block.joint_force[:, :, k : k + 3], axis=2) for k in (3, 9)))
+            joints = (force, torque)
         pending = {"t": block.t, "step": block.step, "x": xf, "q": qf, "inv": inv, "particles": pp, "contacts": cp,
-                   "forces": cf}  # fmt: skip
+                   "forces": cf, "joints": joints}  # fmt: skip
         self._pending.append(pending)
         self._pending_bytes += xf.nbytes + qf.nbytes + (pp.nbytes if pp is not None else 0)
         self._pending_bytes += sum(p.nbytes for p in cp) if cp is not None else 0
@@ -386,6 +395,13 @@ class SinkRerun:
             pp = np.concatenate([p["particles"] for p in pending], axis=0)
             points = rr.Points3D.columns(positions=pp.reshape(-1, 3)).partition(np.full(k_count, pp.shape[1]))
             self._rec.send_columns("particles", indexes=times, columns=points)
+        if all(p["joints"] is not None for p in pending):
+            force = np.concatenate([p["joints"][0] for p in pending])
+            torque = np.concatenate([p["joints"][1] for p in pending])
+            for j, name in enumerate(self._header.joint_names):
+                for what, values in (("force", force), ("torque", torque)):
+                    column = rr.Scalars.columns(scalars=np.ascontiguousarray(values[:, j]))
+                    self._rec.send_columns(f"joint_forces/{name}/{what}", indexes=times, columns=column)
         if all(p["contacts"] is not None for p in pending):
             cp = [c for p in pending for c in p["contacts"]]
             lengths = np.array([len(c) for c in cp], dtype=np.int64)

@@ -19,9 +19,11 @@ def make_block(
     P: np.ndarray,
     L: np.ndarray,
     contact: np.ndarray | None = None,
+    joint: np.ndarray | None = None,
 ) -> FrameBlock:
     """A FrameBlock of K frames from raw (K, N, ...) arrays; copies, so buffers can be reused. contact:
-    (K, 4) the contact statistics of each frame (FrameBuffers.contact), for scenes with contact."""
+    (K, 4) the contact statistics of each frame (FrameBuffers.contact), for scenes with contact; joint:
+    (K, J, 12) the joints' reactions (FrameBuffers.joint), kept with the joint_forces stream."""
     model, settings = compiled.model, compiled.settings
     q_user, v, omega = np.empty_like(q), np.empty_like(P), np.empty_like(L)
     totals = np.empty((q.shape[0], TOTALS_WIDTH))
@@ -51,7 +53,18 @@ def make_block(
         block.particle_position, _ = particle_world(model, x, q, P, L)
     if "contacts" in settings.streams and compiled.contact is not None:
         block.contact_point, block.contact_force = frame_contacts(compiled, x, q, P, L)
+    if recorded_joint_count(compiled):
+        count = recorded_joint_count(compiled)
+        block.joint_force = np.full((q.shape[0], count, 12), np.nan) if joint is None else joint.copy()
     return block
+
+
+def recorded_joint_count(compiled: CompiledScene) -> int:
+    """The joints whose reactions the run records: all of them with the joint_forces stream, else 0."""
+    table = compiled.forces.joint
+    if table is None or "joint_forces" not in compiled.settings.streams:
+        return 0
+    return int(table.body_a.shape[0])
 
 
 def joint_invariants(compiled: CompiledScene, x: np.ndarray, q: np.ndarray, P: np.ndarray, L: np.ndarray) -> np.ndarray:

@@ -18,6 +18,7 @@ import numpy as np
 from rbcli._version import __version__
 from rbcli.physics.energy import CONTACT_INVARIANT_NAMES, INVARIANT_NAMES, JOINT_INVARIANT_NAMES
 from rbcli.record.frame import FrameBlock, RunHeader, RunSummary, Sink
+from rbcli.runner.blocks import recorded_joint_count
 from rbcli.runner.divergence import GUARD_STEPS, JUMP_FACTOR, EnergyGuard, explain, likely_cause
 from rbcli.runner.recorder import Recorder
 from rbcli.scene.compile import CompiledScene
@@ -68,6 +69,7 @@ def run_header(compiled: CompiledScene, *, steps: int | None = None, record_ever
         rbsim_version=__version__,
         seed=settings.seed,
         tolerance=settings.tolerance,
+        joint_names=tuple(joint.name for joint in spec.joints) if recorded_joint_count(compiled) else (),
         invariant_names=(
             (
                 *INVARIANT_NAMES,
@@ -145,6 +147,8 @@ def run_simulation(
             from rbcli.physics.contact.state import record_contact_state
 
             record_contact_state(sim.forces.contact, contact, state.x, state.q, buf.contact, frames)
+        if buf.joint.shape[1]:  # the last step's reactions (joint_record's), unknown before any step
+            buf.joint[frames] = sim.last_reactions() if sim.reactions_known else np.nan
         return frames + 1
 
     handed_at = checkpointed_at = time.perf_counter()

@@ -29,7 +29,7 @@ import numpy as np
 
 from rbcli.physics.step import FrameBuffers, empty_buffers
 from rbcli.record.frame import Checkpoint, FrameBlock, RunHeader, RunSummary, Sink
-from rbcli.runner.blocks import make_block
+from rbcli.runner.blocks import make_block, recorded_joint_count
 from rbcli.scene.compile import CompiledScene
 
 # Buffers in flight: one being filled, one being written, one ready; more only adds memory.
@@ -47,7 +47,7 @@ class Recorder:
         n = compiled.model.body_count
         self._free: queue.Queue[FrameBuffers] = queue.Queue()
         for _ in range(POOL_BUFFERS if threaded else 1):
-            self._free.put(empty_buffers(capacity, n))
+            self._free.put(empty_buffers(capacity, n, recorded_joint_count(compiled)))
         self._todo: queue.Queue[tuple[FrameBuffers, int, Checkpoint | None] | None] = queue.Queue()
         self._thread: threading.Thread | None = None
         self._error: BaseException | None = None
@@ -131,7 +131,7 @@ class Recorder:
         with np.errstate(over="ignore", invalid="ignore"):
             block = make_block(
                 self._compiled, b.step[:frames], b.x[:frames], b.q[:frames], b.P[:frames], b.L[:frames],
-                b.contact[:frames],
+                b.contact[:frames], b.joint[:frames],
             )  # fmt: skip
             for sink in self._sinks:
                 sink.write(block)

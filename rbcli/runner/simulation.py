@@ -105,6 +105,9 @@ class Simulation:
         tolerance = self.settings.tolerance
         self.adaptive = tolerance is not None
         self.threads = 1  # the threads the chunk loop runs on (1: the serial loop)
+        # whether the joints' last (sub-)step impulses describe the step that led to the current state:
+        # not before a step, nor after set_state or reset (restore: when the checkpoint carries them)
+        self.reactions_known = False
         if tolerance is not None:  # the error-controlled loop, generated from the same stages (physics/adaptive.py)
             self._chunk = info.adaptive_chunk().run_chunk
             self.data = make_data(
@@ -189,10 +192,13 @@ class Simulation:
             import numba
 
             numba.set_num_threads(self.threads)
-        return self._chunk(
+        done, filled, status = self._chunk(
             self._kmodel, self._kforces, self._kdata, self.settings.dt, self.data.state.step, n_steps,
             record_every, frames, filled,
         )  # fmt: skip
+        if done:
+            self.reactions_known = True
+        return done, filled, status
 
     # ---- state ------------------------------------------------------------------------------------
 
@@ -220,12 +226,17 @@ class Simulation:
         sub-steps, the last sub-step's). Zeros before the first step; {} in a scene without joints.
         A kick's reaction (an impulse on a jointed body, or initial velocities that break a joint: the
         step's joint_begin projection) is not in it: it is an impulse, not a force over the step."""
+        if self.data.force.joint is None:
+            return {}
+        names = [joint.name for joint in self.compiled.spec.joints]
+        return {name: reaction.reshape(2, 6) for name, reaction in zip(names, self.last_reactions(), strict=True)}
+
+    def last_reactions(self) -> np.ndarray:
+        """(J, 12): `joint_reactions` as one array in joint order (the joint_forces stream's layout)."""
         work = self.data.force.joint
         if work is None:
-            return {}
-        h = self.settings.dt / self.data.substeps
-        names = [joint.name for joint in self.compiled.spec.joints]
-        return {name: work.joint_impulse[j].reshape(2, 6) / h for j, name in enumerate(names)}
+            return np.zeros((0, 12))
+        return work.joint_impulse / (self.settings.dt / self.data.substeps)
 
     def set_state(
         self,
@@ -279,6 +290,7 @@ class Simulation:
                 raise ValueError(f"step must be >= 0, got {step}")
             s.step = int(step)
         self.data.clear_work()
+        self.reactions_known = False
 
     def checkpoint(self) -> Checkpoint:
         """A copy of everything the run carries between steps (Checkpoint): `restore` it into a
@@ -295,8 +307,11 @@ class Simulation:
         fit this run: another scene, integrator or contact layout)."""
         if checkpoint.step < 0:
             raise ValueError(f"checkpoint step must be >= 0, got {checkpoint.step}")
+        from rbcli.physics.data import JOINT_REACTIONS
+
         self.data.restore_carried(checkpoint.arrays)
         self.data.state.step = int(checkpoint.step)
+        self.reactions_known = checkpoint.step > 0 and JOINT_REACTIONS in checkpoint.arrays
 
     def reset(self) -> None:
         """Back to the scene's initial state at step 0, with cleared work arrays."""
@@ -305,6 +320,7 @@ class Simulation:
         s.x[:], s.q[:], s.P[:], s.L[:] = initial.x, initial.q, initial.P, initial.L
         s.step = 0
         self.data.clear_work()
+        self.reactions_known = False
         if self.data.adaptive_counters is not None:
             self.data.adaptive_counters[:] = 0
         self.data.force.term_evaluations[:] = 0

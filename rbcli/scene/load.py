@@ -162,6 +162,7 @@ def _analyse(
                 issues.issues.append(SceneIssue(body.location, f"body '{body.name}': {what} bodies need contact",
                                                 "a `contact:` section (docs/contact.md)"))  # fmt: skip
         _warn_materials_without_contact(entries, issues)
+    _warn_streams_without_their_section(data, issues)
     # the contact section's parts are checked apart (a schema error in its material still lets its planes
     # and the bodies be checked: a scene gets all its problems at once); the section itself must be a mapping
     if "contact" in data and isinstance(data["contact"], dict) and ("contact",) not in bad_paths:
@@ -212,6 +213,25 @@ def _analyse(
     except ValueError as exc:  # a run setting the checks above let through: located, never a traceback
         where = issues.locate(("simulation",), key=True)
         return None, sorted([*warnings, SceneIssue(where, f"simulation: {exc}")], key=SceneIssue.order)
+
+
+# a stream that records what one section of the scene makes: without it the stream records nothing
+_STREAM_SECTIONS = {"contacts": "contact", "joint_forces": "joints"}
+
+
+def _warn_streams_without_their_section(data: dict[str, Any], issues: IssueCollector) -> None:
+    """A warning at `record.streams` for a stream whose section the scene lacks (`contacts` without
+    `contact:`, `joint_forces` without `joints:`): the run would record nothing on it."""
+    record = data.get("simulation", {}).get("record") if isinstance(data.get("simulation"), dict) else None
+    streams = record.get("streams") if isinstance(record, dict) else None
+    if not isinstance(streams, list):
+        return
+    for i, stream in enumerate(streams):
+        section = _STREAM_SECTIONS.get(stream) if isinstance(stream, str) else None
+        if section is not None and not data.get(section):
+            issues.add(("simulation", "record", "streams", i),
+                       f"stream {stream!r} records nothing in a scene without `{section}:`",
+                       f"a `{section}:` section, or no {stream!r} stream", severity="warning")  # fmt: skip
 
 
 def _warn_materials_without_contact(entries: list[Any], issues: IssueCollector) -> None:

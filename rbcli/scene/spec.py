@@ -60,7 +60,7 @@ class RecordSpec:
     """What the recorder writes: every `every`-th step, which streams, and the MCAP chunk compression."""
 
     every: int = 1
-    streams: tuple[str, ...] = ("bodies", "invariants")  # also "particles"
+    streams: tuple[str, ...] = ("bodies", "invariants")  # also "particles", "contacts", "joint_forces"
     compression: str = "zstd"  # MCAP chunks: "zstd", "lz4" or "none"
 
 

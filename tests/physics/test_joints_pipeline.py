@@ -130,8 +130,8 @@ def test_a_scene_without_joints_compiles_no_joint_kernel(tmp_path):
     compiled = set(json.loads(out.stdout.strip().splitlines()[-1]))
     assert "rbcli.physics.chunks.split2.run_chunk" in compiled, sorted(compiled)  # it really compiled
     joint_kernels = {name for name in compiled if name.startswith("rbcli.physics.joints.")}
-    # only the three stages, pruned to nothing; none of the rows, solver, drive or impulse kernels
-    stages = {f"rbcli.physics.joints.stages.joint_{stage}" for stage in ("begin", "position", "velocity")}
+    # only the four stages, pruned to nothing; none of the rows, solver, drive or impulse kernels
+    stages = {f"rbcli.physics.joints.stages.joint_{stage}" for stage in ("begin", "position", "velocity", "record")}
     assert joint_kernels == stages, sorted(joint_kernels)
 
 

@@ -143,6 +143,7 @@ def _header(body_count: int, streams=("bodies", "invariants")) -> RunHeader:
         streams=streams,
         rbsim_version="0",
         invariant_names=("energy_total",) if "invariants" in streams else (),
+        joint_names=("hinge",) if "joint_forces" in streams else (),
     )
 
 
@@ -160,6 +161,8 @@ def _write(sink, header: RunHeader, frames: int = 2) -> FrameBlock:
     if "contacts" in header.streams:
         block.contact_point = [rng.normal(size=(2, 3)) for _ in range(frames)]
         block.contact_force = [rng.uniform(size=2) for _ in range(frames)]
+    if header.joint_names:
+        block.joint_force = rng.normal(size=(frames, len(header.joint_names), 12))
     sink.open(header)
     sink.write(block)
     if hasattr(sink, "write_checkpoint"):  # as a run's last block has: the checkpoint channel too
@@ -169,15 +172,17 @@ def _write(sink, header: RunHeader, frames: int = 2) -> FrameBlock:
 
 
 def test_mcap_keeps_one_topic_per_body_up_to_the_channel_limit(tmp_path):
-    """BODY_CHANNELS_MAX bodies with every fixed channel (particles and contacts streams and invariants
-    on) fill the channel ids exactly, so the per-body layout is kept right up to the limit and read back."""
-    header = _header(BODY_CHANNELS_MAX, streams=("bodies", "invariants", "particles", "contacts"))
+    """BODY_CHANNELS_MAX bodies with every fixed channel (particles, contacts and joint_forces streams and
+    invariants on) fill the channel ids exactly, so the per-body layout is kept right up to the limit and
+    read back."""
+    header = _header(BODY_CHANNELS_MAX, streams=("bodies", "invariants", "particles", "contacts", "joint_forces"))
     block = _write(SinkMcap(tmp_path / "edge.mcap"), header)
     run = read_mcap(tmp_path / "edge.mcap")
     assert len(run.message_counts) == MAX_ID  # every id used, none past it
     assert run.message_counts[particle_topic(header.body_names[-1])] == 1
     assert TOPIC_BODY_PARTICLES not in run.message_counts
     assert np.array_equal(run.x, block.x) and np.array_equal(run.q, block.q)
+    assert run.joint_names == ("hinge",) and np.array_equal(run.joint_force, block.joint_force)
     np.testing.assert_array_equal(run.particle_offset[-1], header.body_particle_offset[-1])
 
 

@@ -52,7 +52,7 @@ def test_a_slow_sink_holds_the_run_back_instead_of_growing_memory(monkeypatch):
     monkeypatch.setattr(loop, "MAX_BLOCK_FRAMES", 2)  # ~50 blocks
     made = []
     real = recorder_module.empty_buffers
-    monkeypatch.setattr(recorder_module, "empty_buffers", lambda k, n: made.append(k) or real(k, n))
+    monkeypatch.setattr(recorder_module, "empty_buffers", lambda k, n, j=0: made.append(k) or real(k, n, j))
     sink = _SlowSink()
     summary = simulation.run(prepare(_scene()), [sink])
     traj = sink.trajectory()

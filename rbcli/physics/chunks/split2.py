@@ -15,7 +15,7 @@ from rbcli.physics.forces.stages import (
 )
 from rbcli.physics.integrators.split2 import SCRATCH_WIDTH
 from rbcli.physics.integrators.split2 import step as integrator_step
-from rbcli.physics.joints.stages import joint_begin, joint_position, joint_velocity
+from rbcli.physics.joints.stages import joint_begin, joint_position, joint_record, joint_velocity
 from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, chunk_status, record_if_due
 
 __all__ = ["SCRATCH_WIDTH", "integrator_step", "run_chunk"]
@@ -61,6 +61,8 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
             contact_commit_stage(model, contact, contact_work, x, q, P, L)
         # contact_record: on recording steps, the state's contact count, deepest overlap and energy
         contact_record_stage(contact, contact_work, x, q, frames, filled, (index + 1) % record_every == 0)
+        # joint_record: on recording steps, each joint's reaction over the last (sub-)step into the next frame
+        joint_record(joint, joint_work, h, frames, filled, (index + 1) % record_every == 0)
         # record: on recording steps, the divergence check and the state copied into the next frame
         filled, status = record_if_due(index + 1, record_every, x, q, P, L, frames, filled)
         if status != STATUS_OK:

@@ -171,3 +171,18 @@ def _project(model, table, work, x, q, P, L) -> None:  # noqa: ANN001
         work.impulse[r] += work.delta[r]
     gather_impulses(table, work, work.delta)
     apply_body_impulses(table, work, 0.0, x, q, P, L)
+
+
+@numba.njit(**STEP_KERNEL)
+def joint_record(table, work, h, frames, filled, due) -> None:  # noqa: ANN001
+    """On a recording step, each joint's reaction over the (sub-)step just taken, work.joint_impulse / h
+    ([N], [N m] about each body's centre of mass, world: Simulation.joint_reactions' layout), into the
+    frame the record stage is about to fill; only into buffers made for them (frames.joint (K, J, 12))."""
+    if table is None or work is None:
+        return
+    out = frames.joint
+    if not due or filled >= out.shape[0] or out.shape[1] != work.joint_impulse.shape[0]:
+        return
+    for j in range(out.shape[1]):  # / h, as Simulation.joint_reactions divides: the same bits
+        for c in range(12):
+            out[filled, j, c] = work.joint_impulse[j, c] / h
