@@ -12,20 +12,32 @@ HANDLE_POSITIONS = np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.2, 0.0], 
 HANDLE_MASSES = np.array([1.0, 0.5, 0.5, 0.25])
 
 
-# Test files that compile the same heavy kernels run on one xdist worker (pyproject's `--dist loadgroup`):
-# the joint solver's stack (~40 s of numba compile) and the contact search's (~25 s) are compiled once and
-# then loaded from numba's cache, where two workers starting them at once both compiled them (the joint
-# files alone: 229 CPU-s on two workers against 195 s on one, measured). Every other file is a group of its
-# own, as `--dist loadfile` made it.
+# Test files that compile the same heavy kernels run on one xdist worker: the joint solver's stack (~40 s
+# of numba compile) and the contact search's (~25 s) are then compiled once and loaded from numba's cache,
+# where two workers starting them at once both compiled them (the joint files alone: 229 CPU-s on two
+# workers against 195 s on one, measured). Every other file is a unit of its own, as `--dist loadfile`
+# makes it. Done by the scheduler itself (below): xdist's `--dist loadgroup` marks do nothing under
+# pytest 9, whose node ids no longer read the `_nodeid` that xdist 3.8 rewrites, so each test became a
+# unit of its own and the suite compiled more (measured 1,065-1,105 CPU-s against ~900).
 KERNEL_FAMILIES = ("joint", "contact")
 
 
-@pytest.hookimpl(tryfirst=True)  # before xdist's own hook, which reads the marks into the node ids
-def pytest_collection_modifyitems(config, items):  # noqa: ANN001, ANN201
-    for item in items:
-        name = item.path.name
-        family = next((f for f in KERNEL_FAMILIES if f in name), None)
-        item.add_marker(pytest.mark.xdist_group(f"kernels-{family}" if family else str(item.path)))
+def kernel_unit(nodeid: str) -> str:
+    """The scheduling unit of a test: its file, or the kernel family its file's name belongs to."""
+    path = nodeid.split("::", 1)[0]
+    family = next((f for f in KERNEL_FAMILIES if f in path.rsplit("/", 1)[-1]), None)
+    return f"kernels-{family}" if family else path
+
+
+def pytest_xdist_make_scheduler(config, log):  # noqa: ANN001, ANN201
+    """xdist's file scheduling, with the units of `kernel_unit` (the controller calls this hook)."""
+    from xdist.scheduler import LoadScopeScheduling
+
+    class KernelFamilyScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return kernel_unit(nodeid)
+
+    return KernelFamilyScheduling(config, log)
 
 
 def make_body(name: str = "b", **overrides) -> BodySpec:
