@@ -39,9 +39,10 @@ JOINT_KINDS = {"ball": JOINT_BALL, "hinge": JOINT_HINGE, "fixed": JOINT_FIXED, "
 JOINT_ROWS = {JOINT_BALL: 3, JOINT_HINGE: 5, JOINT_FIXED: 6, JOINT_SLIDER: 5, JOINT_DISTANCE: 1}
 
 # columns of JointWork.stats: Newton iterations of the last position stage, the largest |g| it left
-# [m or rad], the largest |G V| the velocity stage left [m/s or rad/s], rows found redundant (dropped)
-STAT_ITERATIONS, STAT_POSITION, STAT_VELOCITY, STAT_REDUNDANT = range(4)
-STAT_COUNT = 4
+# [m or rad], the largest |G V| the velocity stage left [m/s or rad/s], rows found redundant (dropped),
+# and the round-off level at which the position stage's Newton iteration stopped [m] (stages.py)
+STAT_ITERATIONS, STAT_POSITION, STAT_VELOCITY, STAT_REDUNDANT, STAT_FLOOR = range(5)
+STAT_COUNT = 5
 
 
 class JointTable(NamedTuple):
