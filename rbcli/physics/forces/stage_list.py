@@ -144,7 +144,7 @@ __all__ = ["accumulate_wrench"]
 
 _PASS = '''
 
-@numba.njit(**STEP_KERNEL)
+@numba.njit(**STEP_ENTRY)
 def accumulate_wrench(model, forces, force_data, t, x, q, P, L, F, tau, dissipative=True) -> None:  # noqa: ANN001
     """Set F [N] and tau [N m] (body_count, 3), world frame, about each centre of mass, to the sum of the
     scene's force terms at time t [s]: the stages of FORCE_STAGES in order. tau is left untouched (zero)
@@ -169,7 +169,7 @@ def wrench_source(stages: tuple[ForceStage, ...] = FORCE_STAGES) -> str:
     """The Python source of forces/wrench_pass.py: a dispatcher per stage with tables, and the pass."""
     names: dict[str, set[str]] = {
         "rbcli.physics.forces.stages": set(),
-        "rbcli.physics.step": {"STEP_KERNEL"},
+        "rbcli.physics.step": {"STEP_ENTRY"},
     }
     for line in (line for stage in stages for line in stage.imports):
         source, _, imported = line.removeprefix("from ").partition(" import ")

@@ -23,7 +23,7 @@ from rbcli.physics.forces.tables import (
     TERM_TORQUE,
 )
 from rbcli.physics.forces.torque import accumulate_torque
-from rbcli.physics.step import STEP_KERNEL
+from rbcli.physics.step import STEP_ENTRY
 
 __all__ = ["accumulate_wrench"]
 
@@ -86,7 +86,7 @@ def _contact(model, forces, force_data, t, x, q, P, L, F, tau, counts, dissipati
 contact_stage = force_stage(_contact, "forces.contact", "force_data.contact")  # nothing when a table is None
 
 
-@numba.njit(**STEP_KERNEL)
+@numba.njit(**STEP_ENTRY)
 def accumulate_wrench(model, forces, force_data, t, x, q, P, L, F, tau, dissipative=True) -> None:  # noqa: ANN001
     """Set F [N] and tau [N m] (body_count, 3), world frame, about each centre of mass, to the sum of the
     scene's force terms at time t [s]: the stages of FORCE_STAGES in order. tau is left untouched (zero)

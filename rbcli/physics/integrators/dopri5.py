@@ -39,6 +39,7 @@ from rbcli.physics.forces.wrench import accumulate_wrench
 from rbcli.physics.integrators.kinematics import carried_momentum_valid, rotate_inverse
 from rbcli.physics.integrators.rk4 import align, align_numpy, body_rates, rates_numpy
 from rbcli.physics.rotation import quat_rotate_inverse
+from rbcli.physics.step import STEP_ENTRY
 
 SCRATCH_WIDTH = 173
 STATE_SIZE = 16  # x (3), q (4), P (3), L (3), m (3)
@@ -63,7 +64,7 @@ A[6, :6] = [35.0 / 384.0, 0.0, 500.0 / 1113.0, 125.0 / 192.0, -2187.0 / 6784.0, 
 E = np.array([71.0 / 57600.0, 0.0, -71.0 / 16695.0, 71.0 / 1920.0, -17253.0 / 339200.0, 22.0 / 525.0, -1.0 / 40.0])
 
 
-@numba.njit(cache=True)
+@numba.njit(**STEP_ENTRY)
 def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One fixed dopri5 step of every body (fifth order, six wrench evaluations), in place."""
     begin(model, forces, force_data, t, x, q, P, L, F, tau, scratch)

@@ -17,7 +17,7 @@ import numpy as np
 from rbcli.physics.forces.wrench import accumulate_wrench, wrench_numpy
 from rbcli.physics.rotation import gram_schmidt, matrix_to_quat, quat_to_matrix, skew
 from rbcli.physics.rotation_kernels import matrix_to_quat_nb, quat_to_matrix_nb
-from rbcli.physics.step import STEP_KERNEL
+from rbcli.physics.step import STEP_ENTRY
 
 # three 3x3 matrices (R, its update, R in the user frame) in row 0: views, so a step allocates nothing
 SCRATCH_WIDTH = 27
@@ -25,7 +25,7 @@ SCRATCH_WIDTH = 27
 
 # STEP_KERNEL: without reference counting, which increfed and decrefed every array of the model and the
 # force tables on each call and each scratch view: ~2/3 of a one-body step (docs/performance.md)
-@numba.njit(**STEP_KERNEL)
+@numba.njit(**STEP_ENTRY)
 def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One explicit Euler step of every body, in place."""
     accumulate_wrench(model, forces, force_data, t, x, q, P, L, F, tau)

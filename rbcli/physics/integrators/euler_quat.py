@@ -16,11 +16,12 @@ import numpy as np
 from rbcli.physics.forces.wrench import accumulate_wrench, wrench_numpy
 from rbcli.physics.integrators.kinematics import angular_velocity_numpy, rotate, rotate_inverse
 from rbcli.physics.rotation import quat_multiply
+from rbcli.physics.step import STEP_ENTRY
 
 SCRATCH_WIDTH = 0
 
 
-@numba.njit(cache=True)
+@numba.njit(**STEP_ENTRY)
 def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One explicit Euler step of every body, in place."""
     accumulate_wrench(model, forces, force_data, t, x, q, P, L, F, tau)

@@ -53,7 +53,7 @@ from rbcli.physics.forces.damping import dissipation_flow, dissipation_flow_nump
 from rbcli.physics.forces.wrench import accumulate_wrench, wrench_numpy
 from rbcli.physics.free_rotation_anchored import ANCHOR_CONSTANTS, anchor_evaluate, anchor_prepare
 from rbcli.physics.free_rotation_exact import _free_rotation_exact_work, free_rotation_exact_batch
-from rbcli.physics.step import STEP_KERNEL
+from rbcli.physics.step import STEP_ENTRY, STEP_KERNEL
 
 # Scratch columns per body (the run's Data.scratch, zeroed by Data.clear_work: no anchor):
 Q_MID = 0  # (4) orientation at the force evaluation (the wrench reads it as its q: first columns)
@@ -117,7 +117,7 @@ def _forces_are_constant_overload(forces):  # noqa: ANN001, ANN202
     return run
 
 
-@numba.njit(**STEP_KERNEL)
+@numba.njit(**STEP_ENTRY)
 def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One `exact` step of every body, in place (one force evaluation, at t + dt/2, unless the forces are
     constant); defers writing the state only once a chunk loop's `materialise` stage has said it runs."""

@@ -13,11 +13,12 @@ import numba
 
 from rbcli.physics.integrators import exact
 from rbcli.physics.integrators.split4 import WEIGHTS
+from rbcli.physics.step import STEP_ENTRY
 
 SCRATCH_WIDTH = exact.SCRATCH_WIDTH
 
 
-@numba.njit(cache=True)
+@numba.njit(**STEP_ENTRY)
 def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One exact4 step of every body, in place (five force evaluations)."""
     exact.compose(model, forces, force_data, t, dt, WEIGHTS, x, q, P, L, F, tau, scratch)

@@ -45,7 +45,7 @@ import numpy as np
 from rbcli.physics.forces.wrench import accumulate_wrench, wrench_numpy
 from rbcli.physics.integrators.kinematics import carried_momentum_valid, rotate, rotate_inverse
 from rbcli.physics.rotation import quat_multiply, quat_rotate, quat_rotate_inverse
-from rbcli.physics.step import STEP_KERNEL
+from rbcli.physics.step import STEP_ENTRY, STEP_KERNEL
 
 # per body: y0 = (x, q, P, L, m) (16), the weighted sum of stage rates (16), the stage's m (3), then
 # what is carried from one step to the next: the compensation of each component's sum (16, those of q
@@ -109,7 +109,7 @@ _STAGE_TIME = np.array([0.0, 0.5, 0.5, 1.0])
 _STAGE_REACH = np.array([0.5, 0.5, 1.0, 1.0])
 
 
-@numba.njit(**STEP_KERNEL)
+@numba.njit(**STEP_ENTRY)
 def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One RK4 step of every body, in place: four wrench evaluations (one call site, so the compiled
     wrench is inlined once, not four times)."""

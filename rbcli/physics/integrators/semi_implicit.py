@@ -22,6 +22,7 @@ import numpy as np
 from rbcli.physics.forces.wrench import accumulate_wrench, wrench_numpy
 from rbcli.physics.integrators.kinematics import angular_velocity_numpy, rotate, rotate_inverse
 from rbcli.physics.rotation import quat_multiply
+from rbcli.physics.step import STEP_ENTRY
 
 SCRATCH_WIDTH = 0
 
@@ -40,7 +41,7 @@ def exp_rotation(v0, v1, v2):  # noqa: ANN001, ANN201 - numba scalars
     return math.cos(angle), sinc * v0, sinc * v1, sinc * v2
 
 
-@numba.njit(cache=True)
+@numba.njit(**STEP_ENTRY)
 def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One semi-implicit Euler step of every body, in place."""
     accumulate_wrench(model, forces, force_data, t, x, q, P, L, F, tau)

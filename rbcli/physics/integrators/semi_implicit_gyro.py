@@ -23,11 +23,12 @@ from rbcli.physics.forces.wrench import accumulate_wrench, wrench_numpy
 from rbcli.physics.integrators.kinematics import rotate, rotate_inverse
 from rbcli.physics.integrators.semi_implicit import exp_rotation, exp_rotation_numpy
 from rbcli.physics.rotation import quat_multiply, quat_rotate, quat_rotate_inverse
+from rbcli.physics.step import STEP_ENTRY
 
 SCRATCH_WIDTH = 0
 
 
-@numba.njit(cache=True)
+@numba.njit(**STEP_ENTRY)
 def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One step with the explicit gyroscopic term, in place."""
     accumulate_wrench(model, forces, force_data, t, x, q, P, L, F, tau)

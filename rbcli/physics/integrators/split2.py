@@ -78,7 +78,7 @@ from rbcli.physics.integrators.kinematics import (
     turn_compensated as turn,
 )
 from rbcli.physics.rotation import quat_multiply
-from rbcli.physics.step import STEP_KERNEL
+from rbcli.physics.step import STEP_ENTRY, STEP_KERNEL
 
 # per body: body-frame angular momentum m (3), cos and sin of the half angle of the last T_c (2), and
 # the q (4) and L (3) the last step wrote, to which the m carried to the next step belongs
@@ -92,7 +92,7 @@ _L_SAVED = 15  # L before the dissipation flow (damped scenes), to turn its chan
 WEIGHTS = np.array([1.0])
 
 
-@numba.njit(**STEP_KERNEL)
+@numba.njit(**STEP_ENTRY)
 def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One split2 step of every body, in place (one force evaluation, at t + dt/2)."""
     compose(model, forces, force_data, t, dt, WEIGHTS, x, q, P, L, F, tau, scratch, False)

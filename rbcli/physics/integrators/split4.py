@@ -22,6 +22,7 @@ import numba
 import numpy as np
 
 from rbcli.physics.integrators import split2
+from rbcli.physics.step import STEP_ENTRY
 
 SCRATCH_WIDTH = split2.SCRATCH_WIDTH
 
@@ -29,7 +30,7 @@ _P = 1.0 / (4.0 - 4.0 ** (1.0 / 3.0))
 WEIGHTS = np.array([_P, _P, 1.0 - 4.0 * _P, _P, _P])
 
 
-@numba.njit(cache=True)
+@numba.njit(**STEP_ENTRY)
 def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One split4 step of every body, in place (five force evaluations)."""
     split2.compose(model, forces, force_data, t, dt, WEIGHTS, x, q, P, L, F, tau, scratch, True)
