@@ -267,10 +267,10 @@ TARGET_FAR = 1.2  # a scene with contact and nothing touching / the same without
 
 def far_scene(contact: bool) -> str:
     """Two of box_drop's bricks (344 contact spheres each) 5 m apart, drifting apart and tumbling, and a
-    ground 1 km below: with `contact:` nothing ever touches."""
+    ground 1,000 km below: with `contact:` nothing ever touches."""
     bricks = "".join("  - " + FAR_BRICK.format(name=f"b{i}", x=5.0 * i, v=0.1 * (2 * i - 1)) + "\n" for i in range(2))
     return ("simulation: {dt: 0.001, steps: 100000, integrator: split2}\ngravity: [0, 0, -9.81]\n"
-            + ("contact: {ground: -1000}\n" if contact else "") + "bodies:\n" + bricks)  # fmt: skip
+            + ("contact: {ground: -1.0e6}\n" if contact else "") + "bodies:\n" + bricks)  # fmt: skip
 
 
 def far_section(quick: bool) -> list[str]:

@@ -133,6 +133,7 @@ class Data:
             target[...] = arrays[name]
         if self.force.contact is not None:  # the restored history may sit on any body (body_phase.py)
             self.force.contact.body_history[:] = 1
+            self.force.contact.quiet_state[:] = 0  # and the quiet skin is this run's (contact/quiet.py)
 
     def clear_work(self) -> None:
         """Forget everything carried between steps but the state (after the state is set from outside):
@@ -142,6 +143,7 @@ class Data:
         self.scratch[:] = 0.0
         if self.force.contact is not None:  # None: the scene has no contact stage
             self.force.contact.hist_count[:] = 0  # contacts form afresh from the new state
+            self.force.contact.quiet_state[:] = 0
         if self.adaptive_work is not None:
             assert self.adaptive_control is not None
             self.adaptive_work[:] = 0.0

@@ -124,36 +124,63 @@ def body_phase(contact, work, x, q, pairs) -> int:  # noqa: ANN001
             else:
                 near[b, p] = 0
     # body pairs: every pair of a few bodies, else the hashed grid of body box centres
-    if lo.shape[0] <= _FEW_BODIES:
-        count = 0
-        for a in range(lo.shape[0]):
+    count, checks = box_pairs(contact, work, lo, hi, contact.body_cell_size, pairs, True)
+    work.body_sweep[SWEEP_PAIRS] = count
+    work.body_sweep[SWEEP_CHECKS] = checks
+    return count
+
+
+@numba.njit(cache=True, inline="always")
+def _meet(contact, lo, hi, a, b, flag) -> bool:  # noqa: ANN001
+    """Whether the boxes of bodies a and b overlap on all three axes and one of them can move; flag
+    False (quiet.py): also False for a pair that never collides (ContactTable.excluded_pair)."""
+    inv_mass = contact.body_inv_contact_mass
+    meet = (
+        lo[b, 0] <= hi[a, 0]
+        and lo[a, 0] <= hi[b, 0]
+        and lo[b, 1] <= hi[a, 1]
+        and lo[a, 1] <= hi[b, 1]
+        and lo[b, 2] <= hi[a, 2]
+        and lo[a, 2] <= hi[b, 2]
+        and (inv_mass[a] != 0.0 or inv_mass[b] != 0.0)
+    )
+    if meet and not flag and contact.excluded_pair.shape[0]:
+        key = min(a, b) * inv_mass.shape[0] + max(a, b)
+        k = np.searchsorted(contact.excluded_pair, key)
+        meet = not (k < contact.excluded_pair.shape[0] and contact.excluded_pair[k] == key)
+    return meet
+
+
+@numba.njit(cache=True, inline="always")
+def box_pairs(contact, work, lo, hi, cell_size, pairs, flag):  # noqa: ANN001, ANN201
+    """Step 2 of the module docstring for the boxes (lo, hi) (empty: lo > hi), boxes of half extent at
+    most cell_size / 2 but for contact.body_large's bodies: (pairs found, box tests). flag True: each
+    body of a pair flagged ACTIVE_PAIR in work.body_active and the pairs (a < b) written to `pairs` up to
+    its capacity; False (quiet.py): nothing written, pairs that never collide skipped, and the search
+    stops at the first pair (returns 1). The grid's arrays are work's body_* scratch."""
+    active = work.body_active
+    n = lo.shape[0]
+    count = 0
+    if n <= _FEW_BODIES:
+        for a in range(n):
             if not lo[a, 0] <= hi[a, 0]:
                 continue
-            for b in range(a + 1, lo.shape[0]):
-                if lo[b, 0] <= hi[b, 0]:
-                    if (
-                        lo[b, 0] <= hi[a, 0]
-                        and lo[a, 0] <= hi[b, 0]
-                        and lo[b, 1] <= hi[a, 1]
-                        and lo[a, 1] <= hi[b, 1]
-                        and lo[b, 2] <= hi[a, 2]
-                        and lo[a, 2] <= hi[b, 2]
-                        and (inv_mass[a] != 0.0 or inv_mass[b] != 0.0)
-                    ):  # the boxes meet, one body can move
-                        active[a] |= ACTIVE_PAIR
-                        active[b] |= ACTIVE_PAIR
-                        if count < pairs.shape[0]:
-                            pairs[count, 0], pairs[count, 1] = min(a, b), max(a, b)
-                        count += 1
-        work.body_sweep[SWEEP_PAIRS] = count
-        work.body_sweep[SWEEP_CHECKS] = lo.shape[0] * (lo.shape[0] - 1) // 2
-        return count
+            for b in range(a + 1, n):
+                if lo[b, 0] <= hi[b, 0] and _meet(contact, lo, hi, a, b, flag):
+                    if not flag:
+                        return 1, n * (n - 1) // 2
+                    active[a] |= ACTIVE_PAIR
+                    active[b] |= ACTIVE_PAIR
+                    if count < pairs.shape[0]:
+                        pairs[count, 0], pairs[count, 1] = min(a, b), max(a, b)
+                    count += 1
+        return count, n * (n - 1) // 2
     cell, bucket, start, order = work.body_cell, work.body_bucket, work.body_bucket_start, work.body_sorted
-    inv_size = 1.0 / contact.body_cell_size
+    inv_size = 1.0 / cell_size
     mask = np.int64(start.shape[0] - 2)  # buckets - 1, buckets a power of two
     large = contact.body_large
     start[:] = 0
-    for b in range(lo.shape[0]):
+    for b in range(n):
         if not lo[b, 0] <= hi[b, 0] or large[b]:
             bucket[b] = -1
             continue
@@ -169,21 +196,20 @@ def body_phase(contact, work, x, q, pairs) -> int:  # noqa: ANN001
         running += start[k]
         start[k] = running
     start[start.shape[0] - 1] = running
-    for b in range(lo.shape[0] - 1, -1, -1):
+    for b in range(n - 1, -1, -1):
         k = bucket[b]
         if k >= 0:
             start[k] -= 1
             order[start[k]] = b
-    count = 0
     checks = 0
     for s in range(running):
         a = order[s]
         ci, cj, ck = cell[a, 0], cell[a, 1], cell[a, 2]
-        for n in range(-1, HALF_SHELL.shape[0]):
-            if n < 0:  # the later bodies of its own bucket
+        for m in range(-1, HALF_SHELL.shape[0]):
+            if m < 0:  # the later bodies of its own bucket
                 first, last, ni, nj, nk = s + 1, start[bucket[a] + 1], ci, cj, ck
             else:
-                ni, nj, nk = ci + HALF_SHELL[n, 0], cj + HALF_SHELL[n, 1], ck + HALF_SHELL[n, 2]
+                ni, nj, nk = ci + HALF_SHELL[m, 0], cj + HALF_SHELL[m, 1], ck + HALF_SHELL[m, 2]
                 k = _hash(ni, nj, nk, mask)
                 first, last = start[k], start[k + 1]
             for e in range(first, last):
@@ -191,44 +217,30 @@ def body_phase(contact, work, x, q, pairs) -> int:  # noqa: ANN001
                 if cell[b, 0] != ni or cell[b, 1] != nj or cell[b, 2] != nk:
                     continue  # another cell sharing the bucket
                 checks += 1
-                if (
-                    lo[b, 0] <= hi[a, 0]
-                    and lo[a, 0] <= hi[b, 0]
-                    and lo[b, 1] <= hi[a, 1]
-                    and lo[a, 1] <= hi[b, 1]
-                    and lo[b, 2] <= hi[a, 2]
-                    and lo[a, 2] <= hi[b, 2]
-                    and (inv_mass[a] != 0.0 or inv_mass[b] != 0.0)
-                ):  # the boxes meet, one body can move
+                if _meet(contact, lo, hi, a, b, flag):
+                    if not flag:
+                        return 1, checks
                     active[a] |= ACTIVE_PAIR
                     active[b] |= ACTIVE_PAIR
                     if count < pairs.shape[0]:
                         pairs[count, 0], pairs[count, 1] = min(a, b), max(a, b)
                     count += 1
-    for a in range(lo.shape[0]):  # large bodies against every body (large pairs once)
+    for a in range(n):  # large bodies against every body (large pairs once)
         if not large[a] or not lo[a, 0] <= hi[a, 0]:
             continue
-        for b in range(lo.shape[0]):
+        for b in range(n):
             if b == a or not lo[b, 0] <= hi[b, 0] or (large[b] and b < a):
                 continue
             checks += 1
-            if (
-                lo[b, 0] <= hi[a, 0]
-                and lo[a, 0] <= hi[b, 0]
-                and lo[b, 1] <= hi[a, 1]
-                and lo[a, 1] <= hi[b, 1]
-                and lo[b, 2] <= hi[a, 2]
-                and lo[a, 2] <= hi[b, 2]
-                and (inv_mass[a] != 0.0 or inv_mass[b] != 0.0)
-            ):  # the boxes meet, one body can move
+            if _meet(contact, lo, hi, a, b, flag):
+                if not flag:
+                    return 1, checks
                 active[a] |= ACTIVE_PAIR
                 active[b] |= ACTIVE_PAIR
                 if count < pairs.shape[0]:
                     pairs[count, 0], pairs[count, 1] = min(a, b), max(a, b)
                 count += 1
-    work.body_sweep[SWEEP_PAIRS] = count
-    work.body_sweep[SWEEP_CHECKS] = checks
-    return count
+    return count, checks
 
 
 def body_pairs_numpy(lo: np.ndarray, hi: np.ndarray, inv_mass: np.ndarray) -> set[tuple[int, int]]:

@@ -45,6 +45,7 @@ from rbcli.physics.contact.law import (
     tangential_force,
     velocity_at,
 )
+from rbcli.physics.contact.quiet import try_quiet
 from rbcli.physics.contact.search import contact_found, find_contacts, sphere_positions
 from rbcli.physics.contact.tables import (
     COUNT_CANDIDATES,
@@ -96,6 +97,7 @@ def commit_contacts(model, contact, work, x, q, P, L) -> None:  # noqa: ANN001
     # only bodies flagged in the last evaluation hold trial contacts, only bodies that held some keep a
     # history to forget: the others' spheres are not visited (body_phase.py), in sphere order as before
     start, trial, history = contact.body_sphere_start, work.body_trial, work.body_history
+    held = False
     for body in range(trial.shape[0]):
         if trial[body] == 0 and history[body] == 0:
             continue
@@ -106,6 +108,7 @@ def commit_contacts(model, contact, work, x, q, P, L) -> None:  # noqa: ANN001
             if count == 0:
                 continue
             history[body] = 1
+            held = True
             ba = contact.sphere_body[i]
             for k in range(count):
                 partner = work.trial_partner[i, k]
@@ -131,6 +134,8 @@ def commit_contacts(model, contact, work, x, q, P, L) -> None:  # noqa: ANN001
                     e0, e1, e2 = e0 * scale, e1 * scale, e2 * scale
                 work.hist_partner[i, k] = partner
                 work.hist_xi[i, k, 0], work.hist_xi[i, k, 1], work.hist_xi[i, k, 2] = e0, e1, e2
+    if not held:  # nothing touches: the stages may rest while every body stays within its skin (quiet.py)
+        try_quiet(contact, work, x)
 
 
 @numba.njit(**STEP_KERNEL)

@@ -57,6 +57,10 @@ SWEEP_COUNT = 3
 # a body whose rho_max is above this many times the median is kept out of the body grid (body_phase.py)
 LARGE_BODY = 4.0
 
+# ContactWork.quiet_state slots (quiet.py): 1 while no contact is possible within the skins; the commits
+# left to wait before the next try after a failed one
+QUIET_ON, QUIET_WAIT = range(2)
+
 
 class ContactTable(NamedTuple):
     """Contact geometry and materials of a scene (read-only)."""
@@ -157,6 +161,11 @@ class ContactWork(NamedTuple):
     body_pair_none: np.ndarray  # int64 (0, 2): the force stage takes body_phase's flags, not its pair list
     # uint8 (body_count,), 1: its spheres may hold history (set by commit_contacts; all 1 after a restore)
     body_history: np.ndarray
+    # the quiet skin (quiet.py): int64 (2,) QUIET_ON, QUIET_WAIT; each body's position [m] (body_count,
+    # 3) when it was set and how far [m] (body_count,) it may move (max norm) before contact is possible
+    quiet_state: np.ndarray
+    quiet_reference: np.ndarray
+    quiet_skin: np.ndarray
 
 
 def _ro(values: object, dtype: type, *shape: int) -> np.ndarray:
@@ -301,4 +310,7 @@ def make_contact_work(contact: ContactTable, body_count: int, *, history: bool =
         body_trial=np.zeros(b, dtype=np.uint8),
         body_pair_none=np.zeros((0, 2), dtype=np.int64),
         body_history=np.zeros(b, dtype=np.uint8),
+        quiet_state=np.zeros(2, dtype=np.int64),
+        quiet_reference=np.zeros((b, 3)),
+        quiet_skin=np.zeros(b),
     )

@@ -115,10 +115,11 @@ FORCE_STAGES: tuple[ForceStage, ...] = (
         "contact: contact forces, then the static bodies held, their wrench zeroed (physics/contact)",
         (
             "from rbcli.physics.contact.force import accumulate_contact, hold_static_bodies",
+            "from rbcli.physics.contact.quiet import contact_quiet",
             "from rbcli.physics.forces.tables import TERM_CONTACT",
         ),
         "work = force_data.contact\n"
-        "if forces.contact.sphere_body.shape[0]:\n"
+        "if forces.contact.sphere_body.shape[0] and not contact_quiet(work, x, t):  # else nothing can touch\n"
         "    accumulate_contact(model, forces.contact, work, t, x, q, P, L, F, tau)\n"
         "    counts[TERM_CONTACT] += np.int64(work.stats[0])\n"
         "if forces.contact.static_body.shape[0]:\n"

@@ -37,6 +37,7 @@ from numba.extending import overload
 
 from rbcli.physics.contact.force import begin_contact_step, commit_contacts
 from rbcli.physics.contact.state import record_contact_state
+from rbcli.physics.contact.tables import QUIET_ON
 from rbcli.physics.forces.impulse import NO_IMPULSE_STEP, apply_impulses, next_impulse_step
 from rbcli.physics.forces.schedule import SCHEDULE_STEP_FLOOR
 from rbcli.physics.kinematic import kinematic_begin, kinematic_end
@@ -156,7 +157,7 @@ def _contact_commit_stage(model, contact, work, x, q, P, L):  # noqa: ANN001, AN
         return lambda model, contact, work, x, q, P, L: None
 
     def run(model, contact, work, x, q, P, L):  # noqa: ANN001, ANN202
-        if contact.sphere_body.shape[0]:
+        if contact.sphere_body.shape[0] and work.quiet_state[QUIET_ON] == 0:  # quiet: nothing to commit
             commit_contacts(model, contact, work, x, q, P, L)
 
     return run

@@ -7,6 +7,7 @@ import numba
 import numpy as np
 
 from rbcli.physics.contact.force import accumulate_contact, hold_static_bodies
+from rbcli.physics.contact.quiet import contact_quiet
 from rbcli.physics.forces.drag import accumulate_drag
 from rbcli.physics.forces.field import accumulate_field
 from rbcli.physics.forces.gravity import accumulate_gravity
@@ -76,7 +77,7 @@ drag_stage = force_stage(_drag, "forces.drag")  # nothing when a table is None
 def _contact(model, forces, force_data, t, x, q, P, L, F, tau, counts, dissipative) -> None:  # noqa: ANN001
     """The contact stage of FORCE_STAGES; `contact_stage` dispatches to it."""
     work = force_data.contact
-    if forces.contact.sphere_body.shape[0]:
+    if forces.contact.sphere_body.shape[0] and not contact_quiet(work, x, t):  # else nothing can touch
         accumulate_contact(model, forces.contact, work, t, x, q, P, L, F, tau)
         counts[TERM_CONTACT] += np.int64(work.stats[0])
     if forces.contact.static_body.shape[0]:

@@ -1,0 +1,139 @@
+"""The quiet skin (contact/quiet.py, issue 28 item 2): while no body can reach another or a plane the
+contact stages rest, and the trajectory is bitwise the one the full stages give.
+
+Each case runs twice, once as it is and once with the quiet held off (its retry wait set beyond the run),
+and the states must agree bit for bit: through flight far from anything, a fall onto the ground, a
+head-on impact of two balls, a kinematic paddle sweeping into a ball, every fixed-step integrator. The
+quiet must be on while nothing is near (else the far case would not be the fast one) and off while a
+contact is held.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import rbcli
+from rbcli.physics.contact.tables import COUNT_CANDIDATES, COUNT_EVALUATIONS, QUIET_ON, QUIET_WAIT
+from rbcli.physics.integrators import INTEGRATORS
+from rbcli.scene.load import load_scene_text
+
+BRICK = ("  - {{name: {name}, shape: {{type: box, size: [0.3, 0.1, 0.05]}}, spacing: 0.025, density: 700, "
+         "position: [{x}, 0, {z}], velocity: [{v}, 0, 0], angular_velocity: [3, 0.2, 5]}}")  # fmt: skip
+
+
+def ball(name: str, position, velocity=(0.0, 0.0, 0.0), extra: str = "") -> str:  # noqa: ANN001
+    return (f"  - {{name: {name}, particles: {{positions: [[0, 0, 0]], masses: [0.5], radius: [0.05]}}, "
+            f"position: {list(map(float, position))}, velocity: {list(map(float, velocity))}{extra}}}")  # fmt: skip
+
+
+def simulation(bodies: list[str], *, contact: str, gravity: bool = True, integrator: str = "split2",
+               dt: float = 1e-3, quiet: bool = True) -> rbcli.Simulation:  # fmt: skip
+    text = (f"name: q\nsimulation: {{dt: {dt!r}, steps: 10, integrator: {integrator}}}\n"
+            + ("gravity: [0, 0, -9.81]\n" if gravity else "") + "contact:\n" + contact
+            + "bodies:\n" + "\n".join(bodies) + "\n")  # fmt: skip
+    sim = rbcli.Simulation(load_scene_text(text))
+    if not quiet:  # every commit waits: the quiet never starts, the full stages run every evaluation
+        sim.data.force.contact.quiet_state[QUIET_WAIT] = 1 << 60
+    return sim
+
+
+def quiet_on(sim: rbcli.Simulation) -> bool:
+    return bool(sim.data.force.contact.quiet_state[QUIET_ON])
+
+
+def assert_same_states(a: rbcli.Simulation, b: rbcli.Simulation) -> None:
+    """Everything a step carries to the next (the state, F, tau, the contact history, statistics and
+    counters: Data.carried), bit for bit."""
+    theirs = b.data.carried()
+    for name, array in a.data.carried().items():
+        if name == "contact.counters":  # but the distance checks done: the quiet's saving
+            assert array[COUNT_CANDIDATES] <= theirs[name][COUNT_CANDIDATES]
+            array, theirs[name] = np.delete(array, COUNT_CANDIDATES), np.delete(theirs[name], COUNT_CANDIDATES)
+        assert np.array_equal(array, theirs[name]), name
+
+
+def run_both(bodies: list[str], steps: int, chunk: int = 50, **kwargs) -> tuple[rbcli.Simulation, list[bool]]:  # noqa: ANN003
+    """Step the scene with and without the quiet in chunks, the states equal after every chunk; returns
+    the quiet run and whether its quiet was on after each chunk."""
+    fast, full = simulation(bodies, **kwargs), simulation(bodies, quiet=False, **kwargs)
+    on = []
+    for _ in range(steps // chunk):
+        fast.step(chunk)
+        full.step(chunk)
+        assert_same_states(fast, full)
+        assert not quiet_on(full)
+        on.append(quiet_on(fast))
+    assert fast.data.force.contact.counters[COUNT_EVALUATIONS] > 0  # (equal: counted as the stage does)
+    return fast, on
+
+
+def test_far_apart_tumbling_bricks_stay_quiet_and_bitwise():
+    bricks = [BRICK.format(name="a", x=0.0, z=0.0, v=-0.1), BRICK.format(name="b", x=5.0, z=0.0, v=0.1)]
+    _, on = run_both(bricks, 2000, contact="  ground: -1000\n")
+    assert all(on), on  # two steps in, the quiet is on and stays on: 16-step skins, re-armed each time
+
+
+def test_ball_falling_onto_the_ground_is_bitwise_through_the_impact():
+    """Dropped from 0.5 m: quiet in the fall (skins re-armed every 16 steps as it speeds up), off while
+    it touches, the bounce is the full stages' to the bit."""
+    sim, on = run_both([ball("b", (0, 0, 0.5))], 400, chunk=10, contact="  ground: 0\n  material: {restitution: 0.5}\n")
+    first_touch = 319 // 10  # free fall to z = r: t = sqrt(2 * 0.45 / g) = 0.303 s, the chunk after it
+    assert all(on[:25]) and not all(on[25 : first_touch + 2]), on
+    assert sim.state.v[0, 2] > 0.5  # it bounced: about 0.5 x 2.97 m/s less the rise since
+
+
+def test_head_on_balls_are_bitwise_through_the_impact():
+    balls = [ball("a", (0, 0, 0), (1.0, 0.02, 0)), ball("b", (0.6, 0, 0), (-1.0, 0, 0))]
+    sim, on = run_both(balls, 600, chunk=20, contact="  material: {restitution: 0.5}\n", gravity=False)
+    assert on[0] and not all(on), on
+    assert sim.state.v[0, 0] < 0 < sim.state.v[1, 0]  # they rebounded
+
+
+def test_kinematic_paddle_sweeping_into_a_ball_is_bitwise():
+    """A kinematic body (no plane stops it, its skin from its own speed) runs into a ball at rest."""
+    paddle = ("  - {name: paddle, shape: {type: box, size: [0.6, 0.05, 0.1]}, spacing: 0.025, density: 500, "
+              "kinematic: true, position: [-0.6, 0, 0], angular_velocity: [0, 0, 2], "
+              "velocity: [1.0, 0, 0]}")  # fmt: skip
+    sim, on = run_both([paddle, ball("b", (0.3, 0.1, 0))], 1000, chunk=25,
+                       contact="  material: {restitution: 0.3, friction: 0.5}\n", gravity=False)  # fmt: skip
+    assert on[0] and not all(on), on
+    assert np.linalg.norm(sim.state.v[1]) > 0.3  # the ball was hit
+
+
+@pytest.mark.parametrize("integrator", list(INTEGRATORS))
+def test_every_integrator_is_bitwise_with_the_quiet(integrator):
+    balls = [ball("a", (0, 0, 0), (1.0, 0.02, 0)), ball("b", (0.15, 0, 0), (-1.0, 0, 0))]  # meet at 250 steps
+    sim, on = run_both(balls, 400, chunk=100, contact="  material: {restitution: 0.5}\n", gravity=False,
+                       integrator=integrator, dt=1e-4)  # fmt: skip
+    assert on[0], on
+    assert sim.state.v[0, 0] < 0 < sim.state.v[1, 0]  # they rebounded
+
+
+def test_a_resting_body_is_never_quiet():
+    sim = simulation([ball("b", (0, 0, 0.049))], contact="  ground: 0\n  material: {restitution: 0.1}\n")
+    sim.step(1000)  # settled
+    assert abs(sim.state.v[0, 2]) < 1e-3
+    for _ in range(5):
+        sim.step(40)
+        assert not quiet_on(sim)
+
+
+def test_set_state_and_restore_end_the_quiet_and_stay_bitwise():
+    balls = [ball("a", (0, 0, 0), (0.2, 0, 0)), ball("b", (3, 0, 0))]
+    sim = simulation(balls, contact="  substeps: 1\n", gravity=False)
+    sim.step(100)
+    assert quiet_on(sim)
+    saved = sim.checkpoint()
+    sim.step(100)
+    after = sim.checkpoint()
+    sim.restore(saved)
+    assert not quiet_on(sim)
+    sim.step(100)
+    for name in ("x", "q", "P", "L"):
+        np.testing.assert_array_equal(getattr(sim.data.state, name), after.arrays[name])
+    assert quiet_on(sim)
+    sim.set_state(x=[[2.95, 0, 0], [3, 0, 0]])  # a teleport into the other ball
+    assert not quiet_on(sim)
+    sim.step(1)
+    assert sim.state.v[1, 0] > 0.0  # pushed at once
