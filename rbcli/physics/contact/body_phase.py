@@ -45,6 +45,7 @@ import numpy as np
 from rbcli.physics.contact.broad_phase import _PRIME_X, _PRIME_Y, _PRIME_Z, HALF_SHELL, _cell
 from rbcli.physics.contact.tables import ACTIVE_PAIR, ACTIVE_PLANE, SWEEP_CHECKS, SWEEP_PAIRS, SWEEP_SPHERES
 from rbcli.physics.rotation_kernels import rotate
+from rbcli.physics.step import STEP_KERNEL
 
 _FEW_BODIES = 8  # up to this many bodies every pair is tested (28 box tests): less than setting up the grid
 _BOX_PAD = 1e-9  # of rho_max: far above R's rounding (~1e-16 rho), far below any contact's overlap
@@ -124,17 +125,19 @@ def body_phase(contact, work, x, q, pairs) -> int:  # noqa: ANN001
             else:
                 near[b, p] = 0
     # body pairs: every pair of a few bodies, else the hashed grid of body box centres
-    count, checks = box_pairs(contact, work, lo, hi, contact.body_cell_size, pairs, True)
+    count, checks = box_pairs(
+        inv_mass, contact.body_large, contact.excluded_pair, lo, hi, contact.body_cell_size, active,
+        work.body_cell, work.body_bucket, work.body_bucket_start, work.body_sorted, pairs, True,
+    )  # fmt: skip
     work.body_sweep[SWEEP_PAIRS] = count
     work.body_sweep[SWEEP_CHECKS] = checks
     return count
 
 
 @numba.njit(cache=True, inline="always")
-def _meet(contact, lo, hi, a, b, flag) -> bool:  # noqa: ANN001
+def _meet(inv_mass, excluded_pair, lo, hi, a, b, flag) -> bool:  # noqa: ANN001
     """Whether the boxes of bodies a and b overlap on all three axes and one of them can move; flag
     False (quiet.py): also False for a pair that never collides (ContactTable.excluded_pair)."""
-    inv_mass = contact.body_inv_contact_mass
     meet = (
         lo[b, 0] <= hi[a, 0]
         and lo[a, 0] <= hi[b, 0]
@@ -144,21 +147,36 @@ def _meet(contact, lo, hi, a, b, flag) -> bool:  # noqa: ANN001
         and lo[a, 2] <= hi[b, 2]
         and (inv_mass[a] != 0.0 or inv_mass[b] != 0.0)
     )
-    if meet and not flag and contact.excluded_pair.shape[0]:
-        key = min(a, b) * inv_mass.shape[0] + max(a, b)
-        k = np.searchsorted(contact.excluded_pair, key)
-        meet = not (k < contact.excluded_pair.shape[0] and contact.excluded_pair[k] == key)
+    if meet and not flag and excluded_pair.shape[0]:
+        meet = not excluded_key(excluded_pair, inv_mass.shape[0], a, b)
     return meet
 
 
 @numba.njit(cache=True, inline="always")
-def box_pairs(contact, work, lo, hi, cell_size, pairs, flag):  # noqa: ANN001, ANN201
+def excluded(contact, bi, bj) -> bool:  # noqa: ANN001
+    """Whether bodies bi and bj never collide (two bodies of a joint: ContactTable.excluded_pair)."""
+    return excluded_key(contact.excluded_pair, contact.body_inv_contact_mass.shape[0], bi, bj)
+
+
+@numba.njit(cache=True, inline="always")
+def excluded_key(keys, body_count, bi, bj) -> bool:  # noqa: ANN001
+    """`excluded` on the sorted keys min * body_count + max, by a binary search."""
+    key = min(bi, bj) * body_count + max(bi, bj)
+    k = np.searchsorted(keys, key)
+    return k < keys.shape[0] and keys[k] == key
+
+
+# a function of its own, not inlined: the body phase runs it once per evaluation (a call is nothing
+# beside it), and inlined into the force stage, the recorded statistics and quiet.py's try it made each
+# contact loop compile ~3 s longer per copy (numba's compile events)
+@numba.njit(**STEP_KERNEL)
+def box_pairs(inv_mass, large, excluded_pair, lo, hi, cell_size, active, cell, bucket, start, order, pairs, flag):  # noqa: ANN001, ANN201
     """Step 2 of the module docstring for the boxes (lo, hi) (empty: lo > hi), boxes of half extent at
-    most cell_size / 2 but for contact.body_large's bodies: (pairs found, box tests). flag True: each
-    body of a pair flagged ACTIVE_PAIR in work.body_active and the pairs (a < b) written to `pairs` up to
-    its capacity; False (quiet.py): nothing written, pairs that never collide skipped, and the search
-    stops at the first pair (returns 1). The grid's arrays are work's body_* scratch."""
-    active = work.body_active
+    most cell_size / 2 but for the `large` bodies: (pairs found, box tests). flag True: each body of a
+    pair flagged ACTIVE_PAIR in `active` and the pairs (a < b) written to `pairs` up to its capacity;
+    False (quiet.py): nothing written, pairs that never collide (excluded_pair) skipped, and the search
+    stops at the first pair (returns 1). cell, bucket, start, order: the grid's scratch (ContactWork's
+    body_cell, body_bucket, body_bucket_start, body_sorted)."""
     n = lo.shape[0]
     count = 0
     if n <= _FEW_BODIES:
@@ -166,7 +184,7 @@ def box_pairs(contact, work, lo, hi, cell_size, pairs, flag):  # noqa: ANN001, A
             if not lo[a, 0] <= hi[a, 0]:
                 continue
             for b in range(a + 1, n):
-                if lo[b, 0] <= hi[b, 0] and _meet(contact, lo, hi, a, b, flag):
+                if lo[b, 0] <= hi[b, 0] and _meet(inv_mass, excluded_pair, lo, hi, a, b, flag):
                     if not flag:
                         return 1, n * (n - 1) // 2
                     active[a] |= ACTIVE_PAIR
@@ -175,10 +193,8 @@ def box_pairs(contact, work, lo, hi, cell_size, pairs, flag):  # noqa: ANN001, A
                         pairs[count, 0], pairs[count, 1] = min(a, b), max(a, b)
                     count += 1
         return count, n * (n - 1) // 2
-    cell, bucket, start, order = work.body_cell, work.body_bucket, work.body_bucket_start, work.body_sorted
     inv_size = 1.0 / cell_size
     mask = np.int64(start.shape[0] - 2)  # buckets - 1, buckets a power of two
-    large = contact.body_large
     start[:] = 0
     for b in range(n):
         if not lo[b, 0] <= hi[b, 0] or large[b]:
@@ -217,7 +233,7 @@ def box_pairs(contact, work, lo, hi, cell_size, pairs, flag):  # noqa: ANN001, A
                 if cell[b, 0] != ni or cell[b, 1] != nj or cell[b, 2] != nk:
                     continue  # another cell sharing the bucket
                 checks += 1
-                if _meet(contact, lo, hi, a, b, flag):
+                if _meet(inv_mass, excluded_pair, lo, hi, a, b, flag):
                     if not flag:
                         return 1, checks
                     active[a] |= ACTIVE_PAIR
@@ -232,7 +248,7 @@ def box_pairs(contact, work, lo, hi, cell_size, pairs, flag):  # noqa: ANN001, A
             if b == a or not lo[b, 0] <= hi[b, 0] or (large[b] and b < a):
                 continue
             checks += 1
-            if _meet(contact, lo, hi, a, b, flag):
+            if _meet(inv_mass, excluded_pair, lo, hi, a, b, flag):
                 if not flag:
                     return 1, checks
                 active[a] |= ACTIVE_PAIR

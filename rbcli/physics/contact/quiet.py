@@ -33,6 +33,7 @@ import numba
 
 from rbcli.physics.contact.body_phase import box_pairs
 from rbcli.physics.contact.tables import COUNT_EVALUATIONS, QUIET_ON, QUIET_WAIT
+from rbcli.physics.step import STEP_KERNEL
 
 SKIN_STEPS = 16.0  # steps of its end-of-step speed a body may move before the stages run again
 SKIN_FLOOR = 0.05  # of rho_b: the skin of a body at rest
@@ -66,7 +67,7 @@ def contact_quiet(work, x, t) -> bool:  # noqa: ANN001
     return True
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(**STEP_KERNEL)  # a call of its own: it runs rarely (inlined, ~2 s more compile of each contact loop)
 def try_quiet(contact, work, x) -> None:  # noqa: ANN001
     """At the end of a step that holds no contact (commit_contacts), with work.body_velocity the
     end-of-step velocities and work.clock[1] the step: start the quiet if the grown cubes meet nothing
@@ -112,7 +113,11 @@ def try_quiet(contact, work, x) -> None:  # noqa: ANN001
                 state[QUIET_ON] = 0
                 state[QUIET_WAIT] = RETRY_STEPS
                 return
-    found, _ = box_pairs(contact, work, lo, hi, 2.0 * widest if widest > 0.0 else 1.0, work.body_pair_none, False)
+    found, _ = box_pairs(
+        inv_mass, contact.body_large, contact.excluded_pair, lo, hi, 2.0 * widest if widest > 0.0 else 1.0,
+        work.body_active, work.body_cell, work.body_bucket, work.body_bucket_start, work.body_sorted,
+        work.body_pair_none, False,
+    )  # fmt: skip
     if found:
         state[QUIET_ON] = 0
         state[QUIET_WAIT] = RETRY_STEPS

@@ -38,9 +38,8 @@ from __future__ import annotations
 import math
 
 import numba
-import numpy as np
 
-from rbcli.physics.contact.body_phase import body_phase, place_spheres, whole_grid_hashed
+from rbcli.physics.contact.body_phase import body_phase, excluded, place_spheres, whole_grid_hashed
 from rbcli.physics.contact.broad_phase import HALF_SHELL, bucket_of, build_grid_of
 from rbcli.physics.contact.tables import ACTIVE_PLANE, PLANE_PARTNER_BASE, SWEEP_SPHERES
 from rbcli.physics.step import STEP_KERNEL
@@ -141,16 +140,6 @@ def _plane_contacts(contact, work, sink) -> None:  # noqa: ANN001
                 mu = contact.body_friction_root[b] * contact.plane_friction_root[p]
                 contact_found(sink, contact, work, i, PLANE_PARTNER_BASE - p, b, -1, n0, n1, n2, overlap,
                               c0, c1, c2, k, zeta, mu)  # fmt: skip
-
-
-@numba.njit(cache=True, inline="always")
-def excluded(contact, bi, bj) -> bool:  # noqa: ANN001
-    """Whether bodies bi and bj never collide (two bodies of a joint: ContactTable.excluded_pair), by a
-    binary search of the sorted keys."""
-    keys = contact.excluded_pair
-    key = min(bi, bj) * contact.body_inv_contact_mass.shape[0] + max(bi, bj)
-    k = np.searchsorted(keys, key)
-    return k < keys.shape[0] and keys[k] == key
 
 
 @numba.njit(cache=True, inline="always")
