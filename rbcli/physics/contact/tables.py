@@ -59,7 +59,7 @@ LARGE_BODY = 4.0
 
 # ContactWork.quiet_state slots (quiet.py): 1 while no contact is possible within the skins; the commits
 # left to wait before the next try after a failed one
-QUIET_ON, QUIET_WAIT = range(2)
+QUIET_ON, QUIET_WAIT, QUIET_ARMED = range(3)
 
 
 class ContactTable(NamedTuple):
@@ -161,11 +161,16 @@ class ContactWork(NamedTuple):
     body_pair_none: np.ndarray  # int64 (0, 2): the force stage takes body_phase's flags, not its pair list
     # uint8 (body_count,), 1: its spheres may hold history (set by commit_contacts; all 1 after a restore)
     body_history: np.ndarray
-    # the quiet skin (quiet.py): int64 (2,) QUIET_ON, QUIET_WAIT; each body's position [m] (body_count,
-    # 3) when it was set and how far [m] (body_count,) it may move (max norm) before contact is possible
+    # the quiet skin (quiet.py): int64 (3,) QUIET_ON, QUIET_WAIT, QUIET_ARMED; each body's position [m]
+    # and velocity [m/s] (body_count, 3) when it was set, how far [m] (body_count,) it may stray (max
+    # norm) from that straight path, its acceleration [m/s^2] (body_count,) over the last window, and
+    # the window [t0, t_end] [s] (2,)
     quiet_state: np.ndarray
     quiet_reference: np.ndarray
+    quiet_velocity: np.ndarray
     quiet_skin: np.ndarray
+    quiet_accel: np.ndarray
+    quiet_window: np.ndarray
 
 
 def _ro(values: object, dtype: type, *shape: int) -> np.ndarray:
@@ -310,7 +315,10 @@ def make_contact_work(contact: ContactTable, body_count: int, *, history: bool =
         body_trial=np.zeros(b, dtype=np.uint8),
         body_pair_none=np.zeros((0, 2), dtype=np.int64),
         body_history=np.zeros(b, dtype=np.uint8),
-        quiet_state=np.zeros(2, dtype=np.int64),
+        quiet_state=np.zeros(3, dtype=np.int64),
         quiet_reference=np.zeros((b, 3)),
+        quiet_velocity=np.zeros((b, 3)),
         quiet_skin=np.zeros(b),
+        quiet_accel=np.zeros(b),
+        quiet_window=np.zeros(2),
     )
