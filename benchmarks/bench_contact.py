@@ -274,9 +274,10 @@ def far_scene(contact: bool) -> str:
 
 
 def far_section(quick: bool) -> list[str]:
-    """ns per step of the far-apart scene with and without contact: best and worst of 5 interleaved
-    blocks. The bricks fall freely (1,000 km above the ground), so later blocks are faster ones: the
-    worst block shows a quiet skin that cannot keep up with the speed (docs/contact.md)."""
+    """ns per step of the far-apart scene with and without contact: the best of 5 interleaved blocks, and
+    each block's ratio. The bricks fall freely (1,000 km above the ground), so each block is faster than
+    the last: a quiet skin that could not keep up with the speed shows in the later blocks
+    (docs/contact.md)."""
     from rbcli.scene.load import load_scene_text
 
     steps = 5_000 if quick else 20_000

@@ -71,11 +71,11 @@ def run_both(bodies: list[str], steps: int, chunk: int = 50, **kwargs) -> tuple[
 def test_far_apart_tumbling_bricks_stay_quiet_and_bitwise():
     bricks = [BRICK.format(name="a", x=0.0, z=0.0, v=-0.1), BRICK.format(name="b", x=5.0, z=0.0, v=0.1)]
     _, on = run_both(bricks, 2000, contact="  ground: -1000\n")
-    assert all(on), on  # two steps in, the quiet is on and stays on: 16-step skins, re-armed each time
+    assert all(on), on  # two steps in, the quiet is on and stays on: re-armed as each window ends
 
 
 def test_ball_falling_onto_the_ground_is_bitwise_through_the_impact():
-    """Dropped from 0.5 m: quiet in the fall (skins re-armed every 16 steps as it speeds up), off while
+    """Dropped from 0.5 m: quiet in the fall (re-armed as it speeds up and nears the ground), off while
     it touches, the bounce is the full stages' to the bit."""
     sim, on = run_both([ball("b", (0, 0, 0.5))], 400, chunk=10, contact="  ground: 0\n  material: {restitution: 0.5}\n")
     first_touch = 319 // 10  # free fall to z = r: t = sqrt(2 * 0.45 / g) = 0.303 s, the chunk after it

@@ -112,14 +112,7 @@ def body_phase(contact, work, x, q, pairs) -> int:  # noqa: ANN001
         c0, c1, c2 = 0.5 * (lo[b, 0] + hi[b, 0]), 0.5 * (lo[b, 1] + hi[b, 1]), 0.5 * (lo[b, 2] + hi[b, 2])
         h0, h1, h2 = 0.5 * (hi[b, 0] - lo[b, 0]), 0.5 * (hi[b, 1] - lo[b, 1]), 0.5 * (hi[b, 2] - lo[b, 2])
         for p in range(planes):
-            n0, n1, n2 = contact.plane_normal[p, 0], contact.plane_normal[p, 1], contact.plane_normal[p, 2]
-            lowest = (
-                (c0 - contact.plane_point[p, 0]) * n0
-                + (c1 - contact.plane_point[p, 1]) * n1
-                + (c2 - contact.plane_point[p, 2]) * n2
-                - (abs(n0) * h0 + abs(n1) * h1 + abs(n2) * h2)
-            )
-            if lowest <= 0.0:
+            if box_clearance(contact, p, c0, c1, c2, h0, h1, h2) <= 0.0:
                 near[b, p] = 1
                 active[b] |= ACTIVE_PLANE
             else:
@@ -132,6 +125,19 @@ def body_phase(contact, work, x, q, pairs) -> int:  # noqa: ANN001
     work.body_sweep[SWEEP_PAIRS] = count
     work.body_sweep[SWEEP_CHECKS] = checks
     return count
+
+
+@numba.njit(cache=True, inline="always")
+def box_clearance(contact, p, c0, c1, c2, h0, h1, h2) -> float:  # noqa: ANN001
+    """How far [m] the box of centre c and half extents h lies above plane p along its normal: the
+    height of its lowest corner (<= 0: the box meets the plane or lies beyond it)."""
+    n0, n1, n2 = contact.plane_normal[p, 0], contact.plane_normal[p, 1], contact.plane_normal[p, 2]
+    return (
+        (c0 - contact.plane_point[p, 0]) * n0
+        + (c1 - contact.plane_point[p, 1]) * n1
+        + (c2 - contact.plane_point[p, 2]) * n2
+        - (abs(n0) * h0 + abs(n1) * h1 + abs(n2) * h2)
+    )
 
 
 @numba.njit(cache=True, inline="always")

@@ -39,7 +39,7 @@ import math
 import numba
 import numpy as np
 
-from rbcli.physics.contact.body_phase import box_pairs
+from rbcli.physics.contact.body_phase import box_clearance, box_pairs
 from rbcli.physics.contact.tables import COUNT_EVALUATIONS, QUIET_ARMED, QUIET_ON, QUIET_WAIT
 from rbcli.physics.step import STEP_KERNEL
 
@@ -69,7 +69,7 @@ def on_paths(work, x, t) -> bool:  # noqa: ANN001
 
 
 @numba.njit(cache=True, inline="always")
-def within_skins(work, x) -> bool:  # noqa: ANN001
+def quiet_at_step_end(work, x) -> bool:  # noqa: ANN001
     """`on_paths` for the state at the end of the (sub-)step the contact clock holds (the recorded state)."""
     return on_paths(work, x, work.clock[0] + work.clock[1])
 
@@ -163,16 +163,9 @@ def _swept_boxes(contact, work, span) -> float:  # noqa: ANN001
             widest = max(widest, extent)
         if inv_mass[b] == 0.0:  # static or kinematic: planes do not stop it
             continue
+        c0, c1, c2 = 0.5 * (lo[b, 0] + hi[b, 0]), 0.5 * (lo[b, 1] + hi[b, 1]), 0.5 * (lo[b, 2] + hi[b, 2])
+        h0, h1, h2 = 0.5 * (hi[b, 0] - lo[b, 0]), 0.5 * (hi[b, 1] - lo[b, 1]), 0.5 * (hi[b, 2] - lo[b, 2])
         for p in range(contact.plane_point.shape[0]):
-            n0, n1, n2 = contact.plane_normal[p, 0], contact.plane_normal[p, 1], contact.plane_normal[p, 2]
-            c0, c1, c2 = 0.5 * (lo[b, 0] + hi[b, 0]), 0.5 * (lo[b, 1] + hi[b, 1]), 0.5 * (lo[b, 2] + hi[b, 2])
-            lowest = (
-                (c0 - contact.plane_point[p, 0]) * n0
-                + (c1 - contact.plane_point[p, 1]) * n1
-                + (c2 - contact.plane_point[p, 2]) * n2
-                - 0.5
-                * (abs(n0) * (hi[b, 0] - lo[b, 0]) + abs(n1) * (hi[b, 1] - lo[b, 1]) + abs(n2) * (hi[b, 2] - lo[b, 2]))
-            )
-            if not lowest > 0.0:
+            if not box_clearance(contact, p, c0, c1, c2, h0, h1, h2) > 0.0:
                 return 0.0
     return widest if widest > 0.0 else 1.0

@@ -26,7 +26,7 @@ from numba.core import types
 from numba.extending import overload
 
 from rbcli.physics.contact.law import history_elongation
-from rbcli.physics.contact.quiet import within_skins
+from rbcli.physics.contact.quiet import quiet_at_step_end
 from rbcli.physics.contact.search import contact_found, find_contacts, sphere_positions
 from rbcli.physics.contact.tables import COUNT_OVERFLOW, STAT_CONTACTS, STAT_ENERGY, STAT_MAX_PENETRATION, STAT_OVERFLOW
 from rbcli.physics.step import STEP_KERNEL
@@ -48,7 +48,7 @@ def record_contact_state(contact, work, x, q, out, row) -> None:  # noqa: ANN001
     Overwrites work's search arrays (positions, grid): every force evaluation rebuilds them."""
     for k in range(out.shape[1]):
         out[row, k] = 0.0
-    if within_skins(work, x):  # nothing can touch (quiet.py)
+    if quiet_at_step_end(work, x):  # nothing can touch (quiet.py)
         pass
     elif sphere_positions(contact, work, x, q):  # else nothing can touch (search.py)
         find_contacts(contact, work, ContactStateSink(out, row))

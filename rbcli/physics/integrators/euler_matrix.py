@@ -23,8 +23,9 @@ from rbcli.physics.step import STEP_ENTRY
 SCRATCH_WIDTH = 27
 
 
-# STEP_KERNEL: without reference counting, which increfed and decrefed every array of the model and the
-# force tables on each call and each scratch view: ~2/3 of a one-body step (docs/performance.md)
+# STEP_ENTRY (STEP_KERNEL, inlined into the chunk loop): without reference counting, which increfed and
+# decrefed every array of the model and the force tables on each call and each scratch view: ~2/3 of a
+# one-body step (docs/performance.md)
 @numba.njit(**STEP_ENTRY)
 def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One explicit Euler step of every body, in place."""
