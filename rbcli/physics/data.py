@@ -159,16 +159,18 @@ def make_data(
     substeps: int = 1,
     tolerance: float = 0.0,
     duration: float = 0.0,
+    contact_threads: int = 1,
 ) -> Data:
     """A Data for `initial` (copied) and the force tables `forces`: zeroed accumulators, scratch and
     force data; with `adaptive`, the adaptive loop's arrays (physics/adaptive.py: adaptive_work, their
-    one definition) and its error budget `tolerance` for a run `duration` [s] long."""
+    one definition) and its error budget `tolerance` for a run `duration` [s] long; contact_threads > 1:
+    the contact pair search on that many threads (contact/threaded.py)."""
     n = initial.x.shape[0]
     state = initial.copy()
     if substeps < 1:
         raise ValueError(f"substeps must be >= 1, got {substeps}")
     F, tau, scratch = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, scratch_width))
-    data = Data(state, F, tau, scratch, make_force_data(forces), substeps=int(substeps))
+    data = Data(state, F, tau, scratch, make_force_data(forces, contact_threads), substeps=int(substeps))
     if adaptive:
         from rbcli.physics.adaptive import adaptive_work
 

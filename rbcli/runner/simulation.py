@@ -28,7 +28,7 @@ from rbcli.physics.data import make_data
 from rbcli.physics.frames import body_angular_velocity, internal_orientation, user_orientation
 from rbcli.physics.integrators import get_integrator
 from rbcli.physics.rotation import quat_rotate, quat_rotate_inverse
-from rbcli.runner.threads import chunk_threads, resolve_threads
+from rbcli.runner.threads import chunk_threads, contact_threads, resolve_threads
 from rbcli.scene.compile import CompiledScene
 
 if TYPE_CHECKING:
@@ -105,6 +105,7 @@ class Simulation:
         tolerance = self.settings.tolerance
         self.adaptive = tolerance is not None
         self.threads = 1  # the threads the chunk loop runs on (1: the serial loop)
+        self.contact_threads = 1  # the threads of the contact stage's pair search (1: the serial search)
         # whether the joints' last (sub-)step impulses describe the step that led to the current state:
         # not before a step, nor after set_state or reset (restore: when the checkpoint carries them)
         self.reactions_known = False
@@ -120,15 +121,20 @@ class Simulation:
             count = resolve_threads(threads)
             contact = compiled.contact is not None
             self.threads = chunk_threads(count, info.parallel, compiled.model.body_count, contact)
-            if self.threads > 1:  # numba launches at most NUMBA_NUM_THREADS (sweep workers: 1)
-                import numba
+            if contact:
+                spheres = compiled.forces.contact.sphere_radius.shape[0]
+                self.contact_threads = contact_threads(count, spheres)
+            if max(self.threads, self.contact_threads) > 1:  # numba launches at most NUMBA_NUM_THREADS
+                import numba  # (sweep workers: 1)
 
-                self.threads = min(self.threads, numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
+                cap = numba.config.NUMBA_NUM_THREADS  # type: ignore[attr-defined]
+                self.threads, self.contact_threads = min(self.threads, cap), min(self.contact_threads, cap)
             chunk = info.parallel_chunk() if self.threads > 1 else info.chunk()
             self._chunk = chunk.run_chunk
             self.data = make_data(
-                compiled.initial_state, self.forces, chunk.SCRATCH_WIDTH, substeps=self.settings.substeps
-            )
+                compiled.initial_state, self.forces, chunk.SCRATCH_WIDTH, substeps=self.settings.substeps,
+                contact_threads=self.contact_threads,
+            )  # fmt: skip
         self._kmodel = self.model.kernel()
         self._kforces = self.forces.kernel()  # None for unused force types: their stages compile away
         self._kdata = self.data.kernel()
@@ -188,10 +194,10 @@ class Simulation:
         The caller adds the steps done to `data.state.step` (the runner does, between chunks)."""
         if frames is None:
             frames, record_every = self._no_frames, NEVER
-        if self.threads > 1:  # per calling thread in numba; launches its pool on the first call
-            import numba
+        if max(self.threads, self.contact_threads) > 1:  # per calling thread in numba; launches its pool
+            import numba  # on the first call
 
-            numba.set_num_threads(self.threads)
+            numba.set_num_threads(max(self.threads, self.contact_threads))
         done, filled, status = self._chunk(
             self._kmodel, self._kforces, self._kdata, self.settings.dt, self.data.state.step, n_steps,
             record_every, frames, filled,

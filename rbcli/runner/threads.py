@@ -19,10 +19,16 @@ ENV = "RBSIM_THREADS"
 # (split2 with gravity, measured on 2 cores: 0.74x the serial rate at 100 bodies, 1.22x at 300, 1.60x
 # at 1,000, 1.89x at 10,000; docs/performance.md, "Threads")
 PARALLEL_MIN_BODIES = 256
-# Scenes with contact keep the serial loop: their contact stages run serially between the threaded
-# passes, and the 1,000-ball pile ran 0.91x its serial rate on 2 threads (bench_threads.py). The threaded
-# loop gives them the same bits (tests/physics/test_threaded_loop.py sets this to check it).
+# Scenes with contact keep the serial loop: the 1,000-ball pile ran 0.91x its serial rate on 2 threads
+# with the serial contact stages between the threaded passes (bench_threads.py), and ~1.0x with the
+# pair search on threads too (contact_threads). The threaded loop gives them the same bits
+# (tests/physics/test_threaded_loop.py sets this to check it).
 THREADED_CONTACT = False
+# The contact stage's pair search runs on threads (physics/contact/threaded.py) in scenes of at least
+# this many contact spheres: on 2 cores it saves ~35 ns per sphere-step in a settled 1,000-ball pile
+# (300 -> 265 us per step) against a fork/join of ~2-4 us, so it breaks even near ~100 spheres; 512
+# leaves a margin for scenes whose spheres touch less (docs/performance.md, "Threads")
+CONTACT_PARALLEL_MIN_SPHERES = 512
 WORKER_ENV = {ENV: "1"}  # what a sweep's worker processes get unless the caller set RBSIM_THREADS itself
 
 
@@ -70,3 +76,10 @@ def chunk_threads(threads: int, has_parallel_loop: bool, body_count: int, contac
     if contact and not THREADED_CONTACT:
         return 1
     return threads
+
+
+def contact_threads(threads: int, sphere_count: int) -> int:
+    """The threads the contact stage's pair search uses: `threads` for a scene of at least
+    CONTACT_PARALLEL_MIN_SPHERES contact spheres, else 1 (the serial search; no threaded kernel is
+    compiled). Independent of the chunk loop's choice: contact scenes keep the serial loop."""
+    return threads if threads > 1 and sphere_count >= CONTACT_PARALLEL_MIN_SPHERES else 1

@@ -37,25 +37,11 @@ import numpy as np
 from numba.core import types
 from numba.extending import overload
 
-from rbcli.physics.contact.law import (
-    body_velocities,
-    normal_force,
-    push,
-    relative_velocity,
-    tangential_force,
-    velocity_at,
-)
+from rbcli.physics.contact.law import apply_contact, body_velocities, contact_values, velocity_at
 from rbcli.physics.contact.quiet import try_quiet
-from rbcli.physics.contact.search import contact_found, find_contacts, sphere_positions
-from rbcli.physics.contact.tables import (
-    COUNT_CANDIDATES,
-    COUNT_CONTACTS,
-    COUNT_EVALUATIONS,
-    COUNT_OVERFLOW,
-    STAT_CONTACTS,
-    STAT_ENERGY,
-    STAT_MAX_PENETRATION,
-)
+from rbcli.physics.contact.search import contact_found, sphere_positions
+from rbcli.physics.contact.tables import COUNT_CANDIDATES, COUNT_EVALUATIONS
+from rbcli.physics.contact.threaded import contact_search
 from rbcli.physics.step import STEP_KERNEL
 
 _OPTIONS: Any = STEP_KERNEL  # typed Any: numba's stubs type jit_options as a TypedDict without `_nrt`
@@ -162,8 +148,10 @@ def accumulate_contact(model, contact, work, t, x, q, P, L, F, tau) -> None:  # 
     work.counters[COUNT_EVALUATIONS] += 1
     s = t - work.clock[0]
     work.clock[2] = s
-    if flagged:  # else nothing can touch: no search (search.py)
-        work.counters[COUNT_CANDIDATES] += find_contacts(contact, work, ContactForceSink(x, s, F, tau))
+    if not flagged:  # nothing can touch: no search (search.py)
+        return
+    # the serial search, or the same contacts and sums with the walk and force law on threads (threaded.py)
+    work.counters[COUNT_CANDIDATES] += contact_search(contact, work, ContactForceSink(x, s, F, tau))
 
 
 # not inline="always": numba 0.68's IR inlining of this overload lost the writes to sink.F and sink.tau
@@ -177,36 +165,10 @@ def _contact_force(sink, contact, work, owner, partner, ba, bb, n0, n1, n2, over
 
     def resolve(sink, contact, work, owner, partner, ba, bb, n0, n1, n2, overlap, c0, c1, c2, k, zeta, mu):  # noqa: ANN001, ANN202
         x = sink.x
-        m_eff, vn, t0, t1, t2 = relative_velocity(contact, work, x, ba, bb, n0, n1, n2, c0, c1, c2)
-        fn, cn = normal_force(k, zeta, m_eff, overlap, vn)
-        energy = 0.5 * k * overlap * overlap
-        f0, f1, f2 = fn * n0, fn * n1, fn * n2
-        if mu > 0.0:
-            g0, g1, g2, u0, u1, u2, kt = tangential_force(contact.tangential_ratio, work, sink.s, owner, partner,
-                                                          n0, n1, n2, t0, t1, t2, k, cn, fn, mu)  # fmt: skip
-            energy += 0.5 * kt * (u0 * u0 + u1 * u1 + u2 * u2)
-            f0, f1, f2 = f0 + g0, f1 + g1, f2 + g2
-            slot = work.trial_count[owner]
-            if slot < work.trial_partner.shape[1]:  # commit_contacts advances it to the end of the step
-                work.trial_partner[owner, slot] = partner
-                work.trial_xi[owner, slot, 0], work.trial_xi[owner, slot, 1] = u0, u1
-                work.trial_xi[owner, slot, 2] = u2
-                work.trial_normal[owner, slot, 0], work.trial_normal[owner, slot, 1] = n0, n1
-                work.trial_normal[owner, slot, 2] = n2
-                work.trial_point[owner, slot, 0], work.trial_point[owner, slot, 1] = c0, c1
-                work.trial_point[owner, slot, 2] = c2
-                work.trial_limit[owner, slot] = mu * fn / kt
-                work.trial_count[owner] = slot + 1
-            else:
-                work.counters[COUNT_OVERFLOW] += 1
-                if work.overflow_sphere[0] < 0:
-                    work.overflow_sphere[0] = owner
-        push(x, ba, c0, c1, c2, f0, f1, f2, sink.F, sink.tau)
-        if bb >= 0:
-            push(x, bb, c0, c1, c2, -f0, -f1, -f2, sink.F, sink.tau)
-        work.stats[STAT_CONTACTS] += 1.0
-        work.stats[STAT_MAX_PENETRATION] = max(work.stats[STAT_MAX_PENETRATION], overlap)
-        work.stats[STAT_ENERGY] += energy
-        work.counters[COUNT_CONTACTS] += 1
+        f0, f1, f2, u0, u1, u2, limit, energy = contact_values(
+            contact, work, x, sink.s, owner, partner, ba, bb, n0, n1, n2, overlap, c0, c1, c2, k, zeta, mu
+        )
+        apply_contact(work, x, sink.F, sink.tau, owner, partner, ba, bb, n0, n1, n2, overlap, c0, c1, c2,
+                      mu > 0.0, f0, f1, f2, u0, u1, u2, limit, energy)  # fmt: skip
 
     return resolve

@@ -11,6 +11,13 @@ import math
 
 import numba
 
+from rbcli.physics.contact.tables import (
+    COUNT_CONTACTS,
+    COUNT_OVERFLOW,
+    STAT_CONTACTS,
+    STAT_ENERGY,
+    STAT_MAX_PENETRATION,
+)
 from rbcli.physics.rotation_kernels import rotate, rotate_inverse
 
 
@@ -118,3 +125,55 @@ def push(x, b, c0, c1, c2, f0, f1, f2, F, tau) -> None:  # noqa: ANN001
     tau[b, 0] += r1 * f2 - r2 * f1
     tau[b, 1] += r2 * f0 - r0 * f2
     tau[b, 2] += r0 * f1 - r1 * f0
+
+
+@numba.njit(cache=True, inline="always")
+def contact_values(contact, work, x, s, owner, partner, ba, bb, n0, n1, n2, overlap, c0, c1, c2, k, zeta, mu):  # noqa: ANN001, ANN201
+    """What one contact does (module docstring), computed from the state and the history alone: the force
+    f [N, world] on body ba (owner) at c (bb, the partner, gets -f), the tangential spring's elongation
+    u [m] at offset s and its Coulomb limit mu f_n / k_t [m] (0 without friction), and the energy [J] in
+    its springs. Reads, writes nothing: the threaded search (threaded.py) computes it on any thread and
+    `apply_contact` does what it says in the search's order."""
+    m_eff, vn, t0, t1, t2 = relative_velocity(contact, work, x, ba, bb, n0, n1, n2, c0, c1, c2)
+    fn, cn = normal_force(k, zeta, m_eff, overlap, vn)
+    energy = 0.5 * k * overlap * overlap
+    f0, f1, f2 = fn * n0, fn * n1, fn * n2
+    u0, u1, u2, limit = 0.0, 0.0, 0.0, 0.0
+    if mu > 0.0:
+        g0, g1, g2, u0, u1, u2, kt = tangential_force(contact.tangential_ratio, work, s, owner, partner,
+                                                      n0, n1, n2, t0, t1, t2, k, cn, fn, mu)  # fmt: skip
+        energy += 0.5 * kt * (u0 * u0 + u1 * u1 + u2 * u2)
+        f0, f1, f2 = f0 + g0, f1 + g1, f2 + g2
+        limit = mu * fn / kt
+    return f0, f1, f2, u0, u1, u2, limit, energy
+
+
+@numba.njit(cache=True, inline="always")
+def apply_contact(work, x, F, tau, owner, partner, ba, bb, n0, n1, n2, overlap, c0, c1, c2, friction,  # noqa: ANN001
+                  f0, f1, f2, u0, u1, u2, limit, energy) -> None:  # fmt: skip
+    """Do what `contact_values` computed: the force and torque on both bodies (F, tau), the spring proposed
+    to the history (trial arrays, with friction; commit_contacts advances it to the end of the step),
+    the evaluation's statistics and counters."""
+    if friction:
+        slot = work.trial_count[owner]
+        if slot < work.trial_partner.shape[1]:
+            work.trial_partner[owner, slot] = partner
+            work.trial_xi[owner, slot, 0], work.trial_xi[owner, slot, 1] = u0, u1
+            work.trial_xi[owner, slot, 2] = u2
+            work.trial_normal[owner, slot, 0], work.trial_normal[owner, slot, 1] = n0, n1
+            work.trial_normal[owner, slot, 2] = n2
+            work.trial_point[owner, slot, 0], work.trial_point[owner, slot, 1] = c0, c1
+            work.trial_point[owner, slot, 2] = c2
+            work.trial_limit[owner, slot] = limit
+            work.trial_count[owner] = slot + 1
+        else:
+            work.counters[COUNT_OVERFLOW] += 1
+            if work.overflow_sphere[0] < 0:
+                work.overflow_sphere[0] = owner
+    push(x, ba, c0, c1, c2, f0, f1, f2, F, tau)
+    if bb >= 0:
+        push(x, bb, c0, c1, c2, -f0, -f1, -f2, F, tau)
+    work.stats[STAT_CONTACTS] += 1.0
+    work.stats[STAT_MAX_PENETRATION] = max(work.stats[STAT_MAX_PENETRATION], overlap)
+    work.stats[STAT_ENERGY] += energy
+    work.counters[COUNT_CONTACTS] += 1

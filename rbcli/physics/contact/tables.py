@@ -57,6 +57,21 @@ SWEEP_COUNT = 3
 # a body whose rho_max is above this many times the median is kept out of the body grid (body_phase.py)
 LARGE_BODY = 4.0
 
+# The threaded contact search (threaded.py): walkers per block of records, and the rows a block holds
+# per walker. A walker finds ~2 contacts in a settled pile of equal balls (at most 6: half of the
+# kissing number), ~0.2 per sphere of a cloud; a block that finds more than its rows is searched again
+# serially.
+RECORD_BLOCK = 64
+RECORDS_PER_WALKER = 4
+# a record's int64 columns: owner and partner (search.py), their bodies (-1: a plane)
+RECORD_INT_OWNER, RECORD_INT_PARTNER, RECORD_INT_BODY_A, RECORD_INT_BODY_B = range(4)
+RECORD_INT_COUNT = 4
+# its float64 columns: the normal n, the overlap d, the point c, friction (1.0 or 0.0), then what
+# force.contact_values computed: f, u, the Coulomb limit and the energy
+RECORD_NORMAL, RECORD_OVERLAP, RECORD_POINT, RECORD_FRICTION = 0, 3, 4, 7
+RECORD_FORCE, RECORD_ELONGATION, RECORD_LIMIT, RECORD_ENERGY = 8, 11, 14, 15
+RECORD_COUNT = 16
+
 # ContactWork.quiet_state slots (quiet.py): 1 while no contact is possible within the skins; the commits
 # left to wait before the next try after a failed one
 QUIET_ON, QUIET_WAIT, QUIET_ARMED = range(3)
@@ -171,6 +186,16 @@ class ContactWork(NamedTuple):
     quiet_skin: np.ndarray
     quiet_accel: np.ndarray
     quiet_window: np.ndarray
+    # the threaded contact search (threaded.py), per block of RECORD_BLOCK walkers: its rows
+    # (RECORD_BLOCK * RECORDS_PER_WALKER each, block after block: RECORD_INT_* int64 and RECORD_* float64
+    # columns), how many contacts it found (int64 (blocks,); more than its rows: the block is searched
+    # again serially) and its candidate pairs (int64 (blocks,)). None in a serial run: numba compiles no
+    # threaded code for it. (Arrays of their own, not a tuple in this one: numba's parallel loops
+    # cannot take a tuple nested in a tuple.)
+    record_int: np.ndarray | None = None
+    record_float: np.ndarray | None = None
+    record_count: np.ndarray | None = None
+    record_candidates: np.ndarray | None = None
 
 
 def _ro(values: object, dtype: type, *shape: int) -> np.ndarray:
@@ -273,11 +298,15 @@ def body_boxes_numpy(
     return start, centre, half, rho
 
 
-def make_contact_work(contact: ContactTable, body_count: int, *, history: bool = True) -> ContactWork:
+def make_contact_work(contact: ContactTable, body_count: int, *, history: bool = True, threads: int = 1) -> ContactWork:
     """Zeroed work arrays for `contact` (0-sized without contact spheres: nothing is allocated).
-    history=False: no history or trial slots (a scratch for the search alone: contact/points.py)."""
+    history=False: no history or trial slots (a scratch for the search alone: contact/points.py);
+    threads > 1: the pair search runs on that many threads (threaded.py), with its record blocks."""
     s = contact.sphere_radius.shape[0]
     b = body_count if s else 0
+    threaded = threads > 1 and history and s > 0
+    blocks = -(-s // RECORD_BLOCK)
+    rows = blocks * RECORD_BLOCK * RECORDS_PER_WALKER
     k = HISTORY_SLOTS if s and history else 0
     return ContactWork(
         clock=np.zeros(3),
@@ -321,4 +350,8 @@ def make_contact_work(contact: ContactTable, body_count: int, *, history: bool =
         quiet_skin=np.zeros(b),
         quiet_accel=np.zeros(b),
         quiet_window=np.zeros(2),
+        record_int=np.zeros((rows, RECORD_INT_COUNT), dtype=np.int64) if threaded else None,
+        record_float=np.zeros((rows, RECORD_COUNT)) if threaded else None,
+        record_count=np.zeros(blocks, dtype=np.int64) if threaded else None,
+        record_candidates=np.zeros(blocks, dtype=np.int64) if threaded else None,
     )

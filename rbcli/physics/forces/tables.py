@@ -280,12 +280,13 @@ class ForceData(NamedTuple):
     joint: JointWork | None = None
 
 
-def make_force_data(forces: ForceTables | KernelForceTables) -> ForceData:
-    """A zeroed ForceData for `forces` (either form: the same ForceData)."""
+def make_force_data(forces: ForceTables | KernelForceTables, contact_threads: int = 1) -> ForceData:
+    """A zeroed ForceData for `forces` (either form: the same ForceData); contact_threads > 1: the
+    contact pair search runs on that many threads (contact/threaded.py)."""
     contact = forces.contact
     return ForceData(
         term_evaluations=np.zeros(len(TERM_NAMES), dtype=np.int64),
-        contact=make_contact_work(contact, forces.torque_body.shape[0])
+        contact=make_contact_work(contact, forces.torque_body.shape[0], threads=contact_threads)
         if contact is not None and contact_present(contact)
         else None,
         joint=make_joint_work(forces.joint) if forces.joint is not None and table_rows(forces.joint) else None,
