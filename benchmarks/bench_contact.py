@@ -2,6 +2,8 @@
 
     python benchmarks/bench_contact.py [--quick] [--no-mujoco] [--big] [--sections pile,far,scenes]
 
+Rows without "1 thread" run on rbsim's default threads (every core: the contact search on threads,
+physics/contact/threaded.py); "1 thread" rows are the serial search.
 1,000 spheres (radius 0.05 m, density 1000 kg/m^3) on a jittered 10 x 10 x 10 lattice (spacing 0.12 m,
 lowest centres at z = 0.3 m, jitter +-0.01 m in x and y, numpy seed 0) dropped into a box (ground z = 0,
 walls at |x|, |y| = 0.7 m), gravity -9.81, dt = 2e-3, 1,000 steps. Rows:
@@ -115,9 +117,12 @@ class PileResult:
         return self.spheres * self.steps / self.seconds
 
 
-def run_pile(label: str, spec: SceneSpec, half: float, steps: int, check_every: int = 50) -> PileResult:
-    """Step the pile through rbcli.Simulation, timing only the stepping, checking stability between blocks."""
-    sim = rbcli.Simulation(compile_scene(spec))
+def run_pile(
+    label: str, spec: SceneSpec, half: float, steps: int, check_every: int = 50, threads: int | None = None
+) -> PileResult:
+    """Step the pile through rbcli.Simulation (on `threads`; None: rbsim's default, every core), timing
+    only the stepping, checking stability between blocks."""
+    sim = rbcli.Simulation(compile_scene(spec), threads=threads)
     sim.step(1)  # compile or load the kernels
     sim.reset()
     m = sim.model.body_mass
@@ -238,11 +243,17 @@ def report(
 def pile_section(quick: bool, with_mujoco: bool, big: bool) -> list[str]:
     steps = 200 if quick else 1000
     results = []
-    for label, cloud, integrator in (("1 particle, split2", False, "split2"), ("1 particle, semi-implicit", False,
-                                     "semi-implicit"), ("13-particle cloud, split2", True, "split2")):  # fmt: skip
+    rows = (
+        ("1 particle, split2", False, "split2", None),
+        ("1 particle, split2, 1 thread", False, "split2", 1),
+        ("1 particle, semi-implicit", False, "semi-implicit", None),
+        ("13-particle cloud, split2", True, "split2", None),
+        ("13-particle cloud, split2, 1 thread", True, "split2", 1),
+    )
+    for label, cloud, integrator, threads in rows:
         print(f"pile: {label} ...", flush=True)
         spec, half = pile(cloud=cloud, integrator=integrator, steps=steps)
-        results.append(run_pile(label, spec, half, steps))
+        results.append(run_pile(label, spec, half, steps, threads=threads))
     mujoco_rate, version = None, ""
     if with_mujoco:
         try:
