@@ -74,7 +74,7 @@ def find_contacts(contact, work, sink) -> int:  # noqa: ANN001
     """Every contact of the sphere positions in work.sphere_position, plane contacts first (by sphere,
     then plane), then the pairs in walk order, each handed to `contact_found(sink, ...)`; returns the
     candidate pairs tested (distance checks)."""
-    plane_contacts(contact, work, sink, 0, work.body_active.shape[0])
+    plane_contacts(contact, work, sink)
     gridded = work.body_sweep[SWEEP_SPHERES]  # the spheres of bodies in body pairs (sphere_positions)
     grid = grid_of_gridded(contact, work, gridded)
     return walk_pairs(contact, work, sink, grid, 0, gridded)
@@ -148,14 +148,13 @@ def walk_pairs(contact, work, sink, grid, first, last) -> int:  # noqa: ANN001
 
 
 @numba.njit(cache=True, inline="always")
-def plane_contacts(contact, work, sink, first, last) -> None:  # noqa: ANN001
-    """Every sphere of bodies first .. last - 1 against every plane its body's box meets (body_phase.py),
-    spheres in index order and planes in theirs for each, as a test of every sphere against every plane
-    would find them."""
+def plane_contacts(contact, work, sink) -> None:  # noqa: ANN001
+    """Every sphere against every plane its body's box meets (body_phase.py), spheres in index order and
+    planes in theirs for each, as a test of every sphere against every plane would find them."""
     pos = work.sphere_position
     planes = contact.plane_point.shape[0]
     start, active, near = contact.body_sphere_start, work.body_active, work.body_plane
-    for b in range(first, last):
+    for b in range(active.shape[0]):
         if not active[b] & ACTIVE_PLANE:
             continue
         for i in range(start[b], start[b + 1]):

@@ -67,7 +67,7 @@ RECORDS_PER_WALKER = 4
 RECORD_INT_OWNER, RECORD_INT_PARTNER, RECORD_INT_BODY_A, RECORD_INT_BODY_B = range(4)
 RECORD_INT_COUNT = 4
 # its float64 columns: the normal n, the overlap d, the point c, friction (1.0 or 0.0), then what
-# force.contact_values computed: f, u, the Coulomb limit and the energy
+# law.contact_values computed: f, u, the Coulomb limit and the energy
 RECORD_NORMAL, RECORD_OVERLAP, RECORD_POINT, RECORD_FRICTION = 0, 3, 4, 7
 RECORD_FORCE, RECORD_ELONGATION, RECORD_LIMIT, RECORD_ENERGY = 8, 11, 14, 15
 RECORD_COUNT = 16

@@ -104,7 +104,7 @@ def _contact_search(contact, work, sink):  # noqa: ANN001, ANN202
 def find_contacts_threaded(contact, work, sink) -> int:  # noqa: ANN001
     """search.find_contacts for the force stage's sink (force.ContactForceSink) on numba's threads, with
     the same results bit for bit (module docstring); returns the candidate pairs tested."""
-    plane_contacts(contact, work, sink, 0, work.body_active.shape[0])
+    plane_contacts(contact, work, sink)
     gridded = work.body_sweep[SWEEP_SPHERES]
     grid = grid_of_gridded(contact, work, gridded)
     blocks = (gridded + RECORD_BLOCK - 1) // RECORD_BLOCK
