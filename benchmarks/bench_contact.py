@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import time
 from dataclasses import dataclass
@@ -359,6 +360,8 @@ def main() -> None:
         lines += scenes_section(args.quick) + [""]
     if "pile" in sections:
         lines += pile_section(args.quick, not args.no_mujoco, args.big)
+    load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
+    lines.append("- load average {:.2f} {:.2f} {:.2f} (1, 5, 15 min) at the end".format(*load))
     for line in lines:
         print(line)
 
