@@ -25,9 +25,10 @@ PARALLEL_MIN_BODIES = 256
 # (tests/physics/test_threaded_loop.py sets this to check it).
 THREADED_CONTACT = False
 # The contact stage's pair search runs on threads (physics/contact/threaded.py) in scenes of at least
-# this many contact spheres: on 2 cores it saves ~35 ns per sphere-step in a settled 1,000-ball pile
-# (300 -> 265 us per step) against a fork/join of ~2-4 us, so it breaks even near ~100 spheres; 512
-# leaves a margin for scenes whose spheres touch less (docs/performance.md, "Threads")
+# this many contact spheres. Measured on 2 cores (piles of bench_contact.py through landing, steps
+# 1-600, whole Simulation.step, 2 threads against 1): 0.73x at 64 balls, 0.77x at 125, 0.76x at 216,
+# 0.80x at 256, 1.04x at 512, 1.10x at 1,000: the records pass's fork/join (~4-10 us per step) is
+# repaid from ~500 spheres on (docs/performance.md, "Threads")
 CONTACT_PARALLEL_MIN_SPHERES = 512
 WORKER_ENV = {ENV: "1"}  # what a sweep's worker processes get unless the caller set RBSIM_THREADS itself
 
