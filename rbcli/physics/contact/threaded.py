@@ -19,18 +19,20 @@ total, and floating-point sums depend on their order. So the work is split where
        the same order, so the same bits. A block that found more contacts than its rows is walked again
        here with the serial sink itself, in its place in the order.
 
-The apply pass is ~15 ns per contact against the ~80 ns (walk and force law) the threads share. Which
-of the force law's inputs are read (body velocities, the history) is unchanged during the records pass:
-the history changes only at the commit, after the step. The blocks are a fixed size, not one per
-thread, so the records and the order do not depend on the thread count either.
+The force law's inputs (body velocities, the history) do not change during the records pass: the
+history changes only at the commit, after the step. What stays serial is large: the apply pass's
+scattered writes (trial slots by owner, F and tau by body) cost about as much as finding and computing
+the contacts (measured in docs/performance.md, "Threads", with what would move them onto threads).
+The blocks are a fixed size, not one per thread, so the records and the order do not depend on the
+thread count either.
 
 `find_contacts_threaded` is compiled with numba's parallel=True (its own function: the serial search
 keeps its plain compiled form) and is what force.accumulate_contact's `contact_search` compiles to when
 the run's ContactWork has record blocks (`record_*`: the Simulation allocates them when
 runner/threads.py gives the contact stage more than one thread); with them None it compiles to
 the serial search, and a serial run compiles nothing of this module's kernels (~15 s of a cold first
-run of the pile). The recorded state's
-statistics (state.py) keep the serial search: they run once per recorded frame, not per evaluation.
+run of the pile). The recorded state's statistics (state.py) keep the serial search: they run once
+per recorded frame, not per evaluation.
 """
 
 from __future__ import annotations
