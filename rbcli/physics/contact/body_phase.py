@@ -88,8 +88,8 @@ def _bounds(contact, work, x, q) -> None:  # noqa: ANN001
 def body_phase(contact, work, x, q, pairs) -> int:  # noqa: ANN001
     """Steps 1-3 of the module docstring for the state (x, q): flags in work.body_active and
     work.body_plane, counts in work.body_sweep; the body pairs (a < b, each once) are also written to
-    `pairs` (capacity, 2) up to its capacity (tests; the force stage passes a (0, 2) array). Returns the
-    pair count."""
+    `pairs` (capacity, 2) up to its capacity (search.sphere_positions passes work.body_pair, whose pairs
+    narrow.py searches; 0 rows where the body level is off). Returns the pair count."""
     active, near = work.body_active, work.body_plane
     inv_mass = contact.body_inv_contact_mass
     if contact.body_level_off:  # bodies of about one sphere: the sphere grid is the body grid already

@@ -71,17 +71,10 @@ def build_grid(contact, work):  # noqa: ANN001, ANN201
 
 
 @numba.njit(cache=True, inline="always")
-def build_grid_of(contact, work, count, hashed=False):  # noqa: ANN001, ANN201
-    """Cells, buckets and the bucket-sorted order of the spheres work.active_sphere[:count] (ascending
-    indices) at their positions in work.sphere_position; returns the grid tuple `bucket_of` takes. Bucket
-    b holds sorted_sphere[bucket_start[b] : bucket_start[b + 1]], sorted_* of length count.
-
-    A dense grid numbers cells row-major from the low corner of the spheres' box, so the order (by cell,
-    then by index) does not depend on where that corner is: a subset of spheres is walked in the order
-    of the whole, and only the buckets of its box (nx ny nz of them) are cleared and summed. When the grid
-    over every sphere would be hashed (`hashed`, body_phase.whole_grid_hashed), so is this one: a subset
-    in a dense grid would be walked in another order than the whole. Inlined: a
-    call passing the contact tuples increments and decrements the reference count of every array in them."""
+def grid_box(contact, work, count, hashed=False):  # noqa: ANN001, ANN201
+    """The cell of each sphere work.active_sphere[:count] into work.sphere_cell, and the grid tuple
+    `bucket_of` takes: dense over the cells' box when it has at most bucket_count cells and `hashed` is
+    False (build_grid_of)."""
     pos, cell, spheres = work.sphere_position, work.sphere_cell, work.active_sphere
     inv_size = 1.0 / contact.cell_size
     lo0, lo1, lo2 = np.int64(2**62), np.int64(2**62), np.int64(2**62)
@@ -96,7 +89,25 @@ def build_grid_of(contact, work, count, hashed=False):  # noqa: ANN001, ANN201
     nx, ny, nz = hi0 - lo0 + 1, hi1 - lo1 + 1, hi2 - lo2 + 1  # each <= 2^41 + 1: no overflow
     dense = nx <= buckets and ny <= buckets and nz <= buckets and nx * ny <= buckets and nx * ny * nz <= buckets
     dense = dense and not hashed  # hashed: the grid over every sphere would be (its walk order kept)
-    grid = (dense, lo0, lo1, lo2, nx, ny, nz, np.int64(buckets - 1))
+    return (dense, lo0, lo1, lo2, nx, ny, nz, np.int64(buckets - 1))
+
+
+@numba.njit(cache=True, inline="always")
+def build_grid_of(contact, work, count, hashed=False):  # noqa: ANN001, ANN201
+    """Cells, buckets and the bucket-sorted order of the spheres work.active_sphere[:count] (ascending
+    indices) at their positions in work.sphere_position; returns the grid tuple `bucket_of` takes. Bucket
+    b holds sorted_sphere[bucket_start[b] : bucket_start[b + 1]], sorted_* of length count.
+
+    A dense grid numbers cells row-major from the low corner of the spheres' box, so the order (by cell,
+    then by index) does not depend on where that corner is: a subset of spheres is walked in the order
+    of the whole, and only the buckets of its box (nx ny nz of them) are cleared and summed. When the grid
+    over every sphere would be hashed (`hashed`, body_phase.whole_grid_hashed), so is this one: a subset
+    in a dense grid would be walked in another order than the whole. Inlined: a
+    call passing the contact tuples increments and decrements the reference count of every array in them."""
+    pos, cell, spheres = work.sphere_position, work.sphere_cell, work.active_sphere
+    grid = grid_box(contact, work, count, hashed)
+    dense, _, _, _, nx, ny, nz, _ = grid
+    buckets = contact.bucket_count
     used = (nx * ny * nz if dense else buckets) if count > 0 else 0  # the buckets the grid can name
     start, bucket = work.bucket_start, work.sphere_bucket
     start[: used + 1] = 0

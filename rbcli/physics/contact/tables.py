@@ -173,7 +173,20 @@ class ContactWork(NamedTuple):
     body_sweep: np.ndarray  # int64 (SWEEP_COUNT,): body pairs, box tests, spheres gridded
     active_sphere: np.ndarray  # int64 (sphere_count,), the spheres of bodies in body pairs, ascending
     body_trial: np.ndarray  # uint8 (body_count,), 1: its spheres may hold trial contacts (flagged last evaluation)
-    body_pair_none: np.ndarray  # int64 (0, 2): the force stage takes body_phase's flags, not its pair list
+    body_pair_none: np.ndarray  # int64 (0, 2): quiet.py takes box_pairs' answer, not its pair list
+    # the sphere pairs of the body pairs (narrow.py; 0 rows where the body level is off): the body pairs
+    # (a < b) body_phase found, the spheres of each side of one pair that meet the other's box, the
+    # contacts found (walker, partner) and their sort keys, the sort's permutations and histogram, the
+    # tests made
+    body_pair: np.ndarray  # int64 (capacity, 2)
+    pair_side: np.ndarray  # int64 (runs, 2, largest body's spheres): one per thread
+    pair_near: np.ndarray  # (runs, largest body's spheres, 4): one side's spheres, x, y, z [m] and r [m]
+    pair_tally: np.ndarray  # int64 (runs, 8): found, tests, cost of each run (padded: no shared line)
+    pair_found: np.ndarray  # int64 (capacity, 2)
+    pair_key: np.ndarray  # int64 (capacity, 2)
+    pair_order: np.ndarray  # int64 (2, capacity)
+    pair_radix: np.ndarray  # int64 (2^11 + 1,)
+    pair_tests: np.ndarray  # int64 (1,)
     # uint8 (body_count,), 1: its spheres may hold history (set by commit_contacts; all 1 after a restore)
     body_history: np.ndarray
     # the quiet skin (quiet.py): int64 (3,) QUIET_ON, QUIET_WAIT, QUIET_ARMED; each body's position [m]
@@ -298,6 +311,15 @@ def body_boxes_numpy(
     return start, centre, half, rho
 
 
+def pair_capacities(body_count: int, sphere_count: int, level_off: bool, largest_body: int) -> tuple[int, int, int]:
+    """The buffers of the sphere pairs of the body pairs (narrow.py): body pairs, contacts found, spheres
+    of one body; all 0 where the body level is off (bodies of about one sphere: the walk is the body
+    grid). Too small for a state, they send that evaluation to the walk."""
+    if level_off or sphere_count == 0:
+        return 0, 0, 0
+    return 16 * body_count + 64, 4 * sphere_count + 64, largest_body
+
+
 def make_contact_work(contact: ContactTable, body_count: int, *, history: bool = True, threads: int = 1) -> ContactWork:
     """Zeroed work arrays for `contact` (0-sized without contact spheres: nothing is allocated).
     history=False: no history or trial slots (a scratch for the search alone: contact/points.py);
@@ -308,6 +330,9 @@ def make_contact_work(contact: ContactTable, body_count: int, *, history: bool =
     blocks = -(-s // RECORD_BLOCK)
     rows = blocks * RECORD_BLOCK * RECORDS_PER_WALKER
     k = HISTORY_SLOTS if s and history else 0
+    largest = int(np.diff(contact.body_sphere_start).max()) if b else 0
+    pair_cap, found_cap, side_cap = pair_capacities(b, s, bool(contact.body_level_off), largest)
+    runs = max(1, threads) if history else 1
     return ContactWork(
         clock=np.zeros(3),
         body_velocity=np.zeros((b, 3)),
@@ -343,6 +368,15 @@ def make_contact_work(contact: ContactTable, body_count: int, *, history: bool =
         active_sphere=np.zeros(s, dtype=np.int64),
         body_trial=np.zeros(b, dtype=np.uint8),
         body_pair_none=np.zeros((0, 2), dtype=np.int64),
+        body_pair=np.zeros((pair_cap, 2), dtype=np.int64),
+        pair_side=np.zeros((runs, 2, side_cap), dtype=np.int64),
+        pair_near=np.zeros((runs, side_cap, 4)),
+        pair_tally=np.zeros((runs, 8), dtype=np.int64),
+        pair_found=np.zeros((found_cap, 2), dtype=np.int64),
+        pair_key=np.zeros((found_cap, 2), dtype=np.int64),
+        pair_order=np.zeros((2, found_cap), dtype=np.int64),
+        pair_radix=np.zeros((1 << 11) + 1, dtype=np.int64),
+        pair_tests=np.zeros(1, dtype=np.int64),
         body_history=np.zeros(b, dtype=np.uint8),
         quiet_state=np.zeros(3, dtype=np.int64),
         quiet_reference=np.zeros((b, 3)),

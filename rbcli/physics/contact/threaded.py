@@ -45,8 +45,10 @@ from numba.core import types
 from numba.extending import overload
 
 from rbcli.physics.contact.law import apply_contact, contact_values
+from rbcli.physics.contact.narrow import pair_candidates_threaded
 from rbcli.physics.contact.search import (
     contact_found,
+    emit_pairs,
     find_contacts,
     grid_of_gridded,
     plane_contacts,
@@ -108,12 +110,16 @@ def find_contacts_threaded(contact, work, sink) -> int:  # noqa: ANN001
     the same results bit for bit (module docstring); returns the candidate pairs tested."""
     plane_contacts(contact, work, sink)
     gridded = work.body_sweep[SWEEP_SPHERES]
-    grid = grid_of_gridded(contact, work, gridded)
-    blocks = (gridded + RECORD_BLOCK - 1) // RECORD_BLOCK
+    found = pair_candidates_threaded(contact, work, gridded) if work.pair_found.shape[0] else -1
+    if found >= 0:  # the sphere pairs of the body pairs, in the walk's order (narrow.py)
+        emit_pairs(contact, work, sink, 0, found)
+        return work.pair_tests[0]
     ints, floats = work.record_int, work.record_float
     counts, block_candidates = work.record_count, work.record_candidates
     rows = ints.shape[0] // counts.shape[0]  # a block's rows (make_contact_work; tests give fewer)
     x, s = sink.x, sink.s
+    grid = grid_of_gridded(contact, work, gridded)
+    blocks = (gridded + RECORD_BLOCK - 1) // RECORD_BLOCK
     # numba gives each thread an equal run of iterations in one piece, and the blocks' costs differ (a
     # pile's top walkers find few contacts): iteration k takes block k * stride mod blocks, stride
     # ~0.38 blocks and coprime with it, so each run holds blocks from all over (which thread takes a

@@ -1,0 +1,221 @@
+"""The sphere pairs of the body pairs: the contacts the sphere grid's walk finds (search.walk_pairs),
+found from the body level's pairs instead and then put in the walk's order, for scenes of bodies of
+many spheres (issue 28: the cloud pile).
+
+Why: in a pile of 13-sphere clouds the walk tests ~50 candidates per sphere (its half shell holds
+~14 cells of ~3.6 spheres), most of them spheres of its own body (42,000 overlapping pairs of one body
+per evaluation, against ~3,200 contacts) or of bodies it cannot reach: 643,000 distance checks, ~2.6 ms
+of a ~3.3 ms step. The body level already knows which bodies' boxes meet (body_phase.py). For each such
+pair (A, B), only the spheres of A whose box meets B's box can touch a sphere of B, and the other way
+round (B's spheres lie in B's box, padded against rounding), so testing those against each other finds
+every contact between A and B: ~220,000 tests for the pile (130,000 of a sphere against a box).
+
+The walk's order is kept, so every sum is the same and the bits too. In a dense grid (the only one this
+path takes; a hashed grid is walked) the walk hands on the pairs of sphere a and e, a before e in the
+bucket order (cell row-major, then sphere index), sorted by a, then by e: a sphere's half shell lies
+after its cell, run after run (search.walk_pairs). So each contact here gets the key (bucket, index) of
+its earlier sphere (the walker) and of its later one, and the contacts are sorted by both (a radix sort
+by the walker's key, then each walker's few partners by theirs) before any is handed to the sink, with
+d = p_walker - p_partner exactly as the walk computes it. Nothing is handed on until every pair is
+found, so the walk can still be taken (`pair_contacts` returns -1) when the buffers would overflow or
+the body pairs hold more sphere tests than a walk would make.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from rbcli.physics.contact.body_phase import whole_grid_hashed
+from rbcli.physics.contact.broad_phase import grid_box
+from rbcli.physics.contact.tables import SWEEP_PAIRS
+from rbcli.physics.step import STEP_KERNEL
+
+# The pair path gives way to the walk when its tests would cost more than the walk's estimated ones: the
+# walk checks the ~13.5 cells of each sphere's half shell, at least gridded / cells spheres each on
+# average (more where spheres cluster: ~50 checks per sphere of a cloud pile against this estimate's
+# 20); a sphere-against-box test counts as half a check (narrow._pairs_of)
+HALF_SHELL_CELLS = 13.5
+_RADIX_BITS = 11
+_CULL = 1.0 + 1e-6  # a sphere's radius in the box test, widened far beyond any rounding of p +- r
+
+
+@numba.njit(**STEP_KERNEL)
+def pair_candidates(contact, work, gridded) -> int:  # noqa: ANN001
+    """The overlapping sphere pairs of the body pairs in work.body_pair, sorted in the walk's order into
+    work.pair_found[:n] (walker, partner), and the tests made (the candidates) in work.pair_tests[0];
+    returns n, or -1 when the walk must be taken instead (the grid would be hashed, a buffer is too
+    small, or the pairs' tests would cost more than the walk's estimated checks)."""
+    pairs = work.body_sweep[SWEEP_PAIRS]
+    if pairs > work.body_pair.shape[0] or work.pair_found.shape[0] == 0:
+        return -1
+    grid = grid_box(contact, work, gridded, whole_grid_hashed(contact, work) if gridded else False)
+    if not grid[0]:
+        return -1
+    budget = _budget(grid, gridded)
+    side, near = work.pair_side, work.pair_near
+    n, tests, spent = _pairs_of(contact, work, grid, 0, pairs, side[0, 0], side[0, 1], near[0], 0,
+                                work.pair_found.shape[0], budget)  # fmt: skip
+    if n < 0:
+        return -1
+    work.pair_tests[0] = tests
+    _sort(work, n)
+    return n
+
+
+@numba.njit(**STEP_KERNEL, parallel=True)
+def pair_candidates_threaded(contact, work, gridded) -> int:  # noqa: ANN001
+    """`pair_candidates` with the body pairs split into one run per row of work.pair_side, searched on
+    numba's threads, each into its own share of pair_found; the contacts are then gathered in run order
+    and sorted as there, so the result is the same (every contact has its own pair of keys)."""
+    pairs = work.body_sweep[SWEEP_PAIRS]
+    if pairs > work.body_pair.shape[0] or work.pair_found.shape[0] == 0:
+        return -1
+    grid = grid_box(contact, work, gridded, whole_grid_hashed(contact, work) if gridded else False)
+    if not grid[0]:
+        return -1
+    budget = _budget(grid, gridded)
+    side, near, tally, found, keys = work.pair_side, work.pair_near, work.pair_tally, work.pair_found, work.pair_key
+    runs = side.shape[0]
+    share = found.shape[0] // runs
+    for run in numba.prange(runs):
+        n, tests, spent = _pairs_of(contact, work, grid, run * pairs // runs, (run + 1) * pairs // runs,
+                                    side[run, 0], side[run, 1], near[run], run * share, share, budget)  # fmt: skip
+        tally[run, 0], tally[run, 1], tally[run, 2] = n, tests, spent
+    n, tests, spent = 0, 0, 0
+    for run in range(runs):
+        if tally[run, 0] < 0:
+            return -1
+        spent += tally[run, 2]
+        for r in range(run * share, run * share + tally[run, 0]):  # gathered in run order
+            found[n, 0], found[n, 1], keys[n, 0], keys[n, 1] = found[r, 0], found[r, 1], keys[r, 0], keys[r, 1]
+            n += 1
+        tests += tally[run, 1]
+    if spent > budget:
+        return -1
+    work.pair_tests[0] = tests
+    _sort(work, n)
+    return n
+
+
+@numba.njit(cache=True, inline="always")
+def _budget(grid, gridded):  # noqa: ANN001, ANN202
+    """The walk's estimated checks, in the units of `_pairs_of`'s cost (half a check)."""
+    _, _, _, _, nx, ny, nz, _ = grid
+    return np.int64(2.0 * HALF_SHELL_CELLS * gridded * (gridded / (nx * ny * nz)))
+
+
+@numba.njit(cache=True, inline="always")
+def _pairs_of(contact, work, grid, first, last, side_a, side_b, near, row0, capacity, budget):  # noqa: ANN001, ANN202
+    """The overlapping sphere pairs of body pairs first .. last - 1, each as (walker, partner) with its
+    keys into work.pair_found and pair_key rows row0 .. row0 + capacity - 1: (found, tests, cost), found
+    -1 when they do not fit or the cost (in half checks: a sphere-box test 1, a sphere pair 2) passes
+    the budget."""
+    _, i0, j0, k0, nx, ny, _, _ = grid
+    pos, radius, cell = work.sphere_position, contact.sphere_radius, work.sphere_cell
+    start, lo, hi, body_pair = contact.body_sphere_start, work.body_lo, work.body_hi, work.body_pair
+    found, keys = work.pair_found, work.pair_key
+    spheres = radius.shape[0]
+    tests, cost, n = 0, 0, 0
+    for k in range(first, last):
+        a, b = body_pair[k, 0], body_pair[k, 1]
+        na = _cull(pos, radius, start[a], start[a + 1], lo, hi, b, side_a)
+        if na == 0:
+            continue
+        nb = _cull(pos, radius, start[b], start[b + 1], lo, hi, a, side_b)
+        culls = start[a + 1] - start[a] + start[b + 1] - start[b]
+        tests += culls + na * nb
+        cost += culls + 2 * na * nb
+        if cost > budget:
+            return -1, tests, cost
+        for v in range(nb):  # B's spheres near A side by side: the inner loop reads them in a row
+            j = side_b[v]
+            near[v, 0], near[v, 1], near[v, 2], near[v, 3] = pos[j, 0], pos[j, 1], pos[j, 2], radius[j]
+        for u in range(na):
+            i = side_a[u]
+            p0, p1, p2, ri = pos[i, 0], pos[i, 1], pos[i, 2], radius[i]
+            for v in range(nb):
+                # the walk's test of the pair (its d is +-this one, its reach r_j + r_i: the same bits)
+                d0, d1, d2 = p0 - near[v, 0], p1 - near[v, 1], p2 - near[v, 2]
+                reach = ri + near[v, 3]
+                dist2 = d0 * d0 + d1 * d1 + d2 * d2
+                if dist2 < reach * reach and dist2 > 0.0:
+                    if n == capacity:
+                        return -1, tests, cost
+                    j = side_b[v]
+                    ki = (((cell[i, 2] - k0) * ny + (cell[i, 1] - j0)) * nx + (cell[i, 0] - i0)) * spheres + i
+                    kj = (((cell[j, 2] - k0) * ny + (cell[j, 1] - j0)) * nx + (cell[j, 0] - i0)) * spheres + j
+                    row = row0 + n
+                    if ki < kj:  # the walker (earlier in bucket order) first
+                        found[row, 0], found[row, 1], keys[row, 0], keys[row, 1] = i, j, ki, kj
+                    else:
+                        found[row, 0], found[row, 1], keys[row, 0], keys[row, 1] = j, i, kj, ki
+                    n += 1
+    return n, tests, cost
+
+
+@numba.njit(cache=True, inline="always")
+def _cull(pos, radius, first, last, lo, hi, other, out) -> int:  # noqa: ANN001
+    """The spheres first .. last - 1 whose box meets body `other`'s box (lo, hi) into out; their count."""
+    n = 0
+    l0, l1, l2, h0, h1, h2 = lo[other, 0], lo[other, 1], lo[other, 2], hi[other, 0], hi[other, 1], hi[other, 2]
+    for i in range(first, last):
+        r = radius[i] * _CULL
+        out[n] = i
+        n += (
+            (pos[i, 0] + r >= l0) & (pos[i, 0] - r <= h0)
+            & (pos[i, 1] + r >= l1) & (pos[i, 1] - r <= h1)
+            & (pos[i, 2] + r >= l2) & (pos[i, 2] - r <= h2)
+        )  # fmt: skip
+    return n
+
+
+@numba.njit(cache=True, inline="always")
+def _sort(work, n) -> None:  # noqa: ANN001
+    """work.pair_found[:n] and pair_key[:n] in the order of the keys (column 0, then 1): a stable LSD
+    radix sort of column 0 (digits of _RADIX_BITS), then an insertion sort of each run of one walker by
+    column 1 (a walker has a few partners)."""
+    found, keys, order, histogram = work.pair_found, work.pair_key, work.pair_order, work.pair_radix
+    if n < 2:
+        return
+    top = 0
+    for r in range(n):
+        top = max(top, keys[r, 0])
+    src, dst = order[0], order[1]
+    for r in range(n):
+        src[r] = r
+    radix = 1 << _RADIX_BITS
+    shift = 0
+    while (top >> shift) > 0:
+        histogram[: radix + 1] = 0
+        for r in range(n):
+            histogram[((keys[src[r], 0] >> shift) & (radix - 1)) + 1] += 1
+        for digit in range(radix):
+            histogram[digit + 1] += histogram[digit]
+        for r in range(n):
+            digit = (keys[src[r], 0] >> shift) & (radix - 1)
+            dst[histogram[digit]] = src[r]
+            histogram[digit] += 1
+        src, dst = dst, src
+        shift += _RADIX_BITS
+    # each walker's partners by their key (runs of a few)
+    run = 0
+    while run < n:
+        end = run + 1
+        while end < n and keys[src[end], 0] == keys[src[run], 0]:
+            end += 1
+        for r in range(run + 1, end):
+            moving = src[r]
+            s = r
+            while s > run and keys[src[s - 1], 1] > keys[moving, 1]:
+                src[s] = src[s - 1]
+                s -= 1
+            src[s] = moving
+        run = end
+    # the rows in that order (through the other permutation buffer's rows as scratch)
+    for r in range(n):
+        dst[r] = found[src[r], 0]
+    for r in range(n):
+        keys[r, 0] = found[src[r], 1]
+    for r in range(n):
+        found[r, 0], found[r, 1] = dst[r], keys[r, 0]
