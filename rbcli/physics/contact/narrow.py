@@ -17,8 +17,8 @@ after its cell, run after run (search.walk_pairs). So each contact here gets the
 its earlier sphere (the walker) and of its later one, and the contacts are sorted by both (a radix sort
 by the walker's key, then each walker's few partners by theirs) before any is handed to the sink, with
 d = p_walker - p_partner exactly as the walk computes it. Nothing is handed on until every pair is
-found, so the walk can still be taken (`pair_contacts` returns -1) when the buffers would overflow or
-the body pairs hold more sphere tests than a walk would make.
+found, so the walk can still be taken (`pair_candidates` returns -1) when the buffers would overflow
+or the body pairs' tests would cost more than the walk's.
 """
 
 from __future__ import annotations
@@ -49,6 +49,9 @@ def pair_candidates(contact, work, gridded) -> int:  # noqa: ANN001
     pairs = work.body_sweep[SWEEP_PAIRS]
     if pairs > work.body_pair.shape[0] or work.pair_found.shape[0] == 0:
         return -1
+    if gridded == 0:  # only plane contacts: no pair to find (and no grid box to size a budget by)
+        work.pair_tests[0] = 0
+        return 0
     grid = grid_box(contact, work, gridded, whole_grid_hashed(contact, work) if gridded else False)
     if not grid[0]:
         return -1
@@ -71,6 +74,9 @@ def pair_candidates_threaded(contact, work, gridded) -> int:  # noqa: ANN001
     pairs = work.body_sweep[SWEEP_PAIRS]
     if pairs > work.body_pair.shape[0] or work.pair_found.shape[0] == 0:
         return -1
+    if gridded == 0:  # only plane contacts: no pair to find (and no grid box to size a budget by)
+        work.pair_tests[0] = 0
+        return 0
     grid = grid_box(contact, work, gridded, whole_grid_hashed(contact, work) if gridded else False)
     if not grid[0]:
         return -1

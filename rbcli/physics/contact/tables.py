@@ -181,7 +181,7 @@ class ContactWork(NamedTuple):
     body_pair: np.ndarray  # int64 (capacity, 2)
     pair_side: np.ndarray  # int64 (runs, 2, largest body's spheres): one per thread
     pair_near: np.ndarray  # (runs, largest body's spheres, 4): one side's spheres, x, y, z [m] and r [m]
-    pair_tally: np.ndarray  # int64 (runs, 8): found, tests, cost of each run (padded: no shared line)
+    pair_tally: np.ndarray  # int64 (runs, 8): found, tests, cost of each run
     pair_found: np.ndarray  # int64 (capacity, 2)
     pair_key: np.ndarray  # int64 (capacity, 2)
     pair_order: np.ndarray  # int64 (2, capacity)
