@@ -6,8 +6,8 @@ grid is hashed, the walk is taken.
 
 Each comparison runs the same state through the search twice, once as configured and once with the
 pair path switched off (a work without its buffers), and compares every output exactly: a contact
-dropped, added, found twice or handed on out of order changes a sum's last bits or the order of the
-recorded contact points.
+dropped, added, found twice or handed on out of order changes a sum's last bits; and the order the
+force stage hands them on is compared with the recorded contact points' (that stream walks).
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ import rbcli.runner.threads as threads_module
 from rbcli.physics.contact.force import accumulate_contact
 from rbcli.physics.contact.points import contact_points
 from rbcli.physics.contact.tables import COUNT_CANDIDATES, COUNT_CONTACTS, make_contact_work
+from rbcli.physics.rotation import quat_to_matrix
 from rbcli.scene.load import load_scene_text
 
 
@@ -69,12 +70,39 @@ def _search(sim: rbcli.Simulation, work) -> tuple[np.ndarray, ...]:  # noqa: ANN
 
 
 def _points(sim: rbcli.Simulation, work) -> np.ndarray:  # noqa: ANN001
-    """The contact points and normal forces in the order the search hands them on."""
+    """The contact points [m] in the order the search hands them on (the contact-points stream)."""
     s = sim.data.state
     point, force = np.zeros((4096, 3)), np.zeros(4096)
     found = contact_points(sim.model.kernel(), sim.forces.contact, work, s.x, s.q, s.P, s.L, point, force)
     assert found < 4096
-    return np.concatenate([point[:found].ravel(), force[:found]])
+    return point[:found]
+
+
+def _sphere_positions(sim: rbcli.Simulation) -> np.ndarray:
+    """p = x_b + R_b r0 of every contact sphere [m] (numpy)."""
+    contact, s = sim.forces.contact, sim.data.state
+    body = contact.sphere_body
+    return s.x[body] + np.einsum("nij,nj->ni", quat_to_matrix(s.q[body]), contact.sphere_offset)
+
+
+def _plane_contacts(sim: rbcli.Simulation) -> int:
+    """Spheres overlapping the scene's plane (numpy)."""
+    contact = sim.forces.contact
+    p = _sphere_positions(sim)
+    normal = contact.plane_normal[0]
+    return int(((p - contact.plane_point[0]) @ normal < contact.sphere_radius).sum())
+
+
+def _pair_points(sim: rbcli.Simulation, pairs: np.ndarray) -> np.ndarray:
+    """The contact point of each pair of spheres (search.py's formula, numpy): halfway through the
+    overlap, from the lower index's partner."""
+    contact = sim.forces.contact
+    p = _sphere_positions(sim)
+    i, j = pairs.min(axis=1), pairs.max(axis=1)
+    d = p[i] - p[j]
+    dist = np.linalg.norm(d, axis=1)
+    overlap = contact.sphere_radius[i] + contact.sphere_radius[j] - dist
+    return p[j] + (contact.sphere_radius[j] - 0.5 * overlap)[:, None] * d / dist[:, None]
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -88,9 +116,11 @@ def test_the_pairs_of_the_body_pairs_are_the_walks_contacts_in_its_order(seed):
     for a, b in zip(mine, theirs, strict=True):
         assert np.array_equal(a, b)
     assert 0 < paired.pair_tests[0] == paired.counters[COUNT_CANDIDATES]  # the pair path was taken
-    # the order the contacts are handed on: the recorded points, contact by contact
-    points = make_contact_work(contact, bodies, history=False)
-    assert np.array_equal(_points(sim, points), _points(sim, _without_pairs(points)))
+    # the order the force stage handed them on (pair_found, sorted) is the walk's: the recorded contact
+    # points (that stream walks) are, after the plane contacts, the points of these pairs in this order
+    pairs = paired.pair_found[: int(paired.stats[0]) - _plane_contacts(sim)]
+    walked_points = _points(sim, make_contact_work(contact, bodies, history=False))
+    np.testing.assert_allclose(walked_points[-len(pairs) :], _pair_points(sim, pairs), rtol=0, atol=1e-12)
 
 
 def test_the_walk_is_taken_where_the_pairs_do_not_fit_or_the_grid_is_hashed():

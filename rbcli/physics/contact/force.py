@@ -57,6 +57,10 @@ class ContactForceSink(NamedTuple):
     tau: np.ndarray
 
 
+# search.pairs_of_bodies: the force stage takes narrow.py's pair path (a class attribute, not a field)
+setattr(ContactForceSink, "PAIRS_OF_BODIES", True)  # noqa: B010
+
+
 @numba.njit(**STEP_KERNEL)
 def begin_contact_step(work, t, h) -> None:  # noqa: ANN001
     """Note the step [t, t + h) being taken: force evaluations measure their offset into it."""

@@ -41,14 +41,19 @@ find now pays. `sphere_positions` stays inlined: it runs on every evaluation.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numba
+from numba.core import types
+from numba.extending import overload
 
 from rbcli.physics.contact.body_phase import body_phase, excluded, place_spheres, whole_grid_hashed
 from rbcli.physics.contact.broad_phase import HALF_SHELL, bucket_of, build_grid_of
-from rbcli.physics.contact.narrow import pair_candidates
+from rbcli.physics.contact.narrow import pair_candidates, pair_candidates_threaded
 from rbcli.physics.contact.tables import ACTIVE_PLANE, PLANE_PARTNER_BASE, SWEEP_SPHERES
 from rbcli.physics.step import STEP_KERNEL
+
+_OPTIONS: Any = STEP_KERNEL  # typed Any: numba's stubs type jit_options as a TypedDict without `_nrt`
 
 
 def contact_found(sink, contact, work, owner, partner, ba, bb, n0, n1, n2, overlap, c0, c1, c2, k, zeta, mu):  # noqa: ANN001, ANN201
@@ -82,12 +87,39 @@ def find_contacts(contact, work, sink) -> int:  # noqa: ANN001
     candidate pairs tested (distance checks)."""
     plane_contacts(contact, work, sink)
     gridded = work.body_sweep[SWEEP_SPHERES]  # the spheres of bodies in body pairs (sphere_positions)
-    found = pair_candidates(contact, work, gridded) if work.pair_found.shape[0] else -1
-    if found >= 0:  # the sphere pairs of the body pairs, in the walk's order (narrow.py)
-        emit_pairs(contact, work, sink, 0, found)
-        return work.pair_tests[0]
+    tested = pairs_of_bodies(contact, work, sink, gridded, False)  # (narrow.py; -1: the walk runs)
+    if tested >= 0:
+        return tested
     grid = grid_of_gridded(contact, work, gridded)
     return walk_pairs(contact, work, sink, grid, 0, gridded)
+
+
+def pairs_of_bodies(contact, work, sink, gridded, threaded) -> int:  # noqa: ANN001
+    """The sphere pairs of the body pairs (narrow.py; on threads when `threaded`, a literal) handed to
+    the sink in the walk's order; returns the tests made, or -1 when the walk must run instead. Kernels
+    only; compiled to -1 where the work has no pair buffers (the body level off), so those scenes
+    compile none of it, and for sinks that do not ask for it (class attribute PAIRS_OF_BODIES: the
+    force stage's; the recorded statistics and contact points run once per frame and walk, which
+    saves compiling a second copy of their code, ~1.6 s each)."""
+    raise TypeError("pairs_of_bodies runs in compiled kernels only")
+
+
+@overload(pairs_of_bodies, jit_options=_OPTIONS, prefer_literal=True)
+def _pairs_of_bodies(contact, work, sink, gridded, threaded):  # noqa: ANN001, ANN202
+    found = dict(zip(work.fields, work.types, strict=True))["pair_found"]
+    wanted = getattr(getattr(sink, "instance_class", None), "PAIRS_OF_BODIES", False)
+    if isinstance(found, types.NoneType) or not wanted:
+        return lambda contact, work, sink, gridded, threaded: -1
+    search = pair_candidates_threaded if getattr(threaded, "literal_value", False) else pair_candidates
+
+    def search_and_emit(contact, work, sink, gridded, threaded):  # noqa: ANN001, ANN202
+        found = search(contact, work, gridded)
+        if found < 0:
+            return -1
+        emit_pairs(contact, work, sink, 0, found)
+        return work.pair_tests[0]
+
+    return search_and_emit
 
 
 @numba.njit(cache=True, inline="always")

@@ -174,19 +174,8 @@ class ContactWork(NamedTuple):
     active_sphere: np.ndarray  # int64 (sphere_count,), the spheres of bodies in body pairs, ascending
     body_trial: np.ndarray  # uint8 (body_count,), 1: its spheres may hold trial contacts (flagged last evaluation)
     body_pair_none: np.ndarray  # int64 (0, 2): quiet.py takes box_pairs' answer, not its pair list
-    # the sphere pairs of the body pairs (narrow.py; 0 rows where the body level is off): the body pairs
-    # (a < b) body_phase found, the spheres of each side of one pair that meet the other's box, the
-    # contacts found (walker, partner) and their sort keys, the sort's permutations and histogram, the
-    # tests made
+    # the body pairs (a < b) body_phase found (narrow.py; 0 rows where the body level is off)
     body_pair: np.ndarray  # int64 (capacity, 2)
-    pair_side: np.ndarray  # int64 (runs, 2, largest body's spheres): one per thread
-    pair_near: np.ndarray  # (runs, largest body's spheres, 4): one side's spheres, x, y, z [m] and r [m]
-    pair_tally: np.ndarray  # int64 (runs, 8): found, tests, cost of each run
-    pair_found: np.ndarray  # int64 (capacity, 2)
-    pair_key: np.ndarray  # int64 (capacity, 2)
-    pair_order: np.ndarray  # int64 (2, capacity)
-    pair_radix: np.ndarray  # int64 (2^11 + 1,)
-    pair_tests: np.ndarray  # int64 (1,)
     # uint8 (body_count,), 1: its spheres may hold history (set by commit_contacts; all 1 after a restore)
     body_history: np.ndarray
     # the quiet skin (quiet.py): int64 (3,) QUIET_ON, QUIET_WAIT, QUIET_ARMED; each body's position [m]
@@ -205,6 +194,19 @@ class ContactWork(NamedTuple):
     # again serially) and its candidate pairs (int64 (blocks,)). None in a serial run: numba compiles no
     # threaded code for it. (Arrays of their own, not a tuple in this one: numba's parallel loops
     # cannot take a tuple nested in a tuple.)
+    # the sphere pairs of the body pairs (narrow.py; None where the body level is off: numba then compiles
+    # none of it, ~8 s of a cold first run): the spheres of each side of one pair that meet the other's
+    # box and the other side's positions and radii, one run per thread, each run's found, tests and
+    # cost, the contacts found (walker, partner) and their sort keys, the sort's permutations and
+    # histogram, the tests made
+    pair_side: np.ndarray | None = None  # int64 (runs, 2, largest body's spheres)
+    pair_near: np.ndarray | None = None  # (runs, largest body's spheres, 4): x, y, z [m] and r [m]
+    pair_tally: np.ndarray | None = None  # int64 (runs, 8)
+    pair_found: np.ndarray | None = None  # int64 (capacity, 2)
+    pair_key: np.ndarray | None = None  # int64 (capacity, 2)
+    pair_order: np.ndarray | None = None  # int64 (2, capacity)
+    pair_radix: np.ndarray | None = None  # int64 (2^11 + 1,)
+    pair_tests: np.ndarray | None = None  # int64 (1,)
     record_int: np.ndarray | None = None
     record_float: np.ndarray | None = None
     record_count: np.ndarray | None = None
@@ -333,6 +335,7 @@ def make_contact_work(contact: ContactTable, body_count: int, *, history: bool =
     largest = int(np.diff(contact.body_sphere_start).max()) if b else 0
     pair_cap, found_cap, side_cap = pair_capacities(b, s, bool(contact.body_level_off), largest)
     runs = max(1, threads) if history else 1
+    paired = found_cap > 0
     return ContactWork(
         clock=np.zeros(3),
         body_velocity=np.zeros((b, 3)),
@@ -369,14 +372,6 @@ def make_contact_work(contact: ContactTable, body_count: int, *, history: bool =
         body_trial=np.zeros(b, dtype=np.uint8),
         body_pair_none=np.zeros((0, 2), dtype=np.int64),
         body_pair=np.zeros((pair_cap, 2), dtype=np.int64),
-        pair_side=np.zeros((runs, 2, side_cap), dtype=np.int64),
-        pair_near=np.zeros((runs, side_cap, 4)),
-        pair_tally=np.zeros((runs, 8), dtype=np.int64),
-        pair_found=np.zeros((found_cap, 2), dtype=np.int64),
-        pair_key=np.zeros((found_cap, 2), dtype=np.int64),
-        pair_order=np.zeros((2, found_cap), dtype=np.int64),
-        pair_radix=np.zeros((1 << 11) + 1, dtype=np.int64),
-        pair_tests=np.zeros(1, dtype=np.int64),
         body_history=np.zeros(b, dtype=np.uint8),
         quiet_state=np.zeros(3, dtype=np.int64),
         quiet_reference=np.zeros((b, 3)),
@@ -384,6 +379,14 @@ def make_contact_work(contact: ContactTable, body_count: int, *, history: bool =
         quiet_skin=np.zeros(b),
         quiet_accel=np.zeros(b),
         quiet_window=np.zeros(2),
+        pair_side=np.zeros((runs, 2, side_cap), dtype=np.int64) if paired else None,
+        pair_near=np.zeros((runs, side_cap, 4)) if paired else None,
+        pair_tally=np.zeros((runs, 8), dtype=np.int64) if paired else None,
+        pair_found=np.zeros((found_cap, 2), dtype=np.int64) if paired else None,
+        pair_key=np.zeros((found_cap, 2), dtype=np.int64) if paired else None,
+        pair_order=np.zeros((2, found_cap), dtype=np.int64) if paired else None,
+        pair_radix=np.zeros((1 << 11) + 1, dtype=np.int64) if paired else None,
+        pair_tests=np.zeros(1, dtype=np.int64) if paired else None,
         record_int=np.zeros((rows, RECORD_INT_COUNT), dtype=np.int64) if threaded else None,
         record_float=np.zeros((rows, RECORD_COUNT)) if threaded else None,
         record_count=np.zeros(blocks, dtype=np.int64) if threaded else None,

@@ -49,12 +49,11 @@ from numba.core import types
 from numba.extending import overload
 
 from rbcli.physics.contact.law import apply_contact, contact_values
-from rbcli.physics.contact.narrow import pair_candidates_threaded
 from rbcli.physics.contact.search import (
     contact_found,
-    emit_pairs,
     find_contacts,
     grid_of_gridded,
+    pairs_of_bodies,
     plane_contacts,
     walk_pairs,
     walk_range,
@@ -114,10 +113,9 @@ def find_contacts_threaded(contact, work, sink) -> int:  # noqa: ANN001
     the same results bit for bit (module docstring); returns the candidate pairs tested."""
     plane_contacts(contact, work, sink)
     gridded = work.body_sweep[SWEEP_SPHERES]
-    found = pair_candidates_threaded(contact, work, gridded) if work.pair_found.shape[0] else -1
-    if found >= 0:  # the sphere pairs of the body pairs, in the walk's order (narrow.py)
-        emit_pairs(contact, work, sink, 0, found)
-        return work.pair_tests[0]
+    tested = pairs_of_bodies(contact, work, sink, gridded, True)  # (narrow.py; -1: the walk runs)
+    if tested >= 0:
+        return tested
     ints, floats = work.record_int, work.record_float
     counts, block_candidates = work.record_count, work.record_candidates
     rows = ints.shape[0] // counts.shape[0]  # a block's rows (make_contact_work; tests give fewer)
