@@ -47,15 +47,9 @@ def pair_candidates(contact, work, gridded) -> int:  # noqa: ANN001
     returns n, or -1 when the walk must be taken instead (the grid would be hashed, a buffer is too
     small, or the pairs' tests would cost more than the walk's estimated checks)."""
     pairs = work.body_sweep[SWEEP_PAIRS]
-    if pairs > work.body_pair.shape[0] or work.pair_found.shape[0] == 0:
-        return -1
-    if gridded == 0:  # only plane contacts: no pair to find (and no grid box to size a budget by)
-        work.pair_tests[0] = 0
-        return 0
-    grid = grid_box(contact, work, gridded, whole_grid_hashed(contact, work) if gridded else False)
-    if not grid[0]:
-        return -1
-    budget = _budget(grid, gridded)
+    ready, grid, budget = _prepare(contact, work, gridded, pairs)
+    if ready <= 0:
+        return ready
     side, near = work.pair_side, work.pair_near
     n, tests, spent = _pairs_of(contact, work, grid, 0, pairs, side[0, 0], side[0, 1], near[0], 0,
                                 work.pair_found.shape[0], budget)  # fmt: skip
@@ -72,15 +66,9 @@ def pair_candidates_threaded(contact, work, gridded) -> int:  # noqa: ANN001
     numba's threads, each into its own share of pair_found; the contacts are then gathered in run order
     and sorted as there, so the result is the same (every contact has its own pair of keys)."""
     pairs = work.body_sweep[SWEEP_PAIRS]
-    if pairs > work.body_pair.shape[0] or work.pair_found.shape[0] == 0:
-        return -1
-    if gridded == 0:  # only plane contacts: no pair to find (and no grid box to size a budget by)
-        work.pair_tests[0] = 0
-        return 0
-    grid = grid_box(contact, work, gridded, whole_grid_hashed(contact, work) if gridded else False)
-    if not grid[0]:
-        return -1
-    budget = _budget(grid, gridded)
+    ready, grid, budget = _prepare(contact, work, gridded, pairs)
+    if ready <= 0:
+        return ready
     side, near, tally, found, keys = work.pair_side, work.pair_near, work.pair_tally, work.pair_found, work.pair_key
     runs = side.shape[0]
     share = found.shape[0] // runs
@@ -105,10 +93,20 @@ def pair_candidates_threaded(contact, work, gridded) -> int:  # noqa: ANN001
 
 
 @numba.njit(cache=True, inline="always")
-def _budget(grid, gridded):  # noqa: ANN001, ANN202
-    """The walk's estimated checks, in the units of `_pairs_of`'s cost (half a check)."""
+def _prepare(contact, work, gridded, pairs):  # noqa: ANN001, ANN202
+    """What both searches check first: (1, the dense grid's tuple, the budget) to search; -1 when the
+    walk must run (a buffer too small, the grid hashed); 0 when no sphere is gridded (only plane
+    contacts: no pair to find, and no grid box to size a budget by). The budget is the walk's estimated
+    checks in the units of `_pairs_of`'s cost (half a check)."""
+    if pairs > work.body_pair.shape[0] or work.pair_found.shape[0] == 0:
+        return -1, (False, 0, 0, 0, 0, 0, 0, np.int64(0)), np.int64(0)  # no grid built
+    if gridded == 0:
+        work.pair_tests[0] = 0
+        return 0, (False, 0, 0, 0, 0, 0, 0, np.int64(0)), np.int64(0)
+    grid = grid_box(contact, work, gridded, whole_grid_hashed(contact, work))
     _, _, _, _, nx, ny, nz, _ = grid
-    return np.int64(2.0 * HALF_SHELL_CELLS * gridded * (gridded / (nx * ny * nz)))
+    budget = np.int64(2.0 * HALF_SHELL_CELLS * gridded * (gridded / (nx * ny * nz)))
+    return (1 if grid[0] else -1), grid, budget
 
 
 @numba.njit(cache=True, inline="always")
