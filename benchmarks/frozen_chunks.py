@@ -3,7 +3,8 @@ positional state arrays, impulses applied by the runner between chunks), for spl
 
 bench_pipeline.py times the generated loops of rbcli/physics/chunks/ against these in the same run
 (interleaved medians): the refactor must keep the chunk kernels within 5 % of them. Do not edit
-beyond following the step signature (force_data, the force pass's mutable arrays, came later).
+beyond following the step signature (force_data, the force pass's mutable arrays, and contact, the
+model's contact table, came later).
 """
 
 import numba
@@ -32,7 +33,7 @@ def run_chunk_split2(
     filled,  # noqa: ANN001
 ):  # noqa: ANN201
     for k in range(n_steps):
-        split2.step(model, forces, force_data, (step0 + k) * dt, dt, x, q, P, L, F, tau, scratch)
+        split2.step(model, forces, model.contact, force_data, (step0 + k) * dt, dt, x, q, P, L, F, tau, scratch)
         filled, stop = record_if_due(step0 + k + 1, record_every, x, q, P, L, frames, filled)
         if stop != STATUS_OK:
             return k + 1, filled, stop
@@ -59,7 +60,7 @@ def run_chunk_rk4(
     filled,  # noqa: ANN001
 ):  # noqa: ANN201
     for k in range(n_steps):
-        rk4.step(model, forces, force_data, (step0 + k) * dt, dt, x, q, P, L, F, tau, scratch)
+        rk4.step(model, forces, model.contact, force_data, (step0 + k) * dt, dt, x, q, P, L, F, tau, scratch)
         filled, stop = record_if_due(step0 + k + 1, record_every, x, q, P, L, frames, filled)
         if stop != STATUS_OK:
             return k + 1, filled, stop

@@ -134,9 +134,7 @@ def adaptive_run(compiled, tolerance: float):  # noqa: ANN001, ANN201
     """Drive the adaptive loop as the runner would; returns (t, q_user (T, N, 4), x, counters)."""
     model, settings = compiled.model, compiled.settings
     n, total, dt = model.body_count, settings.steps, settings.dt
-    data = make_data(
-        compiled.initial_state, compiled.forces, 0, adaptive=True, tolerance=tolerance, duration=total * dt
-    )
+    data = make_data(compiled.initial_state, compiled.model, 0, adaptive=True, tolerance=tolerance, duration=total * dt)
     state, run_chunk = data.state, INTEGRATORS["dopri5"].adaptive_chunk().run_chunk
     frames = empty_buffers(total + 1, n)
     frames.step[0], frames.x[0], frames.q[0], frames.P[0], frames.L[0] = 0, state.x, state.q, state.P, state.L

@@ -171,7 +171,8 @@ def force_terms(spec: SceneSpec) -> tuple[str, ...]:
     drag, impulse, contact), in that order."""
     from rbcli.physics.forces import force_terms_present
 
-    return force_terms_present(_compiled_model(spec).forces)
+    compiled = _compiled_model(spec)
+    return force_terms_present(compiled.forces, compiled.model.contact)
 
 
 def conserved_invariants(spec: SceneSpec, names: Sequence[str]) -> dict[str, bool]:
@@ -180,7 +181,8 @@ def conserved_invariants(spec: SceneSpec, names: Sequence[str]) -> dict[str, boo
     (momentum under gravity, energy under drag): physics/conservation.py has the rules."""
     from rbcli.physics.conservation import conserved_invariants as _kept
 
-    return _kept(_compiled_model(spec).forces, tuple(names))
+    compiled = _compiled_model(spec)
+    return _kept(compiled.model, compiled.forces, tuple(names))
 
 
 def _compiled_model(spec: SceneSpec):  # noqa: ANN202 - scene.compile.CompiledModel

@@ -135,7 +135,7 @@ def fit_order(dt: np.ndarray, error: np.ndarray, floor: np.ndarray | float = 0.0
 def admits_exact_solution(compiled: CompiledScene) -> bool:
     """True when every force term is uniform gravity and no joint holds a body: free flight plus
     torque-free rotation is then exact (a jointed body's motion is not that)."""
-    terms = set(force_terms_present(compiled.forces))
+    terms = set(force_terms_present(compiled.forces, compiled.model.contact))
     return terms <= EXACT_FORCE_TERMS and not compiled.spec.forces and not compiled.spec.joints
 
 
@@ -146,7 +146,7 @@ def conserved_quantities(compiled: CompiledScene) -> tuple[str, ...]:
     (gravity, undamped springs, unscheduled fields with a symmetric gradient); momentum without external
     force (springs between two bodies, pure torques); angular momentum without external torque.
     """
-    kept = conserved_invariants(compiled.forces, INVARIANT_NAMES)
+    kept = conserved_invariants(compiled.model, compiled.forces, INVARIANT_NAMES)
     conserved = []
     if kept["energy_total"]:
         conserved.append("energy")
@@ -238,10 +238,13 @@ def pendulum_of(compiled: CompiledScene) -> Pendulum | None:
     """The Pendulum a scene is, or None (any other body, joint, force, drive, limit or initial motion)."""
     from rbcli.physics.joints.tables import JOINT_HINGE
 
-    joint, model, state = compiled.forces.joint, compiled.model, compiled.initial_state
+    joint, model, state = compiled.model.joint, compiled.model, compiled.initial_state
     if joint is None or model.body_count != 1 or joint.kind.shape[0] != 1 or compiled.spec.forces:
         return None
-    if set(force_terms_present(compiled.forces)) != {"gravity"} or compiled.spec.contact is not None:
+    if (
+        set(force_terms_present(compiled.forces, compiled.model.contact)) != {"gravity"}
+        or compiled.spec.contact is not None
+    ):
         return None
     drives = joint.damping[0] > 0.0 or joint.motor_cap[0] > 0.0
     if joint.kind[0] != JOINT_HINGE or joint.body_b[0] >= 0 or drives or np.isfinite(joint.limit_lower[0]):

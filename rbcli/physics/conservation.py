@@ -40,16 +40,18 @@ import numpy as np
 from rbcli.physics.forces import ForceTables, force_terms_present
 from rbcli.physics.forces.field import field_is_conservative
 from rbcli.physics.forces.point_force import point_force_is_conservative
+from rbcli.physics.model import Model
 
 
-def conserved_invariants(forces: ForceTables, names: tuple[str, ...] | list[str]) -> dict[str, bool]:
-    """For each invariant name, True when the scene's force terms keep it constant (module docstring)."""
-    terms = set(force_terms_present(forces))
+def conserved_invariants(model: Model, forces: ForceTables, names: tuple[str, ...] | list[str]) -> dict[str, bool]:
+    """For each invariant name, True when the scene's force terms (its force tables, and the model's
+    contact and joints) keep it constant (module docstring)."""
+    terms = set(force_terms_present(forces, model.contact))
     g = np.asarray(forces.gravity, dtype=np.float64) if "gravity" in terms else np.zeros(3)
     internal_springs = "spring" not in terms or bool(np.all(forces.spring.body_b >= 0))
     # a term that can add a net external force (and torque) in any direction
     external = bool(terms - {"gravity", "spring", "torque"}) or not internal_springs
-    joint = forces.joint
+    joint = model.joint
     if joint is not None:
         ends = np.concatenate([joint.body_a, joint.body_b[joint.body_b >= 0]])
         external = external or bool(np.any(joint.body_b < 0) or np.any(joint.body_ground[ends]))

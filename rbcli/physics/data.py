@@ -1,7 +1,8 @@
 """Data: every mutable array of a run, allocated once (MuJoCo's mjData beside the constant Model).
 
-The Model (physics/model.py) and the force tables never change during a run; everything a step
-writes lives here, so kernels never allocate and a run's memory is known when it starts:
+The Model (physics/model.py, with its contact, joint and kinematic tables) and the force tables never
+change during a run; everything a step writes lives here, so kernels never allocate and a run's memory
+is known when it starts:
 
     x, q, P, L   the state (physics/state.py has the frames and units); `step` counts grid steps
     F, tau       wrench accumulators [N], [N m], shape (body_count, 3), world frame, about each centre
@@ -12,6 +13,9 @@ writes lives here, so kernels never allocate and a run's memory is known when it
     force        what the force pass writes besides F and tau (forces/tables.py ForceData): stage
                  counters, and the contact stage's grid, per-evaluation arrays and contact history
                  (None without a contact stage, so the kernels compile none of it)
+    joint        the joint stages' work (joints/tables.py JointWork): Jacobians, the solver's work, the
+                 last step's multipliers and reactions; None without joints (the model's joint table
+                 None), so the joint stages compile to nothing
     substeps     integrator steps per grid step (contact sub-stepping; 1 otherwise), a run setting
     adaptive     error-controlled runs only (physics/adaptive.py): stage work (body_count, dopri5
                  width), controller state `control` (2,) and step `counters` int64 (2,) that persist
@@ -29,7 +33,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from rbcli.physics.forces.tables import ForceData, ForceTables, KernelForceTables, make_force_data
+from rbcli.physics.forces.tables import ForceData, make_force_data
+from rbcli.physics.joints.tables import JointWork, make_joint_work
+from rbcli.physics.model import KernelModel, Model
 from rbcli.physics.state import State
 
 # the joints' last (sub-)step impulses in a checkpoint: optional (logs written before it was carried lack it)
@@ -58,6 +64,7 @@ class KernelData(NamedTuple):
     tau: np.ndarray
     scratch: np.ndarray
     force: ForceData
+    joint: JointWork | None
     substeps: int
     adaptive: KernelAdaptive | None = None
 
@@ -71,6 +78,7 @@ class Data:
     tau: np.ndarray
     scratch: np.ndarray
     force: ForceData
+    joint: JointWork | None = None
     substeps: int = 1
     adaptive_work: np.ndarray | None = None
     adaptive_control: np.ndarray | None = None
@@ -88,7 +96,7 @@ class Data:
                 float(self.adaptive_tolerance), float(self.adaptive_duration),
             )  # fmt: skip
         return KernelData(
-            s.x, s.q, s.P, s.L, self.F, self.tau, self.scratch, self.force, int(self.substeps), adaptive
+            s.x, s.q, s.P, s.L, self.F, self.tau, self.scratch, self.force, self.joint, int(self.substeps), adaptive
         )  # fmt: skip
 
     def carried(self) -> dict[str, np.ndarray]:
@@ -108,8 +116,8 @@ class Data:
             array = getattr(self, f"adaptive_{name}")
             if array is not None:
                 arrays[f"adaptive.{name}"] = array
-        if self.force.joint is not None:  # read by no step: the last step's reactions, for the first frame
-            arrays[JOINT_REACTIONS] = self.force.joint.joint_impulse  # a resumed run records (joint_forces)
+        if self.joint is not None:  # read by no step: the last step's reactions, for the first frame
+            arrays[JOINT_REACTIONS] = self.joint.joint_impulse  # a resumed run records (joint_forces)
         return arrays
 
     def restore_carried(self, arrays: dict[str, np.ndarray]) -> None:
@@ -152,7 +160,7 @@ class Data:
 
 def make_data(
     initial: State,
-    forces: ForceTables | KernelForceTables,
+    model: Model | KernelModel,
     scratch_width: int,
     *,
     adaptive: bool = False,
@@ -161,16 +169,18 @@ def make_data(
     duration: float = 0.0,
     contact_threads: int = 1,
 ) -> Data:
-    """A Data for `initial` (copied) and the force tables `forces`: zeroed accumulators, scratch and
-    force data; with `adaptive`, the adaptive loop's arrays (physics/adaptive.py: adaptive_work, their
-    one definition) and its error budget `tolerance` for a run `duration` [s] long; contact_threads > 1:
-    the contact pair search on that many threads (contact/threaded.py)."""
+    """A Data for `initial` (copied) and the model `model` (either form; its contact and joint tables
+    size the contact and joint work): zeroed accumulators, scratch, force data and joint work; with
+    `adaptive`, the adaptive loop's arrays (physics/adaptive.py: adaptive_work, their one definition)
+    and its error budget `tolerance` for a run `duration` [s] long; contact_threads > 1: the contact
+    pair search on that many threads (contact/threaded.py)."""
     n = initial.x.shape[0]
     state = initial.copy()
     if substeps < 1:
         raise ValueError(f"substeps must be >= 1, got {substeps}")
     F, tau, scratch = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, scratch_width))
-    data = Data(state, F, tau, scratch, make_force_data(forces, contact_threads), substeps=int(substeps))
+    joint = make_joint_work(model.joint) if model.joint is not None and model.joint.body_a.shape[0] else None
+    data = Data(state, F, tau, scratch, make_force_data(model, contact_threads), joint, substeps=int(substeps))
     if adaptive:
         from rbcli.physics.adaptive import adaptive_work
 

@@ -10,8 +10,9 @@ and p0 the pivot it turns about [world, at t = 0; default its centre of mass x0]
     v(t) = s(t) (v0 + w0 x (x(t) - p(t))),   w(t) = s(t) w0,   P = M v,   L = I w
 
 (kinematic bodies get an isotropic inertia I at compile time, so L = I w in any frame). A constant
-velocity is the schedule-free case, `kinematic: true`. The table (`KinematicTable`, one row per body)
-is one of the ForceTables (forces/tables.py); kinematic_reference.py holds the numpy reference of the
+velocity is the schedule-free case, `kinematic: true`. The table (`KinematicTable`, one row per body:
+kinematic_table.py) is the model's `kinematic` (physics/model.py); its schedules are rows of the force
+terms' ScheduleTable (forces/tables.py). kinematic_reference.py holds the numpy reference of the
 closed form (numpy only: the scene compiler uses it for the initial state). Kinematic bodies are not
 contact code: contact sees them as bodies of infinite contact mass (inverse contact mass 0,
 contact/tables.py) moving at the velocity the stages below set.

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rbcli.physics.forces.tables import KinematicTable
+from rbcli.physics.kinematic_table import KinematicTable
 from rbcli.physics.rotation import quat_multiply, quat_rotate
 
 

@@ -5,15 +5,24 @@ I0 = sum m_i (r0_i . r0_i 1 - r0_i r0_i^T). rbsim then diagonalises I0: internal
 the principal frame (I0 = diag(I1, I2, I3)), which makes omega = I^-1 L three multiplications and
 is what the splitting and exact integrators need. `body_frame_q` keeps the fixed rotation from the
 principal frame to the user's particle frame so every output is reported in the user's frame.
+
+The model also holds the scene's other constant tables, as MuJoCo's mjModel holds every table: `contact`
+(contact spheres, materials, planes, static bodies: physics/contact/tables.py), `joint` (the joints:
+physics/joints/tables.py) and `kinematic` (the kinematic bodies' prescribed motions: kinematic_table.py).
+The force terms are the force tables' (physics/forces/tables.py). `build_model` builds the bodies;
+scene/compile.py adds the tables.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
 
+from rbcli.physics.contact.tables import ContactTable, contact_present, contact_table
+from rbcli.physics.joints.tables import JointTable
+from rbcli.physics.kinematic_table import KinematicTable, kinematic_table
 from rbcli.physics.rotation import matrix_to_quat, quat_to_matrix
 
 # A principal moment below this fraction of the largest makes I0 singular (collinear or single-point
@@ -59,8 +68,11 @@ def inertia_is_degenerate(moments: np.ndarray) -> bool:
     return bool(moments.min() <= INERTIA_DEGENERACY_RATIO * max(moments.max(), np.finfo(float).tiny))
 
 
-class KernelModel(NamedTuple):
-    """The model's arrays as compiled kernels take them (a numba-friendly named tuple)."""
+class KernelBodies(NamedTuple):
+    """The model's body and particle arrays as compiled kernels take them (a numba-friendly named tuple):
+    what every kernel below the chunk loops takes as `model`. One numba type for every scene, so a stage
+    kernel compiled for one kind of scene serves every other (physics/kernel_link.py); the chunk loops
+    take the whole KernelModel and pass its tables by name (physics/pipeline.py)."""
 
     body_mass: np.ndarray  # [kg], (body_count,)
     body_inertia: np.ndarray  # principal moments [kg m^2], (body_count, 3)
@@ -72,12 +84,35 @@ class KernelModel(NamedTuple):
     body_frame: np.ndarray  # E, user-from-principal rotation, (body_count, 3, 3)
 
 
+class KernelModel(NamedTuple):
+    """The whole model as the compiled chunk loops take them (`Model.kernel()`): KernelBodies' arrays,
+    then the tables, each None where the scene lacks it, so numba types it as NoneType and the stages
+    that use it compile to nothing (physics/stages.py, joints/stages.py); a scene always gets the same
+    combination, so its loop's numba type is the same from run to run."""
+
+    body_mass: np.ndarray
+    body_inertia: np.ndarray
+    body_inertia_inv: np.ndarray
+    particle_offset: np.ndarray
+    particle_mass: np.ndarray
+    body_particle_start: np.ndarray
+    body_particle_count: np.ndarray
+    body_frame: np.ndarray
+    contact: ContactTable | None  # None without contact spheres and static bodies (`contact_present`)
+    joint: JointTable | None  # None without joints
+    kinematic: KinematicTable | None  # None without kinematic bodies
+
+
 @dataclass(frozen=True)
 class Model:
     """Constant description of the bodies; read-only after compilation.
 
     body_frame_q: (body_count, 4) wxyz, rotation user-frame-from-principal-frame (the E above).
     particle_offset_user: (particle_count, 3) [m], user frame, about the centre of mass (for output).
+    contact: contact spheres, materials, planes and static bodies (0 spheres and no static body: no
+      contact stages). joint: the joints, None without joints. kinematic: the kinematic bodies' motions
+      (0 rows: no kinematic stages). Python code reads every Model alike (`model.contact.sphere_body`);
+      kernels take `kernel()`, in which absent tables are None.
     """
 
     body_names: tuple[str, ...]
@@ -90,6 +125,9 @@ class Model:
     particle_radius: np.ndarray
     body_particle_start: np.ndarray
     body_particle_count: np.ndarray
+    contact: ContactTable = field(default_factory=contact_table)
+    joint: JointTable | None = None
+    kinematic: KinematicTable = field(default_factory=kinematic_table)
 
     @property
     def body_count(self) -> int:
@@ -100,8 +138,19 @@ class Model:
         return int(self.particle_mass.shape[0])
 
     def kernel(self) -> KernelModel:
-        """Arrays for compiled kernels."""
+        """The model as the chunk loops take it: the body arrays and each table, None where the scene
+        lacks it (see KernelModel)."""
         return KernelModel(
+            *self.kernel_bodies(),
+            contact=self.contact if contact_present(self.contact) else None,
+            joint=self.joint,  # None without joints (a table of welds alone has 0 rows: its stages skip)
+            kinematic=self.kinematic if self.kinematic.body.shape[0] else None,
+        )
+
+    def kernel_bodies(self) -> KernelBodies:
+        """The body and particle arrays as kernels below the chunk loops take them (see KernelBodies):
+        what Python passes a stage kernel it calls itself (the recording thread's joint violations)."""
+        return KernelBodies(
             self.body_mass,
             self.body_inertia,
             1.0 / self.body_inertia,

@@ -24,15 +24,18 @@ A step from grid index n (t = n dt) to n + 1 runs, in this order (STEP_STAGES):
     record          on recording steps: the divergence check, then the state copied into the next frame
 
 Each optional stage is present only when the scene needs it, decided when numba compiles the loop, not
-at run time: the loop takes `ForceTables.kernel()`, in which a force type's table is None when the scene
-has none of it, and calls the stage through a dispatcher of forces/stages.py (a `numba.extending.
-overload`) that compiles to nothing for a None table and to the stage otherwise (the joint stages
-prune themselves instead: joints/stages.py). A run-time test
-(`if forces.impulse.body.shape[0]:`, as these loops had) skips the work but still compiles the stage
-(numba compiles both sides of a branch), so a gravity-only scene's first run compiled the impulses and
-the contact stage too. A scene always gets the same combination of None and tables, so numba's cache
-holds one loop per scene kind; a loop called with a plain ForceTables (tests, benchmarks) compiles every
-stage and skips the empty ones at run time.
+at run time: the loop takes `Model.kernel()` and `ForceTables.kernel()`, in which the model's contact,
+joint and kinematic tables and each force type's table are None when the scene has none of it, and
+calls the stage through a dispatcher of physics/stages.py (a `numba.extending.overload`,
+physics/dispatch.py) that compiles to nothing for a None table and to the stage otherwise (the joint
+stages prune themselves instead: joints/stages.py). A run-time test (`if forces.impulse.body.shape[0]:`,
+as these loops had) skips the work but still compiles the stage (numba compiles both sides of a
+branch), so a gravity-only scene's first run compiled the impulses and the contact stage too. A scene
+always gets the same combination of None and tables, so numba's cache holds one loop per scene kind; a
+loop called with a plain ForceTables (tests, benchmarks) compiles every force stage and skips the empty
+ones at run time. Before its first step the loop takes the model apart: its tables by name (`contact`,
+`joint`, `kinematic`) and its body arrays alone (`model_bodies`, physics/step.py) as `model`, one numba
+type for every kind of scene, so each stage kernel below the loop is compiled once for all of them.
 
 The runner (runner/loop.py) owns time, chunk sizes, sinks and interrupts; a chunk loop never prints,
 writes files or allocates.
@@ -47,7 +50,7 @@ committed files differ from the template, and regenerates them with
     python tests/physics/test_pipeline.py --regenerate
 
 Adding a stage: one entry in STEP_STAGES (this file), the stage's own module (with a dispatcher in
-forces/stages.py when only some scenes have it), and the regeneration. The entry says which loops have
+physics/stages.py when only some scenes have it), and the regeneration. The entry says which loops have
 it (`loops`: FIXED, ADAPTIVE or BOTH, the default; `integrators`: the integrator modules, default all)
 and, for the adaptive loop, what Stage's docstring lists (`lands_at`, `restarts`, `prepares_evaluation`).
 Adaptive runs (a tolerance instead of dt) step between output times under error control: their loop
@@ -71,19 +74,20 @@ UPDATE = "update"  # the integrator's own stage: a step in FIXED loops, an error
 class Stage:
     """One stage of a step, as code inside the chunk loops.
 
-    Names the code may use: model, forces, data (KernelData), x, q, P, L, F, tau, scratch (data's arrays),
-    force_data (data.force), contact and contact_work (forces.contact and force_data.contact, None without
-    contact), dt, index (the grid step being taken), t = index * dt, frames, filled, record_every, status;
-    `integrator_step` is the integrator's update; joint and joint_work (forces.joint and force_data.joint,
-    None without joints: fixed-step loops only). Use the names, not `data.F`, `data.force` or
-    `forces.joint`: the loop takes them out of their tuples once, before it starts (each `data.force` inside
-    the loop increfs and decrefs every array the tuple holds, every step). Consecutive sub-step stages form
-    one loop run data.substeps times (contact sub-stepping, 1 otherwise), where ts and h are the sub-step's
-    start time and length. Placeholders, filled per loop: `{te}` the sub-step's end time (ts + h; in the
+    Names the code may use: model (the model's body arrays, KernelBodies: one numba type for every scene),
+    forces, data (KernelData), x, q, P, L, F, tau, scratch (data's arrays), force_data (data.force), the
+    model's tables contact, joint and kinematic (None where the scene lacks them), contact_work
+    (force_data.contact) and joint_work (data.joint), schedule (forces.schedule), dt, index (the grid step
+    being taken), t = index * dt, frames, filled, record_every, status; `integrator_step` is the
+    integrator's update. Use the names, not `data.F`, `data.force` or `model.joint`: the loop takes them
+    out of their tuples once, before it starts (each `data.force` inside the loop increfs and decrefs every
+    array the tuple holds, every step), and `model` is the body arrays alone by then. Consecutive sub-step
+    stages form one loop run data.substeps times (contact sub-stepping, 1 otherwise), where ts and h are
+    the sub-step's start time and length. Placeholders, filled per loop: `{te}` the sub-step's end time (ts + h; in the
     adaptive loop exactly the grid time it lands on), `{reached}` the grid index a step-end stage follows
     (index + 1; in the adaptive loop the index it landed on), `{recording}` whether that index is a
     recording step, `{due}` (fixed loops' materialise only). A stage that only some scenes have calls a
-    dispatcher (forces/stages.py) that compiles to nothing without it, or a function that takes its table
+    dispatcher (physics/stages.py) that compiles to nothing without it, or a function that takes its table
     itself and prunes its body when numba types that table as None (`if table is None: return`,
     joints/stages.py: no compiled level between the loop and the stage).
 
@@ -120,7 +124,7 @@ STEP_STAGES: tuple[Stage, ...] = (
     Stage(
         "impulses",
         "impulses: exact jumps of P and L at the start of the step that holds them",
-        ("from rbcli.physics.forces.stages import impulse_stage, next_impulse_step_stage",),
+        ("from rbcli.physics.stages import impulse_stage, next_impulse_step_stage",),
         "impulse_stage(model, forces, force_data, t, t + dt, x, q, P, L)",
         lands_at="next_impulse_step_stage(forces, dt, index)",
     ),
@@ -135,7 +139,7 @@ STEP_STAGES: tuple[Stage, ...] = (
     Stage(
         "contact_begin",
         "contact_begin: the contact springs measure time from the start of this (sub-)step",
-        ("from rbcli.physics.forces.stages import contact_begin_stage",),
+        ("from rbcli.physics.stages import contact_begin_stage",),
         "contact_begin_stage(contact, contact_work, ts, h)",
         substep=True,
         prepares_evaluation=True,
@@ -143,8 +147,8 @@ STEP_STAGES: tuple[Stage, ...] = (
     Stage(
         "kinematic_begin",
         "kinematic_begin: kinematic bodies at their exact pose, moving at their mean velocity over the (sub-)step",
-        ("from rbcli.physics.forces.stages import kinematic_begin_stage",),
-        "kinematic_begin_stage(model, forces, ts, h, x, q, P, L)",
+        ("from rbcli.physics.stages import kinematic_begin_stage",),
+        "kinematic_begin_stage(model, kinematic, schedule, ts, h, x, q, P, L)",
         substep=True,
         restarts=True,
     ),
@@ -152,14 +156,14 @@ STEP_STAGES: tuple[Stage, ...] = (
         UPDATE,
         "update: the integrator's maths, its force evaluations through forces.wrench.accumulate_wrench",
         (),
-        "integrator_step(model, forces, force_data, ts, h, x, q, P, L, F, tau, scratch)",
+        "integrator_step(model, forces, contact, force_data, ts, h, x, q, P, L, F, tau, scratch)",
         substep=True,
     ),
     Stage(
         "kinematic_end",
         "kinematic_end: kinematic bodies at their exact state at the end of the (sub-)step (closed form)",
-        ("from rbcli.physics.forces.stages import kinematic_end_stage",),
-        "kinematic_end_stage(model, forces, {te}, x, q, P, L)",
+        ("from rbcli.physics.stages import kinematic_end_stage",),
+        "kinematic_end_stage(model, kinematic, schedule, {te}, x, q, P, L)",
         substep=True,
     ),
     Stage(
@@ -183,7 +187,7 @@ STEP_STAGES: tuple[Stage, ...] = (
     Stage(
         "contact_commit",
         "contact_commit: the (sub-)step is complete: its last evaluation's contacts become the history",
-        ("from rbcli.physics.forces.stages import contact_commit_stage",),
+        ("from rbcli.physics.stages import contact_commit_stage",),
         "contact_commit_stage(model, contact, contact_work, x, q, P, L)",
         substep=True,
     ),
@@ -191,14 +195,14 @@ STEP_STAGES: tuple[Stage, ...] = (
         "materialise",
         "materialise: exact defers torque-free bodies under constant forces; write them when due",
         ("from rbcli.physics.integrators.exact import materialise",),
-        "materialise(model, forces, t, dt, x, q, P, L, scratch, {due})",
+        "due = {due}\nmaterialise(model, forces, contact, t, dt, x, q, P, L, scratch, due)",
         integrators=("exact",),
         loops=(FIXED,),
     ),
     Stage(
         "contact_record",
         "contact_record: on recording steps, the state's contact count, deepest overlap and energy",
-        ("from rbcli.physics.forces.stages import contact_record_stage",),
+        ("from rbcli.physics.stages import contact_record_stage",),
         "contact_record_stage(contact, contact_work, x, q, frames, filled, {recording})",
     ),
     Stage(
@@ -240,9 +244,8 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
     """
     # taken out of their tuples once: inside the loop each would be increfed and decrefed every step
     x, q, P, L, F, tau, scratch = data.x, data.q, data.P, data.L, data.F, data.tau, data.scratch
-    force_data, contact = data.force, forces.contact
-    contact_work = force_data.contact
-{joints}    substeps = data.substeps
+    force_data = data.force
+{tables}{bodies}    substeps = data.substeps
     h = dt / substeps
     for k in range(n_steps):
         index = step0 + k
@@ -280,15 +283,14 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
     """
     # taken out of their tuples once, as in the fixed-step loops
     x, q, P, L, F, tau = data.x, data.q, data.P, data.L, data.F, data.tau
-    force_data, contact = data.force, forces.contact
-    contact_work = force_data.contact
-    adaptive = data.adaptive
+    force_data = data.force
+{tables}{bodies}    adaptive = data.adaptive
     work, control, counters, tolerance = adaptive.work, adaptive.control, adaptive.counters, adaptive.tolerance
     index = step0
     end = step0 + n_steps
     land = end  # the next grid index a step-start stage needs the loop to stand on
     t = step0 * dt
-    h_max = contact_step_limit(forces)  # inf without contact
+    h_max = contact_step_limit(contact)  # inf without contact
     # steps shorter than h_floor are allowed the error of one that long: the step across a touch-down
     # or a schedule's window edge (adaptive.py)
     h_floor = max(CONTACT_STEP_FLOOR * h_max if h_max < np.inf else 0.0, schedule_step_floor(forces, dt))
@@ -303,7 +305,7 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
             restart, moved = False, False
             land = end
 {start}            ts, h = t, 0.0  # k_1's evaluation: offset 0 into a step
-{prepare}            begin(model, forces, force_data, t, x, q, P, L, F, tau, work)  # y0 and k_1
+{prepare}            begin(model, forces, contact, force_data, t, x, q, P, L, F, tau, work)  # y0 and k_1
             if h_next <= 0.0:
                 h_next = initial_step(x, q, P, L, work, tolerance, record_every * dt)
             h_next = min(h_next, h_max)
@@ -315,10 +317,10 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
         te = target * dt if landing else t + h
 {before}        if moved:  # the state changed since k_1 was evaluated: evaluate it again
             moved = False
-            begin(model, forces, force_data, t, x, q, P, L, F, tau, work)
+            begin(model, forces, contact, force_data, t, x, q, P, L, F, tau, work)
         # update: one attempt over [ts, ts + h), its 4th-order error estimate against the budget per step
-        advance(model, forces, force_data, t, h, x, q, P, L, F, tau, work)
-        err = error_norm(model, forces, force_data, t, h, per_time * max(h, h_floor), x, q, P, L, F, tau, work)
+        advance(model, forces, contact, force_data, t, h, x, q, P, L, F, tau, work)
+        err = error_norm(model, forces, contact, force_data, t, h, per_time * max(h, h_floor), x, q, P, L, F, tau, work)
         if err <= 1.0:
             counters[COUNT_ACCEPTED] += 1
             accept(x, q, P, L, work)
@@ -358,10 +360,37 @@ _ADAPTIVE_IMPORTS = {
         "CONTACT_STEP_FLOOR", "CONTROL_REJECTED_LAST", "CONTROL_STEP", "COUNT_ACCEPTED", "COUNT_REJECTED",
         "FAC_MAX", "FAC_MIN", "SAFETY", "STATUS_STEP_TOO_SMALL", "STEP_MIN_RELATIVE", "initial_step",
     },
-    "rbcli.physics.forces.stages": {"contact_step_limit", "schedule_step_floor"},
-    "rbcli.physics.step": {"CHUNK_KERNEL", "STATUS_OK", "chunk_status"},
+    "rbcli.physics.stages": {"contact_step_limit", "schedule_step_floor"},
+    "rbcli.physics.step": {"CHUNK_KERNEL", "STATUS_OK", "chunk_status", "model_bodies"},
 }  # fmt: skip
 _ADAPTIVE_METHOD = ("accept", "advance", "begin", "error_norm", "restore")  # the integrator module's kernels
+
+
+# What a loop takes out of the model, the force tables and the Data before it starts, where its stages'
+# code uses it: the model's tables and the schedules, then the work arrays of contact and joints
+_TAKEN = (
+    (("contact", "model.contact"), ("joint", "model.joint"), ("kinematic", "model.kinematic"),
+     ("schedule", "forces.schedule")),
+    (("contact_work", "force_data.contact"), ("joint_work", "data.joint")),
+)  # fmt: skip
+
+# then `model` becomes the body arrays alone, what every stage and integrator takes
+_BODIES = """\
+    # from here on `model` is the model's body arrays alone (KernelBodies): one numba type for every
+    # kind of scene, so each stage kernel below is compiled once for all of them; tables go by name
+    model = model_bodies(model)
+"""
+
+
+def _taken(code: str) -> str:
+    """The header lines that take out of their tuples the names of _TAKEN that `code` uses."""
+    used = set(re.findall(r"\w+", code))
+    lines = []
+    for group in _TAKEN:
+        found = [(name, source) for name, source in group if name in used]
+        if found:
+            lines.append(f"    {', '.join(name for name, _ in found)} = {', '.join(source for _, source in found)}\n")
+    return "".join(lines)
 
 
 def _indent(code: str, depth: int) -> str:
@@ -418,7 +447,7 @@ def loop_stages(module: str, loop: str, stages: tuple[Stage, ...] = STEP_STAGES)
 def chunk_source(module: str, name: str, stages: tuple[Stage, ...] = STEP_STAGES, parallel: bool = False) -> str:
     """The Python source of the fixed-step chunk loop of integrator module `module` (registry name `name`);
     parallel: the loop calling the module's `step_parallel` (chunks/<module>_parallel.py), the same stages."""
-    body = []
+    body, codes = [], []
     in_substeps = False
     stages = loop_stages(module, FIXED, stages)
     for i, stage in enumerate(stages):
@@ -430,14 +459,14 @@ def chunk_source(module: str, name: str, stages: tuple[Stage, ...] = STEP_STAGES
         code = _fill(stage, "ts + h", "index + 1", "(index + 1) % record_every == 0", _state_due(stages[i + 1 :]))
         if stage.ends_chunk:
             code += "\nif status != STATUS_OK:\n    return k + 1, filled, status"
+        codes.append(code)
         body.append(_indent(f"# {stage.why}", depth))
         body.append(_indent(code, depth))
     own = f"rbcli.physics.integrators.{module}"
-    names = {"rbcli.physics.step": {"CHUNK_KERNEL", "chunk_status"}, own: {"SCRATCH_WIDTH"}}
-    joints = "    joint, joint_work = forces.joint, force_data.joint\n" if "joint_work" in "".join(body) else ""
+    names = {"rbcli.physics.step": {"CHUNK_KERNEL", "chunk_status", "model_bodies"}, own: {"SCRATCH_WIDTH"}}
     imports = _import_lines(names, stages, "".join(body), own, "step_parallel" if parallel else "step")
     title = f"`{name}` on threads" if parallel else f"`{name}`"
-    head = _HEADER.format(name=title, imports=imports, joints=joints)
+    head = _HEADER.format(name=title, imports=imports, tables=_taken("\n".join(codes)), bodies=_BODIES)
     return head + "".join(body) + _FOOTER
 
 
@@ -475,4 +504,7 @@ def adaptive_source(module: str, name: str, stages: tuple[Stage, ...] = STEP_STA
     )
     own = f"rbcli.physics.integrators.{module}"
     imports = _import_lines({**_ADAPTIVE_IMPORTS, own: set(_ADAPTIVE_METHOD)}, stages, "".join(parts.values()))
-    return _ADAPTIVE_HEADER.format(name=name, imports=imports, **parts)
+    # the loop's own code passes `contact` (the step limit, the method's force evaluations)
+    codes = ["contact", *(_fill(stage, "te", "index", "index % record_every == 0") for stage in stages)]
+    tables = _taken("\n".join(codes))
+    return _ADAPTIVE_HEADER.format(name=name, imports=imports, tables=tables, bodies=_BODIES, **parts)

@@ -1,5 +1,6 @@
 """Shared pieces of the chunk loops (physics/pipeline.py generates the loops themselves): the frame
-buffers, the recording stage `record_if_due`, the divergence check and the chunk status codes.
+buffers, the recording stage `record_if_due`, the divergence check, the chunk status codes and
+`model_bodies`, the model's body arrays that the loops hand every stage.
 
 A chunk returns (steps_done, frames_filled, status): STATUS_OK (ran n_steps), STATUS_FULL (the frame
 buffers are full: flush them and call again), STATUS_DIVERGED (the last step left a non-finite or
@@ -15,6 +16,7 @@ import numba
 import numpy as np
 
 from rbcli.physics import kernel_cache
+from rbcli.physics.model import KernelBodies
 
 kernel_cache.install()  # loads of the kernels skip numba's registry build (kernel_cache.py)
 
@@ -85,6 +87,18 @@ def empty_buffers(capacity: int, body_count: int, joint_count: int = 0) -> Frame
         np.zeros((capacity, CONTACT_STATS)),
         np.zeros((capacity, joint_count, 12)),
     )
+
+
+@numba.njit(cache=True, inline="always")
+def model_bodies(model):  # noqa: ANN001, ANN201
+    """The body and particle arrays of a KernelModel (or KernelBodies) as a KernelBodies: what a chunk loop
+    passes every stage and integrator as `model`. Its numba type is the same whichever tables the scene
+    has, so a stage kernel compiled for one kind of scene serves all (physics/kernel_link.py), and a
+    call passes no table it does not use; the loop passes the tables by name."""
+    return KernelBodies(
+        model.body_mass, model.body_inertia, model.body_inertia_inv, model.particle_offset, model.particle_mass,
+        model.body_particle_start, model.body_particle_count, model.body_frame,
+    )  # fmt: skip
 
 
 @numba.njit(cache=True)

@@ -46,7 +46,7 @@ def make_block(
                 block.invariants[name] = np.ascontiguousarray(stats[:, k], dtype=np.float64)
             for name in ("energy_potential", "energy_total"):  # the contact springs' energy is potential
                 block.invariants[name] = block.invariants[name] + block.invariants["contact_energy"]
-        if compiled.forces.joint is not None:
+        if compiled.model.joint is not None:
             for name, column in zip(JOINT_INVARIANT_NAMES, joint_invariants(compiled, x, q, P, L).T, strict=True):
                 block.invariants[name] = np.ascontiguousarray(column)
     if "particles" in settings.streams:
@@ -61,7 +61,7 @@ def make_block(
 
 def recorded_joint_count(compiled: CompiledScene) -> int:
     """The joints whose reactions the run records: all of them with the joint_forces stream, else 0."""
-    table = compiled.forces.joint
+    table = compiled.model.joint
     if table is None or "joint_forces" not in compiled.settings.streams:
         return 0
     return int(table.body_a.shape[0])
@@ -72,10 +72,10 @@ def joint_invariants(compiled: CompiledScene, x: np.ndarray, q: np.ndarray, P: n
     from rbcli.physics.joints.tables import make_joint_work
     from rbcli.physics.joints.violation import joint_violations
 
-    table = compiled.forces.joint
+    table = compiled.model.joint
     assert table is not None
     out = np.zeros((x.shape[0], 2))
-    joint_violations(compiled.model.kernel(), table, make_joint_work(table), x, q, P, L, out)
+    joint_violations(compiled.model.kernel_bodies(), table, make_joint_work(table), x, q, P, L, out)
     return out
 
 
@@ -87,9 +87,9 @@ def frame_contacts(
     from rbcli.physics.contact.points import contact_points
     from rbcli.physics.contact.tables import make_contact_work
 
-    table = compiled.forces.contact
+    table = compiled.model.contact
     work = make_contact_work(table, compiled.model.body_count, history=False)
-    model = compiled.model.kernel()
+    model = compiled.model.kernel_bodies()
     capacity = max(16, table.sphere_radius.shape[0])
     point, force = np.empty((capacity, 3)), np.empty(capacity)
     points, forces = [], []

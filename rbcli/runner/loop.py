@@ -74,7 +74,7 @@ def run_header(compiled: CompiledScene, *, steps: int | None = None, record_ever
             (
                 *INVARIANT_NAMES,
                 *(CONTACT_INVARIANT_NAMES if compiled.contact is not None else ()),
-                *(JOINT_INVARIANT_NAMES if compiled.forces.joint is not None else ()),
+                *(JOINT_INVARIANT_NAMES if compiled.model.joint is not None else ()),
             )
             if "invariants" in settings.streams
             else ()
@@ -146,7 +146,7 @@ def run_simulation(
         else:  # the current state's (as the chunks' contact_record stage writes them)
             from rbcli.physics.contact.state import record_contact_state
 
-            record_contact_state(sim.forces.contact, contact, state.x, state.q, buf.contact, frames)
+            record_contact_state(sim.model.contact, contact, state.x, state.q, buf.contact, frames)
         if buf.joint.shape[1]:  # the last step's reactions (joint_record's), unknown before any step
             buf.joint[frames] = sim.last_reactions() if sim.reactions_known else np.nan
         return frames + 1
@@ -278,5 +278,5 @@ def contact_overflow(sim) -> tuple[int | None, str]:  # noqa: ANN001 - a Simulat
     if work is None:
         return None, ""
     sphere = int(work.overflow_sphere[0])
-    body = sim.model.body_names[int(sim.forces.contact.sphere_body[sphere])] if sphere >= 0 else ""
+    body = sim.model.body_names[int(sim.model.contact.sphere_body[sphere])] if sphere >= 0 else ""
     return int(work.counters[COUNT_OVERFLOW]), body

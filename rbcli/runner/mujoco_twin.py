@@ -71,13 +71,13 @@ def mujoco_version() -> str | None:
 def refusal(compiled: CompiledScene) -> str | None:
     """Why MuJoCo cannot run this scene as rbsim does, or None when it can (free bodies under uniform
     gravity, or under no force at all)."""
-    terms = [t for t in force_terms_present(compiled.forces) if t != "gravity"]
-    contact = compiled.forces.contact
+    terms = [t for t in force_terms_present(compiled.forces, compiled.model.contact) if t != "gravity"]
+    contact = compiled.model.contact
     if contact.static_body.size:
         terms.append("static bodies")
     if contact.sphere_body.size and "contact" not in terms:
         terms.append("contact")
-    if compiled.forces.joint is not None:  # the twin builds free bodies only (a jointed twin: next)
+    if compiled.model.joint is not None:  # the twin builds free bodies only (a jointed twin: next)
         terms.append("joints")
     if terms:
         return (

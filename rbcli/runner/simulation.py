@@ -112,7 +112,7 @@ class Simulation:
         if tolerance is not None:  # the error-controlled loop, generated from the same stages (physics/adaptive.py)
             self._chunk = info.adaptive_chunk().run_chunk
             self.data = make_data(
-                compiled.initial_state, self.forces, 0, adaptive=True, tolerance=tolerance,
+                compiled.initial_state, self.model, 0, adaptive=True, tolerance=tolerance,
                 duration=self.settings.steps * self.settings.dt,
             )  # fmt: skip
         else:
@@ -122,7 +122,7 @@ class Simulation:
             contact = compiled.contact is not None
             self.threads = chunk_threads(count, info.parallel, compiled.model.body_count, contact)
             if contact:
-                spheres = compiled.forces.contact.sphere_radius.shape[0]
+                spheres = compiled.model.contact.sphere_radius.shape[0]
                 self.contact_threads = contact_threads(count, spheres)
             if max(self.threads, self.contact_threads) > 1:  # numba launches at most NUMBA_NUM_THREADS
                 import numba  # (sweep workers: 1)
@@ -132,11 +132,11 @@ class Simulation:
             chunk = info.parallel_chunk() if self.threads > 1 else info.chunk()
             self._chunk = chunk.run_chunk
             self.data = make_data(
-                compiled.initial_state, self.forces, chunk.SCRATCH_WIDTH, substeps=self.settings.substeps,
+                compiled.initial_state, self.model, chunk.SCRATCH_WIDTH, substeps=self.settings.substeps,
                 contact_threads=self.contact_threads,
             )  # fmt: skip
-        self._kmodel = self.model.kernel()
-        self._kforces = self.forces.kernel()  # None for unused force types: their stages compile away
+        self._kmodel = self.model.kernel()  # None for the tables the scene lacks: their stages compile away
+        self._kforces = self.forces.kernel()  # None for unused force types, likewise
         self._kdata = self.data.kernel()
         from rbcli.physics.step import empty_buffers
 
@@ -232,14 +232,14 @@ class Simulation:
         sub-steps, the last sub-step's). Zeros before the first step; {} in a scene without joints.
         A kick's reaction (an impulse on a jointed body, or initial velocities that break a joint: the
         step's joint_begin projection) is not in it: it is an impulse, not a force over the step."""
-        if self.data.force.joint is None:
+        if self.data.joint is None:
             return {}
         names = [joint.name for joint in self.compiled.spec.joints]
         return {name: reaction.reshape(2, 6) for name, reaction in zip(names, self.last_reactions(), strict=True)}
 
     def last_reactions(self) -> np.ndarray:
         """(J, 12): `joint_reactions` as one array in joint order (the joint_forces stream's layout)."""
-        work = self.data.force.joint
+        work = self.data.joint
         if work is None:
             return np.zeros((0, 12))
         return work.joint_impulse / (self.settings.dt / self.data.substeps)

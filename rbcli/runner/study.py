@@ -442,7 +442,7 @@ def study(
     times = grid.times
     base = compile_scene(spec, duration=grid.duration)
     exact = admits_exact_solution(base)
-    pendulum = pendulum_of(base) if base.forces.joint is not None else None
+    pendulum = pendulum_of(base) if base.model.joint is not None else None
     conserved = conserved_quantities(base)
     notes: list[str] = []
 
@@ -546,7 +546,7 @@ def study(
         mujoco_skipped=mujoco_reason,
         load_average=load,
     )
-    if not (np.any(base.initial_state.L != 0.0) or base.forces.has_torque or base.forces.joint is not None):
+    if not (np.any(base.initial_state.L != 0.0) or base.forces.has_torque or base.model.joint is not None):
         result.primary_error = "position"  # nothing rotates: rotation errors are all zero (a joint turns bodies)
     length_scale = max(float(np.abs(ref_path.x).max(initial=0.0)), 1e-3)
     fitted = [(i.name, i.order, i.symplectic) for i in infos] + [(m.name, m.order, False) for m in mujoco_methods]

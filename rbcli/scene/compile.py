@@ -1,4 +1,7 @@
-"""Compile a validated SceneSpec into the model, the initial state and the force tables, once."""
+"""Compile a validated SceneSpec into the model (with its contact, joint and kinematic tables), the
+initial state and the force tables, once. Who builds which table: compile_contact.py the contact
+table, compile_forces.py the force tables and the kinematic bodies' table (their schedules are one
+table), compile_joints.py the joint table; this module gives the model its tables."""
 
 from __future__ import annotations
 
@@ -40,8 +43,9 @@ class RunSettings:
 
 @dataclass(frozen=True)
 class CompiledModel:
-    """What compiling a scene builds that no run setting changes: the model, the force tables and the
-    initial state. Built once per scene (while loading it); runs differ only in their RunSettings."""
+    """What compiling a scene builds that no run setting changes: the model (with its contact, joint and
+    kinematic tables), the force tables and the initial state. Built once per scene (while loading it);
+    runs differ only in their RunSettings."""
 
     model: Model
     forces: ForceTables
@@ -74,7 +78,7 @@ class CompiledScene:
         if self.spec.joints:
             from rbcli.scene.compile_joints import redundant_row_warnings
 
-            issues += redundant_row_warnings(self.spec.joints, self.forces.joint, self.model, self.initial_state)
+            issues += redundant_row_warnings(self.spec.joints, self.model.joint, self.model, self.initial_state)
         return sorted(issues, key=SceneIssue.order)
 
 
@@ -132,15 +136,20 @@ def compile_model(spec: SceneSpec) -> CompiledModel:
     if contact is not None and spec.joints:  # a joint's two bodies do not collide unless it asks
         contact = contact._replace(excluded_pair=_jointed_pairs(spec, body_index, model.body_mass.shape[0]))
     motions = kinematic_rows(spec, model, state) if spec.contact is not None else []
-    forces = compile_force_tables(spec.gravity, spec.forces, model, body_index, centres, contact, motions)
-    kinematic_initial_state(forces, model, state)
+    forces, kinematic_motions = compile_force_tables(
+        spec.gravity, spec.forces, model, body_index, centres, contact, motions
+    )
+    model = replace(model, kinematic=kinematic_motions)
+    if contact is not None:
+        model = replace(model, contact=contact)
+    kinematic_initial_state(model, forces.schedule, state)
     if summary is not None and contact is not None:  # the speeds need the initial state, kinematic ones too
         summary = replace(summary, impact=impact_bound(spec, model, state, contact))
     if spec.joints:
         from rbcli.scene.compile_joints import compile_joints
 
         joints = compile_joints(spec.joints, spec.bodies, model, centres, state, has_contact=spec.contact is not None)
-        forces = forces._replace(joint=joints)
+        model = replace(model, joint=joints)
     return CompiledModel(model, forces, state, summary)
 
 

@@ -28,8 +28,7 @@ from rbcli.physics.contact.parameters import (
     support_count,
 )
 from rbcli.physics.contact.tables import ContactTable, contact_table
-from rbcli.physics.forces import ForceTables
-from rbcli.physics.forces.tables import schedule_values_numpy
+from rbcli.physics.forces.tables import ScheduleTable, schedule_values_numpy
 from rbcli.physics.kinematic_reference import kinematic_state_numpy
 from rbcli.physics.model import Model
 from rbcli.physics.rotation import quat_to_matrix
@@ -228,12 +227,13 @@ def kinematic_rows(spec: SceneSpec, model: Model, state: State) -> list[Kinemati
     return rows
 
 
-def kinematic_initial_state(forces: ForceTables, model: Model, state: State) -> None:
-    """Set the kinematic bodies' P and L to their prescribed motion at t = 0 (s(0) scales it)."""
-    table = forces.kinematic
+def kinematic_initial_state(model: Model, schedule: ScheduleTable, state: State) -> None:
+    """Set the kinematic bodies' P and L (the model's kinematic table; its schedules are rows of the
+    force terms' `schedule`) to their prescribed motion at t = 0 (s(0) scales it)."""
+    table = model.kinematic
     if not table.body.shape[0]:
         return
-    rate = schedule_values_numpy(forces.schedule, table.schedule, 0.0)
+    rate = schedule_values_numpy(schedule, table.schedule, 0.0)
     body = table.body
     _, _, P, L = kinematic_state_numpy(table, np.zeros(len(body)), rate, model.body_mass[body],
                                        model.body_inertia[body, 0])  # fmt: skip

@@ -1,4 +1,5 @@
-"""Compile a scene's force specs into `ForceTables` (plain arrays), once, with located errors.
+"""Compile a scene's force specs into `ForceTables` (plain arrays), once, with located errors; and the
+kinematic bodies' motions into the model's KinematicTable, whose schedules join the force terms'.
 
 Body names become indices; body points given in the user's body frame become principal-frame
 offsets about the centre of mass, r = E^T (p_user - centre_user); body-frame vectors become
@@ -22,12 +23,12 @@ from rbcli.physics.forces.tables import (
     drag_table,
     field_table,
     impulse_table,
-    kinematic_table,
     point_force_table,
     schedule_table,
     spring_table,
     torque_table,
 )
+from rbcli.physics.kinematic_table import KinematicTable, kinematic_table
 from rbcli.physics.model import Model
 from rbcli.physics.rotation import quat_to_matrix
 from rbcli.scene.force_specs import (
@@ -61,10 +62,12 @@ def compile_force_tables(
     body_centres_user: np.ndarray,
     contact: ContactTable | None = None,
     kinematic: Sequence[KinematicRow] = (),
-) -> ForceTables:
+) -> tuple[ForceTables, KinematicTable]:
     """ForceTables of a scene: uniform gravity [m/s^2] (3,) or None, its force specs, the compiled
     model, body name -> index, and each body's centre of mass in its user frame [m] (body_count, 3);
-    with contact, its table and the kinematic bodies' motions (their schedules join the force terms').
+    with contact, its table (the model's: it decides which bodies contact can give a torque); and the
+    model's KinematicTable of the kinematic bodies' motions, whose schedules join the force terms' table
+    (ForceTables.schedule: one table of time profiles, forces/tables.py).
 
     Raises SceneError listing every invalid spec with its location.
     """
@@ -320,8 +323,10 @@ class _TableBuilder:
             row["gradient"].append(gradient)
             row["schedule"].append(schedule)
 
-    def tables(self, gravity: np.ndarray | None, contact: ContactTable | None = None) -> ForceTables:
-        return build_force_tables(
+    def tables(
+        self, gravity: np.ndarray | None, contact: ContactTable | None = None
+    ) -> tuple[ForceTables, KinematicTable]:
+        forces = build_force_tables(
             gravity,
             body_count=self.model.body_count,
             schedule=schedule_table(**self.schedule),
@@ -332,5 +337,5 @@ class _TableBuilder:
             drag=drag_table(**self.drag),
             impulse=impulse_table(**self.impulse),
             contact=contact,
-            kinematic=kinematic_table(**self.kinematic),
         )
+        return forces, kinematic_table(**self.kinematic)

@@ -53,7 +53,7 @@ def _heights(text: str, every: int) -> tuple[np.ndarray, rbcli.Simulation]:
 
 def _exact_heights(sim: rbcli.Simulation, times: np.ndarray) -> np.ndarray:
     """z(t) of the dropped ball, phase by phase (module docstring), with the scene's k and c."""
-    contact = sim.forces.contact
+    contact = sim.model.contact
     k = contact.body_stiffness[0]  # a plane contact takes the body's stiffness
     m = sim.model.body_mass[0]
     zeta = min(contact.body_damping_ratio[0], contact.plane_damping_ratio[0])
@@ -115,9 +115,10 @@ def test_a_rejected_attempt_leaves_no_trace():
     s, d = b.data.state, b.data
     t = s.step * b.dt
     begin_contact_step(work, t, 0.004)
-    dopri5.begin(b._kmodel, b._kforces, d.force, t, s.x, s.q, s.P, s.L, d.F, d.tau, d.adaptive_work)
-    dopri5.advance(b._kmodel, b._kforces, d.force, t, 0.004, s.x, s.q, s.P, s.L, d.F, d.tau, d.adaptive_work)
-    err = dopri5.error_norm(b._kmodel, b._kforces, d.force, t, 0.004, 1e-6 * 0.004 / 0.8, s.x, s.q, s.P, s.L, d.F,
+    model, forces, contact = b.model.kernel_bodies(), b._kforces, b._kmodel.contact  # as the loop passes them
+    dopri5.begin(model, forces, contact, d.force, t, s.x, s.q, s.P, s.L, d.F, d.tau, d.adaptive_work)
+    dopri5.advance(model, forces, contact, d.force, t, 0.004, s.x, s.q, s.P, s.L, d.F, d.tau, d.adaptive_work)
+    err = dopri5.error_norm(model, forces, contact, d.force, t, 0.004, 1e-6 * 0.004 / 0.8, s.x, s.q, s.P, s.L, d.F,
                             d.tau, d.adaptive_work)  # fmt: skip
     assert err > 1.0  # the controller would reject it
     dopri5.restore(s.x, s.q, s.P, s.L, d.adaptive_work)

@@ -183,12 +183,12 @@ def test_the_force_stage_through_the_body_level_equals_brute_force(outlier):
             "  planes: [{point: [0, 0, -0.25], normal: [0.1, 0.2, 1], friction: 0.3}]\n"
             "  material: {restitution: 0.4, friction: 0.6}\nbodies:\n" + "\n".join(bodies) + "\n")  # fmt: skip
     sim = rbcli.Simulation(load_scene_text(text))
-    contact = sim.forces.contact
+    contact = sim.model.contact
     assert not contact.body_level_off
     work = make_contact_work(contact, sim.model.body_count)
     s = sim.data.state
     F, tau = np.zeros_like(s.x), np.zeros_like(s.x)
-    accumulate_contact(sim.model.kernel(), contact, work, 0.0, s.x, s.q, s.P, s.L, F, tau)
+    accumulate_contact(sim.model.kernel_bodies(), contact, work, 0.0, s.x, s.q, s.P, s.L, F, tau)
     hold_static_bodies(contact, F, tau)
     F_ref, tau_ref, found = contact_wrench_numpy(sim.model, contact, s.x, s.q, s.P, s.L)
     assert work.stats[STAT_CONTACTS] == found > 30

@@ -1,6 +1,7 @@
 """A first run compiles only what the scene needs (tracker issue 16, item 5): the kernels take
-`ForceTables.kernel()`, whose tables of unused force types are None, and every optional stage is called
-through a dispatcher (physics/forces/stages.py) that compiles to nothing for None. Checked by numba's
+`ForceTables.kernel()` and `Model.kernel()`, whose tables of unused force types (and contact, joints,
+kinematic bodies) are None, and every optional stage is called through a dispatcher (physics/stages.py,
+physics/forces/stages.py) that compiles to nothing for None. Checked by numba's
 own compile events in a fresh process with an empty cache (a warm cache compiles nothing at all, so it
 could not tell), then that a second process loads every kernel from that cache without compiling."""
 
@@ -24,6 +25,7 @@ from rbcli.physics.forces import drag, field, impulse, point_force, spring, torq
 from rbcli.physics.forces.gravity import accumulate_gravity
 from rbcli.physics.forces.tables import KernelForceTables, make_force_data
 from rbcli.physics.integrators import get_integrator
+from rbcli.physics.model import KernelModel
 from rbcli.physics.step import empty_buffers
 from rbcli.scene.force_specs import BodyPoint, ForceField, ForceImpulse, ForceSpring
 
@@ -149,15 +151,20 @@ def test_first_run_compiles_only_the_stages_the_scene_has_and_the_second_loads_t
 def test_kernel_tables_are_none_for_unused_types_and_stable_per_scene():
     body = make_body("h")
     kick = ForceImpulse(at=BodyPoint(body="h"), time=0.5, vector=np.ones(3))
-    forces = prepare(replace(make_scene([body], gravity=G), forces=(kick,))).forces
+    compiled = prepare(replace(make_scene([body], gravity=G), forces=(kick,)))
+    forces, model = compiled.forces, compiled.model
     kernel = forces.kernel()
     assert isinstance(kernel, KernelForceTables) and kernel._fields == forces._fields
     assert kernel.impulse is forces.impulse and kernel.schedule is forces.schedule
-    for name in ("field", "point_force", "torque", "spring", "drag", "contact"):
+    for name in ("field", "point_force", "torque", "spring", "drag"):
         assert getattr(kernel, name) is None, name
-    assert make_force_data(forces).contact is None and make_force_data(kernel).contact is None
-    again = prepare(replace(make_scene([body], gravity=G), forces=(kick,))).forces.kernel()
-    assert numba.typeof(again) == numba.typeof(kernel)  # one compiled kernel per kind of scene
+    kernel_model = model.kernel()  # the model's tables: None where the scene lacks them
+    assert isinstance(kernel_model, KernelModel)
+    assert (kernel_model.contact, kernel_model.joint, kernel_model.kinematic) == (None, None, None)
+    assert make_force_data(model).contact is None and make_force_data(kernel_model).contact is None
+    again = prepare(replace(make_scene([body], gravity=G), forces=(kick,)))
+    assert numba.typeof(again.forces.kernel()) == numba.typeof(kernel)  # one compiled kernel per kind of scene
+    assert numba.typeof(again.model.kernel()) == numba.typeof(kernel_model)
 
 
 def test_a_chunk_gives_the_same_bits_with_kernel_tables_as_with_full_tables():
@@ -173,7 +180,7 @@ def test_a_chunk_gives_the_same_bits_with_kernel_tables_as_with_full_tables():
     chunk = get_integrator(INTEGRATOR).chunk()
     results = []
     for forces in (compiled.forces, compiled.forces.kernel()):
-        data = make_data(compiled.initial_state, forces, chunk.SCRATCH_WIDTH)
+        data = make_data(compiled.initial_state, compiled.model, chunk.SCRATCH_WIDTH)
         frames = empty_buffers(4, 3)
         status = chunk.run_chunk(compiled.model.kernel(), forces, data.kernel(), 1e-3, 0, 20, 5, frames, 0)
         results.append((status, data.state.x, data.state.q, data.state.P, data.state.L, frames.x,

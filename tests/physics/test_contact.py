@@ -30,7 +30,7 @@ from rbcli.physics.contact.tables import (
     make_contact_work,
 )
 from rbcli.physics.integrators import INTEGRATORS
-from rbcli.physics.model import KernelModel
+from rbcli.physics.model import KernelBodies
 from rbcli.physics.rotation import quat_to_matrix
 from rbcli.scene.load import load_scene_text
 from rbcli.scene.spec import SceneError
@@ -99,11 +99,11 @@ def _random_scene(count: int, seed: int, box: float, outlier: bool = False) -> r
 
 
 def _compiled_and_reference(sim: rbcli.Simulation) -> tuple[np.ndarray, ...]:
-    contact = sim.forces.contact
+    contact = sim.model.contact
     work = make_contact_work(contact, sim.model.body_count)
     s = sim.data.state
     F, tau = np.zeros_like(s.x), np.zeros_like(s.x)
-    accumulate_contact(sim.model.kernel(), contact, work, 0.0, s.x, s.q, s.P, s.L, F, tau)
+    accumulate_contact(sim.model.kernel_bodies(), contact, work, 0.0, s.x, s.q, s.P, s.L, F, tau)
     hold_static_bodies(contact, F, tau)
     F_ref, tau_ref, found = contact_wrench_numpy(sim.model, contact, s.x, s.q, s.P, s.L)
     return F, tau, F_ref, tau_ref, np.array([work.stats[STAT_CONTACTS], found, work.counters[COUNT_CANDIDATES]])
@@ -129,7 +129,7 @@ def _candidates_per_sphere(count: int, seed: int = 0) -> float:
     positions = rng.uniform(0.0, side, (count, 3))
     index = np.zeros(count, np.int64)
     inertia = np.full((count, 3), 0.4e-4)
-    model = KernelModel(np.ones(count), inertia, 1.0 / inertia, np.zeros((0, 3)), np.zeros(0), index, index,
+    model = KernelBodies(np.ones(count), inertia, 1.0 / inertia, np.zeros((0, 3)), np.zeros(0), index, index,
                         np.tile(np.eye(3), (count, 1, 1)))  # fmt: skip
     contact = contact_table(sphere_body=np.arange(count), sphere_offset=np.zeros((count, 3)),
                             sphere_radius=np.full(count, 0.01), body_inv_contact_mass=np.ones(count),
@@ -152,7 +152,7 @@ def test_broad_phase_work_grows_linearly():
 
 def test_grid_buckets_hold_every_sphere_once():
     sim = _random_scene(60, seed=5, box=0.2, outlier=True)
-    contact = sim.forces.contact
+    contact = sim.model.contact
     work = make_contact_work(contact, sim.model.body_count)
     work.sphere_position[:] = np.random.default_rng(0).uniform(-1, 1, work.sphere_position.shape)
     build_grid(contact, work)
@@ -264,7 +264,7 @@ def test_a_cloud_ball_resting_on_an_edge_sinks_the_rest_fraction_of_its_sphere_r
     cloud = f"{{positions: {points.tolist()}, masses: {[0.04] * 13}, radius: {radii}}}"
     sim = scene([f"  - {{name: ball, particles: {cloud}, position: [0, 0, {z!r}]}}"], dt=1e-3, steps=1000,
                 contact="  ground: 0\n")  # fmt: skip
-    table = sim.forces.contact
+    table = sim.model.contact
     assert table.body_plane_stiffness[0] == pytest.approx(2 * table.body_stiffness[0], rel=1e-12)
     sim.step(1000)
     assert sim.data.force.contact.stats[STAT_CONTACTS] == 2

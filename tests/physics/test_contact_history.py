@@ -64,14 +64,14 @@ def _cloud(seed: int = 11, count: int = 160) -> rbcli.Simulation:
 def _contacts(sim: rbcli.Simulation, buckets: int | None) -> tuple[dict, np.ndarray, np.ndarray, int]:
     """One force evaluation at the start of a step: {(owner, partner): (point, normal, xi, limit)},
     F, tau and the contact count, with the scene's table or one of `buckets` buckets."""
-    table = sim.forces.contact
+    table = sim.model.contact
     if buckets is not None:
         table = table._replace(bucket_count=buckets)
     work = make_contact_work(table, sim.model.body_count)
     work.clock[1] = 1e-3
     s = sim.data.state
     F, tau = np.zeros_like(s.x), np.zeros_like(s.x)
-    accumulate_contact(sim.model.kernel(), table, work, 0.0, s.x, s.q, s.P, s.L, F, tau)
+    accumulate_contact(sim.model.kernel_bodies(), table, work, 0.0, s.x, s.q, s.P, s.L, F, tau)
     assert work.counters[COUNT_OVERFLOW] == 0
     found = {}
     for i in range(work.trial_count.shape[0]):
@@ -96,7 +96,7 @@ def test_a_tiny_hash_table_finds_exactly_the_contacts_of_the_dense_grid(buckets)
     bitwise equal; F and tau sum the same terms in another order: equal to 1e-12 of the largest."""
     sim = _cloud()
     dense, F_dense, tau_dense, count_dense = _contacts(sim, None)
-    table = sim.forces.contact
+    table = sim.model.contact
     assert table.bucket_count >= 640  # the scene's own grid is dense
     hashed, F_hashed, tau_hashed, count_hashed = _contacts(sim, buckets)
     assert count_dense > 150  # sphere pairs and plane contacts
@@ -176,7 +176,7 @@ def test_two_simultaneous_contacts_keep_their_histories_as_the_brute_force_refer
     most = 0
     for _ in range(400):
         sim.step(1)
-        history = contact_step_numpy(sim.model, sim.forces.contact, x, q, P, L, history, sim.dt, gravity)
+        history = contact_step_numpy(sim.model, sim.model.contact, x, q, P, L, history, sim.dt, gravity)
         most = max(most, int(work.hist_count.max()))
     np.testing.assert_allclose(sim.data.state.x, x, rtol=0, atol=1e-12)
     np.testing.assert_allclose(sim.data.state.P, P, rtol=0, atol=1e-12)
@@ -211,7 +211,7 @@ def test_recorded_total_energy_is_that_of_each_recorded_state(integrator):
     spec = load_scene_text(text)
     traj = rbcli.simulate(spec)
     compiled = rbcli.prepare(spec)
-    contact, model = compiled.forces.contact, compiled.model
+    contact, model = compiled.model.contact, compiled.model
     m = model.body_mass
     potential = np.array([contact_energy_numpy(contact, x, q) for x, q in zip(traj.x, traj.q, strict=True)])
     kinetic = 0.5 * (m[:, None] * traj.v**2).sum(axis=(1, 2)) + 0.5 * (traj.omega * traj.L).sum(axis=(1, 2))

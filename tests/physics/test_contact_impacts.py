@@ -118,7 +118,7 @@ def test_auto_substeps_find_a_contact_within_the_travel_fraction_of_its_touch():
     auto = _head_on_small("auto", 0.002, gap=0.01)
     h = 0.002 / auto.settings.substeps
     assert auto.settings.substeps == math.ceil(0.002 * 10.0 / (TRAVEL_FRACTION * 0.005) - 1e-9)
-    stable = 0.002 / substeps_for(0.002, auto.forces.contact.stable_step)
+    stable = 0.002 / substeps_for(0.002, auto.model.contact.stable_step)
     assert stable > 2 * h  # the travel rule is what sets h here
     assert _first_overlap(h) <= 2 * TRAVEL_FRACTION * 0.005 * (1 + 1e-9)
     assert _first_overlap(stable) > 1.5 * 2 * TRAVEL_FRACTION * 0.005
@@ -143,7 +143,7 @@ def _deepest(text: str) -> tuple[float, list[str]]:
     spec = load_scene_text(text, file="brick.yaml")
     warnings = [str(w) for w in rbcli.prepare(spec).warnings]
     trajectory = rbcli.simulate(spec)
-    radius = float(spec.compiled_model.forces.contact.sphere_radius.min())
+    radius = float(spec.compiled_model.model.contact.sphere_radius.min())
     return float(trajectory.invariants["contact_max_overlap"].max()) / radius, warnings
 
 

@@ -63,7 +63,7 @@ def _search(sim: rbcli.Simulation, work) -> tuple[np.ndarray, ...]:  # noqa: ANN
     """One force evaluation of sim's state with `work`: its forces, trial springs and statistics."""
     s = sim.data.state
     F, tau = np.zeros_like(s.x), np.zeros_like(s.x)
-    accumulate_contact(sim.model.kernel(), sim.forces.contact, work, 0.0, s.x, s.q, s.P, s.L, F, tau)
+    accumulate_contact(sim.model.kernel_bodies(), sim.model.contact, work, 0.0, s.x, s.q, s.P, s.L, F, tau)
     trial = [getattr(work, name).copy() for name in ("trial_count", "trial_partner", "trial_xi", "trial_normal",
                                                      "trial_point", "trial_limit")]  # fmt: skip
     return F, tau, *trial, work.stats.copy(), work.counters[COUNT_CONTACTS]
@@ -73,21 +73,21 @@ def _points(sim: rbcli.Simulation, work) -> np.ndarray:  # noqa: ANN001
     """The contact points [m] in the order the search hands them on (the contact-points stream)."""
     s = sim.data.state
     point, force = np.zeros((4096, 3)), np.zeros(4096)
-    found = contact_points(sim.model.kernel(), sim.forces.contact, work, s.x, s.q, s.P, s.L, point, force)
+    found = contact_points(sim.model.kernel_bodies(), sim.model.contact, work, s.x, s.q, s.P, s.L, point, force)
     assert found < 4096
     return point[:found]
 
 
 def _sphere_positions(sim: rbcli.Simulation) -> np.ndarray:
     """p = x_b + R_b r0 of every contact sphere [m] (numpy)."""
-    contact, s = sim.forces.contact, sim.data.state
+    contact, s = sim.model.contact, sim.data.state
     body = contact.sphere_body
     return s.x[body] + np.einsum("nij,nj->ni", quat_to_matrix(s.q[body]), contact.sphere_offset)
 
 
 def _plane_contacts(sim: rbcli.Simulation) -> int:
     """Spheres overlapping the scene's plane (numpy)."""
-    contact = sim.forces.contact
+    contact = sim.model.contact
     p = _sphere_positions(sim)
     normal = contact.plane_normal[0]
     return int(((p - contact.plane_point[0]) @ normal < contact.sphere_radius).sum())
@@ -96,7 +96,7 @@ def _plane_contacts(sim: rbcli.Simulation) -> int:
 def _pair_points(sim: rbcli.Simulation, pairs: np.ndarray) -> np.ndarray:
     """The contact point of each pair of spheres (search.py's formula, numpy): halfway through the
     overlap, from the lower index's partner."""
-    contact = sim.forces.contact
+    contact = sim.model.contact
     p = _sphere_positions(sim)
     i, j = pairs.min(axis=1), pairs.max(axis=1)
     d = p[i] - p[j]
@@ -108,7 +108,7 @@ def _pair_points(sim: rbcli.Simulation, pairs: np.ndarray) -> np.ndarray:
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_the_pairs_of_the_body_pairs_are_the_walks_contacts_in_its_order(seed):
     sim = _clouds(5, seed)
-    contact, bodies = sim.forces.contact, sim.model.body_count
+    contact, bodies = sim.model.contact, sim.model.body_count
     assert not contact.body_level_off  # bodies of many spheres: the body level and the pair path run
     paired, walked = make_contact_work(contact, bodies), _without_pairs(make_contact_work(contact, bodies))
     mine, theirs = _search(sim, paired), _search(sim, walked)
@@ -125,7 +125,7 @@ def test_the_pairs_of_the_body_pairs_are_the_walks_contacts_in_its_order(seed):
 
 def test_the_walk_is_taken_where_the_pairs_do_not_fit_or_the_grid_is_hashed():
     sim = _clouds(4, 5)
-    contact, bodies = sim.forces.contact, sim.model.body_count
+    contact, bodies = sim.model.contact, sim.model.body_count
     walked = _search(sim, _without_pairs(make_contact_work(contact, bodies)))
     narrow = make_contact_work(contact, bodies)._replace(  # room for 3 contacts
         pair_found=np.zeros((3, 2), dtype=np.int64), pair_key=np.zeros((3, 2), dtype=np.int64),
@@ -137,8 +137,8 @@ def test_the_walk_is_taken_where_the_pairs_do_not_fit_or_the_grid_is_hashed():
             assert np.array_equal(a, b)
         assert work.pair_tests[0] == 0  # the pair path gave up before handing anything on
     hashed = _clouds(4, 5, outlier=True)
-    work = make_contact_work(hashed.forces.contact, hashed.model.body_count)
-    theirs = _search(hashed, _without_pairs(make_contact_work(hashed.forces.contact, hashed.model.body_count)))
+    work = make_contact_work(hashed.model.contact, hashed.model.body_count)
+    theirs = _search(hashed, _without_pairs(make_contact_work(hashed.model.contact, hashed.model.body_count)))
     for a, b in zip(_search(hashed, work), theirs, strict=True):
         assert np.array_equal(a, b)
     assert work.pair_tests[0] == 0

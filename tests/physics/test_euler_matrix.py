@@ -95,11 +95,12 @@ def test_compiled_step_matches_numpy_reference():
     compiled = prepare(make_scene(random_bodies(7), gravity=G))
     km, forces = compiled.model.kernel(), compiled.forces
     a, b = compiled.initial_state.copy(), compiled.initial_state.copy()
-    F, tau, force_data = np.zeros((7, 3)), np.zeros((7, 3)), make_force_data(forces)
+    F, tau, force_data = np.zeros((7, 3)), np.zeros((7, 3)), make_force_data(km)
     for k in range(50):
         euler_matrix.step(
             km,
             forces,
+            km.contact,
             force_data,
             k * 0.01,
             0.01,

@@ -175,7 +175,7 @@ def test_an_impulse_restarts_the_closed_form_from_the_state_it_leaves():
     s = sim.data.state
     x, q, P, L = s.x.copy(), s.q.copy(), s.P.copy(), s.L.copy()
     assert (
-        apply_impulses(sim.model.kernel(), sim.forces, make_force_data(sim.forces), 3000 * dt, 3001 * dt, x, q, P, L)
+        apply_impulses(sim.model.kernel(), sim.forces, make_force_data(sim.model), 3000 * dt, 3001 * dt, x, q, P, L)
         == 1
     )
     assert not np.array_equal(L, s.L)

@@ -110,12 +110,12 @@ def test_compiled_wrench_matches_numpy_reference(term, t):
     the largest terms (k l ~ 100 N), far below any modelling error and far above round-off order."""
     forces = [f for specs in TERMS.values() for f in specs] if term == "all" else TERMS[term]
     compiled = prepare(replace(make_scene(random_bodies(5, seed=3), gravity=G), forces=tuple(forces)))
-    assert term == "all" or force_terms_present(compiled.forces) == ("gravity", term)
+    assert term == "all" or force_terms_present(compiled.forces, compiled.model.contact) == ("gravity", term)
     km, tables = compiled.model.kernel(), compiled.forces
     for seed in range(3):
         x, q, P, L = random_state(5, seed)
         F, tau = np.zeros((5, 3)), np.zeros((5, 3))
-        accumulate_wrench(km, tables, make_force_data(tables), t, x, q, P, L, F, tau)
+        accumulate_wrench(km, tables, km.contact, make_force_data(km), t, x, q, P, L, F, tau)
         F_ref, tau_ref = wrench_numpy(compiled.model, tables, t, x, q, P, L)
         np.testing.assert_allclose(F, F_ref, rtol=0, atol=1e-12)
         np.testing.assert_allclose(tau, tau_ref, rtol=0, atol=1e-12)
@@ -153,7 +153,7 @@ def test_apply_impulses_matches_numpy_reference():
     x, q, P, L = random_state(5, 1)
     P2, L2 = P.copy(), L.copy()
     for t_prev, t_next, expected in [(0.4, 0.5, 0), (0.5, 0.55, 2), (0.55, 0.7, 0), (0.7, 0.8, 1)]:
-        assert apply_impulses(km, tables, make_force_data(tables), t_prev, t_next, x, q, P, L) == expected
+        assert apply_impulses(km, tables, make_force_data(km), t_prev, t_next, x, q, P, L) == expected
         assert impulses_numpy(tables.impulse, t_prev, t_next, q, P2, L2) == expected
         np.testing.assert_allclose(P, P2, rtol=0, atol=1e-15)
         np.testing.assert_allclose(L, L2, rtol=0, atol=1e-15)

@@ -42,7 +42,7 @@ def run_and_count(forces, bodies=10, gravity=G):  # noqa: ANN001, ANN201
 def test_gravity_only_scene_evaluates_gravity_and_nothing_else():
     compiled, counts = run_and_count([])
     tables = compiled.forces
-    assert force_terms_present(tables) == ("gravity",)
+    assert force_terms_present(tables, None) == ("gravity",)
     assert not tables.has_torque
     for name in ("schedule", "field", "point_force", "torque", "spring", "drag", "impulse"):
         assert table_rows(getattr(tables, name)) == 0, name
@@ -51,14 +51,14 @@ def test_gravity_only_scene_evaluates_gravity_and_nothing_else():
 
 def test_empty_scene_evaluates_no_term():
     compiled, counts = run_and_count([], gravity=None)
-    assert force_terms_present(compiled.forces) == ()
+    assert force_terms_present(compiled.forces, compiled.model.contact) == ()
     assert set(counts.values()) == {0}
 
 
 def test_one_spring_on_one_body_of_ten_touches_one_row():
     spring = ForceSpring(end_a=BodyPoint(body="b3", point=np.array([0.1, 0.0, 0.0])), anchor=np.zeros(3), stiffness=1.0)
     compiled, counts = run_and_count([spring])
-    assert force_terms_present(compiled.forces) == ("gravity", "spring")
+    assert force_terms_present(compiled.forces, compiled.model.contact) == ("gravity", "spring")
     assert compiled.forces.spring.body_a.tolist() == [3]
     assert counts == {**dict.fromkeys(TERM_NAMES, 0), "gravity": STEPS * 10, "spring": STEPS}
 
@@ -84,7 +84,9 @@ def test_every_term_counts_exactly_its_rows():
         ForceImpulse(at=BodyPoint(body="b6"), time=0.0, vector=np.ones(3)),
     ]
     compiled, counts = run_and_count(forces)
-    assert force_terms_present(compiled.forces) == tuple(n for n in TERM_NAMES if n != "contact")  # no contact section
+    assert force_terms_present(compiled.forces, compiled.model.contact) == tuple(
+        n for n in TERM_NAMES if n != "contact"
+    )  # no contact section
     # the impulse row: the runner's call of apply_impulses is pending (docs/forces.md), so 0 or 1
     assert counts.pop("impulse") in (0, 1)
     assert counts == {"gravity": STEPS * 10, "field": STEPS * 5, "point_force": STEPS, "torque": STEPS,
@@ -104,8 +106,8 @@ def test_torque_free_scenes_never_write_tau():
     assert not compiled.forces.has_torque
     s = compiled.initial_state
     F, tau = np.full((4, 3), np.nan), np.full((4, 3), np.nan)
-    force_data = make_force_data(compiled.forces)
-    accumulate_wrench(compiled.model.kernel(), compiled.forces, force_data, 0.1, s.x, s.q, s.P, s.L, F, tau)
+    force_data, km = make_force_data(compiled.model), compiled.model.kernel()
+    accumulate_wrench(km, compiled.forces, km.contact, force_data, 0.1, s.x, s.q, s.P, s.L, F, tau)
     assert np.isfinite(F).all() and np.isnan(tau).all()
 
 
@@ -125,7 +127,7 @@ def test_terms_that_can_turn_a_body_switch_torque_on(spec):
 
 def test_zero_drag_adds_no_rows():
     compiled = prepare(replace(make_scene(random_bodies(3)), forces=(ForceDrag(bodies=None),)))
-    assert force_terms_present(compiled.forces) == ()
+    assert force_terms_present(compiled.forces, compiled.model.contact) == ()
 
 
 HERE = SourceLocation("scene.yaml", 12, 5)

@@ -31,7 +31,7 @@ def test_example_loads_and_compiles_to_its_terms(name):
     path = SCENES / name
     assert path.read_text().startswith("# yaml-language-server: $schema=../../schemas/scene.schema.json\n")
     compiled = prepare(load_scene(path))
-    assert force_terms_present(compiled.forces) == EXPECTED_TERMS[name]
+    assert force_terms_present(compiled.forces, compiled.model.contact) == EXPECTED_TERMS[name]
 
 
 def test_spinning_top_precesses_at_the_gyroscopic_rate():

@@ -118,7 +118,9 @@ def test_wrench_tau_is_right_for_flagged_bodies_and_exactly_zero_for_the_others(
         s.P += rng.normal(size=s.P.shape)
         s.L += rng.normal(size=s.L.shape)
         F, tau = np.full_like(s.x, np.nan), np.full_like(s.x, np.nan)
-        accumulate_wrench(kmodel, forces, make_force_data(forces), 0.1 * trial, s.x, s.q, s.P, s.L, F, tau)
+        accumulate_wrench(
+            kmodel, forces, kmodel.contact, make_force_data(kmodel), 0.1 * trial, s.x, s.q, s.P, s.L, F, tau
+        )
         F_np, tau_np = wrench_numpy(kmodel, forces, 0.1 * trial, s.x, s.q, s.P, s.L)
         np.testing.assert_allclose(F, F_np, rtol=0, atol=1e-12)
         np.testing.assert_allclose(tau, tau_np, rtol=0, atol=1e-12)
@@ -145,7 +147,7 @@ def _run_chunk(name, compiled, forces, steps):  # noqa: ANN001, ANN202
     from rbcli.physics.data import make_data
 
     chunk = get_integrator(name).chunk()
-    data = make_data(compiled.initial_state, compiled.forces, chunk.SCRATCH_WIDTH)
+    data = make_data(compiled.initial_state, compiled.model, chunk.SCRATCH_WIDTH)
     n, dt = compiled.model.body_count, compiled.settings.dt
     never = np.iinfo(np.int64).max
     done, _, status = chunk.run_chunk(compiled.model.kernel(), forces, data.kernel(), dt, 0, steps, never,
@@ -217,7 +219,7 @@ def test_adaptive_dopri5_per_body_torque_path_is_bitwise_the_all_bodies_path():
     results = []
     run_chunk = get_integrator("dopri5").adaptive_chunk().run_chunk
     for forces in (tables, all_bodies, tables._replace(has_torque=False)):
-        data = make_data(compiled.initial_state, forces, 0, adaptive=True, tolerance=1e-8, duration=2.0)
+        data = make_data(compiled.initial_state, compiled.model, 0, adaptive=True, tolerance=1e-8, duration=2.0)
         done, _, status = run_chunk(
             compiled.model.kernel(), forces, data.kernel(), 0.01, 0, 200, 50, empty_buffers(8, 5), 0
         )

@@ -42,9 +42,7 @@ def run_adaptive(compiled, tolerance, chunk_steps=None):
     """
     model, settings = compiled.model, compiled.settings
     n, total, dt, every = model.body_count, settings.steps, settings.dt, settings.record_every
-    data = make_data(
-        compiled.initial_state, compiled.forces, 0, adaptive=True, tolerance=tolerance, duration=total * dt
-    )
+    data = make_data(compiled.initial_state, compiled.model, 0, adaptive=True, tolerance=tolerance, duration=total * dt)
     state, run_chunk = data.state, get_integrator("dopri5").adaptive_chunk().run_chunk
     frames = empty_buffers(total // every + 2, n)
     frames.step[0], frames.x[0], frames.q[0] = 0, state.x, state.q

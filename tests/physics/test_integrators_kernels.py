@@ -69,12 +69,13 @@ def test_compiled_step_matches_numpy_reference(name, kind):
     scratch = np.zeros((BODY_COUNT, kernel.SCRATCH_WIDTH))
     carried, carried_scratch = compiled.initial_state.copy(), np.zeros_like(scratch)
     dt = 0.01
+    contact, force_data = kmodel.contact, make_force_data(kmodel)  # no contact: force_data holds counters only
     for k in range(30):
         scratch[:] = 0.0
-        kernel.step(kmodel, forces, make_force_data(forces), k * dt, dt, a.x, a.q, a.P, a.L, F, tau, scratch)
+        kernel.step(kmodel, forces, contact, force_data, k * dt, dt, a.x, a.q, a.P, a.L, F, tau, scratch)
         kernel.step_numpy(kmodel, forces, k * dt, dt, b.x, b.q, b.P, b.L)
         c = carried
-        kernel.step(kmodel, forces, make_force_data(forces), k * dt, dt, c.x, c.q, c.P, c.L, F, tau, carried_scratch)
+        kernel.step(kmodel, forces, contact, force_data, k * dt, dt, c.x, c.q, c.P, c.L, F, tau, carried_scratch)
     for field in "xqPL":
         np.testing.assert_allclose(getattr(a, field), getattr(b, field), rtol=0, atol=1e-12, err_msg=field)
         np.testing.assert_allclose(getattr(carried, field), getattr(b, field), rtol=0, atol=1e-8, err_msg=field)
@@ -92,15 +93,16 @@ def test_chunk_loop_equals_repeated_steps(name):
     # the kernel form of the tables, as Simulation passes them (a plain ForceTables compiles every stage:
     # test_compile_only_what_is_used covers that form once, instead of once per integrator here)
     kmodel, forces = compiled.model.kernel(), _forces("torque-free").kernel()
-    data = make_data(compiled.initial_state, compiled.forces, chunk.SCRATCH_WIDTH)
+    data = make_data(compiled.initial_state, compiled.model, chunk.SCRATCH_WIDTH)
     a, b = data.state, compiled.initial_state.copy()
     F, tau, scratch = np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, kernel.SCRATCH_WIDTH))
     frames = empty_buffers(4, 3)
     done, filled, status = chunk.run_chunk(kmodel, forces, data.kernel(), 0.01, 0, 10, 3, frames, 0)
     assert (done, filled, status) == (10, 3, 0)
     assert frames.step[:3].tolist() == [3, 6, 9]
+    contact, force_data = kmodel.contact, make_force_data(kmodel)
     for k in range(10):
-        kernel.step(kmodel, forces, make_force_data(forces), k * 0.01, 0.01, b.x, b.q, b.P, b.L, F, tau, scratch)
+        kernel.step(kmodel, forces, contact, force_data, k * 0.01, 0.01, b.x, b.q, b.P, b.L, F, tau, scratch)
         if k == 8:
             assert np.array_equal(frames.q[2], b.q)
     assert np.array_equal(a.q, b.q) and np.array_equal(a.x, b.x)

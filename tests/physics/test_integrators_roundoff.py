@@ -62,7 +62,7 @@ def test_carried_momentum_is_dropped_when_the_state_is_written(name):
     F, tau = np.zeros((1, 3)), np.zeros((1, 3))
 
     def step(s, work):
-        kernel.step(model, forces, make_force_data(forces), 0.0, 0.01, s.x, s.q, s.P, s.L, F, tau, work)
+        kernel.step(model, forces, model.contact, make_force_data(model), 0.0, 0.01, s.x, s.q, s.P, s.L, F, tau, work)
 
     for _ in range(5):
         step(state, scratch)

@@ -37,11 +37,11 @@ def test_jointed_bodies_do_not_collide_unless_asked_and_others_still_do(collide,
     feels no contact force (a's wrench is zero) unless collide: true, while the unjointed pair (b, c)
     always does."""
     sim = rbcli.Simulation(load_scene_text(_overlapping(collide, cloud)))
-    contact = sim.forces.contact
+    contact = sim.model.contact
     work = make_contact_work(contact, sim.model.body_count)
     s = sim.data.state
     F, tau = np.zeros_like(s.x), np.zeros_like(s.x)
-    accumulate_contact(sim.model.kernel(), contact, work, 0.0, s.x, s.q, s.P, s.L, F, tau)
+    accumulate_contact(sim.model.kernel_bodies(), contact, work, 0.0, s.x, s.q, s.P, s.L, F, tau)
     hold_static_bodies(contact, F, tau)
     F_ref, tau_ref, found = contact_wrench_numpy(sim.model, contact, s.x, s.q, s.P, s.L)
     spheres = 3 if cloud else 1
@@ -61,11 +61,11 @@ def test_jointed_bodies_do_not_collide_unless_asked_and_others_still_do(collide,
 def test_the_reference_without_the_exclusion_would_see_the_jointed_pair():
     """The test above can fail: the same scene with the exclusion list emptied finds the jointed pair."""
     sim = rbcli.Simulation(load_scene_text(_overlapping("", False)))
-    contact = sim.forces.contact._replace(excluded_pair=np.zeros(0, dtype=np.int64))
+    contact = sim.model.contact._replace(excluded_pair=np.zeros(0, dtype=np.int64))
     s = sim.data.state
     assert contact_wrench_numpy(sim.model, contact, s.x, s.q, s.P, s.L)[2] == 2
 
 
 def test_a_scene_without_joints_excludes_nothing():
     sim = rbcli.Simulation(load_scene_text(_overlapping("", False).split("joints:")[0]))
-    assert sim.forces.contact.excluded_pair.shape == (0,)
+    assert sim.model.contact.excluded_pair.shape == (0,)

@@ -19,7 +19,7 @@ SCENES = Path(__file__).resolve().parents[2] / "scenes" / "joints"
 
 def _rows(sim: Simulation) -> float:
     s = sim.data.state
-    return float(np.abs(joint_rows_numpy(sim.forces.joint, s.x, s.q)[0]).max())
+    return float(np.abs(joint_rows_numpy(sim.model.joint, s.x, s.q)[0]).max())
 
 
 def test_the_cradle_passes_the_first_balls_speed_to_the_last():
@@ -84,7 +84,7 @@ def test_the_ragdoll_lands_folds_and_keeps_its_limits():
     stayed within its limits to 1e-9 rad (the knees reach their lower stop 0, measured -4e-16), and the
     joints held to round-off."""
     sim = Simulation(SCENES / "ragdoll.yaml")
-    table = sim.forces.joint
+    table = sim.model.joint
     hinges = [j for j in range(table.body_a.shape[0]) if np.isfinite(table.limit_lower[j])]
     assert len(hinges) == 4
     worst = beyond = 0.0

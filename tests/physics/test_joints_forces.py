@@ -17,7 +17,7 @@ from tests.physics.joint_scenes import G, angle_and_rate, pendulum_text
 
 def _rows(sim: rbcli.Simulation) -> float:
     s = sim.data.state
-    return float(np.abs(joint_rows_numpy(sim.forces.joint, s.x, s.q)[0]).max())
+    return float(np.abs(joint_rows_numpy(sim.model.joint, s.x, s.q)[0]).max())
 
 
 def test_a_pendulum_with_linear_drag_loses_energy_monotonically_and_keeps_its_hinge():
@@ -127,7 +127,7 @@ def _reaction_balance(sim: rbcli.Simulation, steps: int, track: list | None = No
     P [N s] and in L [N m s] (gravity acts at the centre of mass: no torque). split2 changes P and L by
     the forces' kick and the joints' impulses alone, so the gap is round-off when every joint's rows,
     motor, damper and limit are in its reaction."""
-    table, dt = sim.forces.joint, sim.dt
+    table, dt = sim.model.joint, sim.dt
     mass, g = sim.model.body_mass, np.asarray(sim.forces.gravity)
     sim.step(1)
     gap_p = gap_l = 0.0

@@ -55,7 +55,7 @@ def _compiled_rows(table: JointTable, x: np.ndarray, q: np.ndarray):  # noqa: AN
 
 
 def test_rows_match_their_numpy_twins_for_every_type():
-    table = chain().forces.joint
+    table = chain().model.joint
     assert table.row_count.tolist() == [5, 3, 6, 5, 1]
     x, q = _perturbed(chain())
     worst, work = _compiled_rows(table, x, q)
@@ -79,7 +79,7 @@ def test_jacobians_are_the_rates_of_the_residuals():
     """G V = d g / dt along any velocity V, checked by central differences (error eps^2 + round-off /
     eps: ~1e-10 at eps = 1e-5), independently of how the rows were derived."""
     compiled = chain()
-    table = compiled.forces.joint
+    table = compiled.model.joint
     x, q = _perturbed(compiled, seed=2)
     _, work = _compiled_rows(table, x, q)
     velocity = np.random.default_rng(5).normal(size=(x.shape[0], 6))
@@ -97,7 +97,7 @@ def test_jacobians_are_the_rates_of_the_residuals():
 
 def _dense_problem(compiled):  # noqa: ANN001, ANN202
     """The solver's inputs at a perturbed configuration of `compiled`, and A = G W G^T built densely."""
-    table = compiled.forces.joint
+    table = compiled.model.joint
     x, q = _perturbed(compiled, seed=3)
     _, work = _compiled_rows(table, x, q)
     R = quat_to_matrix(q)
@@ -159,9 +159,9 @@ def test_a_compiled_step_matches_the_numpy_step():
     s = compiled.initial_state.copy()
     model, forces = compiled.model.kernel(), compiled.forces
     for k in range(20):
-        joint_begin_numpy(model, forces.joint, s.x, s.q, s.P, s.L)
+        joint_begin_numpy(model, model.joint, s.x, s.q, s.P, s.L)
         split2.step_numpy(model, forces, k * 1e-3, 1e-3, s.x, s.q, s.P, s.L)
-        joint_stages_numpy(model, forces.joint, 1e-3, s.x, s.q, s.P, s.L)
+        joint_stages_numpy(model, model.joint, 1e-3, s.x, s.q, s.P, s.L)
     got = sim.data.state
     for name in ("x", "q", "P", "L"):
         np.testing.assert_allclose(getattr(got, name), getattr(s, name), rtol=0, atol=1e-11, err_msg=name)
@@ -175,7 +175,7 @@ def test_every_joint_type_holds_to_round_off():
     sim = Simulation(compiled)
     sim.step(2000)
     s = sim.data.state
-    table = compiled.forces.joint
+    table = compiled.model.joint
     g, ga, gb = joint_rows_numpy(table, s.x, s.q)
     assert np.abs(g).max() <= 1e-12, np.abs(g).max()
     R = quat_to_matrix(s.q)
@@ -188,5 +188,5 @@ def test_every_joint_type_holds_to_round_off():
         if table.body_b[j] >= 0:
             rate[rows] += gb[rows] @ velocity[table.body_b[j]]
     assert np.abs(rate).max() <= 1e-12, np.abs(rate).max()
-    stats = sim.data.force.joint.stats
+    stats = sim.data.joint.stats
     assert stats[1] <= 1e-12 and stats[2] <= 1e-12 and stats[3] == 0

@@ -42,7 +42,7 @@ def test_a_kinematic_crank_drives_a_slider_on_the_exact_slider_crank_kinematics(
     for _ in range(100):
         sim.step(10)
         s = sim.data.state
-        worst_row = max(worst_row, float(np.abs(joint_rows_numpy(sim.forces.joint, s.x, s.q)[0]).max()))
+        worst_row = max(worst_row, float(np.abs(joint_rows_numpy(sim.model.joint, s.x, s.q)[0]).max()))
         wt = OMEGA * sim.time
         exact = R * math.cos(wt) + math.sqrt(ROD**2 - (R * math.sin(wt)) ** 2)
         worst_x = max(worst_x, abs(float(s.x[1, 0]) - exact))

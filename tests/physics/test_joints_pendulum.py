@@ -126,7 +126,7 @@ def tension_error(dt: float) -> float:
     for _ in range(int(0.9 / dt)):  # past the bottom (a quarter period is ~0.59 s for large swings of 1 m)
         sim.step(1)
         after = formula()
-        tension = -sim.data.force.joint.impulse[0] / dt
+        tension = -sim.data.joint.impulse[0] / dt
         worst = max(worst, abs(tension - 0.5 * (before + after)) / (mass * G))
         before = after
     return worst

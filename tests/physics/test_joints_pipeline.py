@@ -17,7 +17,7 @@ import pytest
 from typer.testing import CliRunner
 
 from rbcli.cli.app import app
-from rbcli.physics.forces.tables import make_force_data
+from rbcli.physics.data import make_data
 from rbcli.physics.rotation import quat_rotate
 from rbcli.record.read import read_trajectory
 from rbcli.runner.simulation import Simulation
@@ -55,11 +55,11 @@ def test_joint_violations_are_drifts_a_grounded_joint_changes_momentum_and_drive
 
     names = ["joint_position_violation", "momentum_x", "angular_momentum_z", "energy_total"]
     spec = load_scene(PENDULUM)
-    kept = conserved_invariants(spec.compiled_model.forces, names)
+    kept = conserved_invariants(spec.compiled_model.model, spec.compiled_model.forces, names)
     assert kept == {"joint_position_violation": True, "momentum_x": False, "angular_momentum_z": False,
                     "energy_total": True}  # fmt: skip
     damped = load_scene_text(PENDULUM.read_text().replace("axis: [0, 1, 0]}", "axis: [0, 1, 0], damping: 0.1}"))
-    assert not conserved_invariants(damped.compiled_model.forces, names)["energy_total"]
+    assert not conserved_invariants(damped.compiled_model.model, damped.compiled_model.forces, names)["energy_total"]
     # gravity alone, but the hinge holds the rod: free flight and torque-free rotation are not its motion
     # (a sweep or study of a pendulum compared against them reported 4.9 m "errors")
     assert not admits_exact_solution(compile_scene(spec))
@@ -79,12 +79,14 @@ def test_a_checkpoint_of_a_jointed_scene_continues_bitwise():
         assert np.array_equal(a, b)
 
 
-def test_kernel_tables_and_force_data_of_a_scene_without_joints_have_no_joint_part():
+def test_the_kernel_model_and_data_of_a_scene_without_joints_have_no_joint_part():
     spec = load_scene(ROOT / "scenes" / "forces" / "spring_pendulum.yaml")
-    forces = spec.compiled_model.forces
-    assert forces.joint is None and forces.kernel().joint is None and make_force_data(forces.kernel()).joint is None
-    jointed = load_scene(PENDULUM).compiled_model.forces
-    assert jointed.kernel().joint is jointed.joint and make_force_data(jointed.kernel()).joint is not None
+    model, state = spec.compiled_model.model, spec.compiled_model.initial_state
+    assert model.joint is None and model.kernel().joint is None and make_data(state, model.kernel(), 1).joint is None
+    jointed = load_scene(PENDULUM).compiled_model
+    assert jointed.model.kernel().joint is jointed.model.joint
+    assert make_data(jointed.initial_state, jointed.model.kernel(), 1).joint is not None
+    assert "joint" not in spec.compiled_model.forces._fields  # joints are the model's, not force terms
 
 
 SCRIPT = """
@@ -154,7 +156,7 @@ def test_the_joint_stages_do_not_allocate_per_step():
         "        before = rtsys.get_allocation_stats().alloc\n"
         "        sim.step(n)\n"
         "        counts.append(rtsys.get_allocation_stats().alloc - before)\n"
-        "    print(name, counts[0], counts[1], sim.forces.joint.damping.max())\n"
+        "    print(name, counts[0], counts[1], sim.model.joint.damping.max())\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
                          env={**os.environ, "NUMBA_NRT_STATS": "1"}, timeout=600)  # fmt: skip

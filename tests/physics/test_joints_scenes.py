@@ -23,7 +23,7 @@ def test_every_joint_scene_holds_its_joints_to_round_off(name):
     sim = Simulation(SCENES / f"{name}.yaml")
     sim.step(200)
     s = sim.data.state
-    residual = joint_rows_numpy(sim.forces.joint, s.x, s.q)[0]
+    residual = joint_rows_numpy(sim.model.joint, s.x, s.q)[0]
     assert np.abs(residual).max() <= 1e-12, np.abs(residual).max()
 
 
@@ -44,8 +44,8 @@ def test_the_four_bar_loop_warns_of_its_redundant_rows_and_still_closes_to_round
     for _ in range(30):
         sim.step(100)
         s = sim.data.state
-        worst = max(worst, float(np.abs(joint_rows_numpy(sim.forces.joint, s.x, s.q)[0]).max()))
-        dropped.append(int(sim.data.force.joint.stats[3]))  # rows dropped by the solver in the last step
+        worst = max(worst, float(np.abs(joint_rows_numpy(sim.model.joint, s.x, s.q)[0]).max()))
+        dropped.append(int(sim.data.joint.stats[3]))  # rows dropped by the solver in the last step
     assert worst <= 1e-12, worst
     assert 1 <= min(dropped) and max(dropped) <= 3, dropped
     assert np.abs(sim.data.state.x - start).max() > 0.05  # it moved

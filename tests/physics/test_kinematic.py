@@ -51,7 +51,7 @@ def _run_and_compare(text: str, blocks: int, every: int) -> rbcli.Simulation:
     """Step in blocks of `every` (the recording cadence) and compare every kinematic body's x, q, P, L
     with the numpy closed form at each block's end; returns the simulation."""
     sim = rbcli.Simulation(load_scene_text(text))
-    table, schedule = sim.forces.kinematic, sim.forces.schedule
+    table, schedule = sim.model.kinematic, sim.forces.schedule
     body = table.body
     mass, inertia = sim.model.body_mass[body], sim.model.body_inertia[body, 0]
     worst = 0.0

@@ -135,7 +135,7 @@ def test_a_stage_added_to_the_list_runs_in_the_generated_loop(tmp_path, name):
     stages = (*STEP_STAGES[:-1], PUSH_STAGE, STEP_STAGES[-1])
     pushed = _load_generated(tmp_path, name, stages)
     compiled = prepare(make_scene(random_bodies(3, seed=2), integrator=name))
-    data = make_data(compiled.initial_state, compiled.forces, pushed.SCRATCH_WIDTH)
+    data = make_data(compiled.initial_state, compiled.model, pushed.SCRATCH_WIDTH)
     P0 = data.state.P.copy()
     frames = empty_buffers(4, 3)
     steps = 12
@@ -164,7 +164,7 @@ def test_a_step_start_stage_added_to_the_list_runs_at_every_grid_step_of_the_ada
     assert "land = min(land, index + 1)" in adaptive_source("dopri5", "dopri5", (PUSH_STAGE, *STEP_STAGES))
     compiled = prepare(make_scene(random_bodies(3, seed=2), integrator="dopri5"))
     steps, every = 12, 5
-    data = make_data(compiled.initial_state, compiled.forces, 0, adaptive=True, tolerance=1e-6, duration=0.012)
+    data = make_data(compiled.initial_state, compiled.model, 0, adaptive=True, tolerance=1e-6, duration=0.012)
     P0 = data.state.P.copy()
     frames = empty_buffers(4, 3)
     done, filled, status = pushed.run_chunk(
@@ -215,13 +215,14 @@ def test_a_force_stage_added_to_the_list_runs_in_the_generated_pass(tmp_path):
     spec.loader.exec_module(module)
     compiled = prepare(make_scene(random_bodies(3, seed=4), gravity=np.array([0.0, 0.0, -9.81])))
     model, s = compiled.model.kernel(), compiled.initial_state
+    bodies, force_data = compiled.model.kernel_bodies(), make_force_data(model)  # as a chunk loop passes them
     field = field_table(body=[1], per_mass=[False], value=[[0.0, 0.0, 0.0]], gradient=[np.zeros((3, 3))],
                         schedule=[NO_SCHEDULE])  # fmt: skip
     with_field = compiled.forces._replace(field=field)
     expected = compiled.model.body_mass[:, None] * np.array([0.0, 0.0, -9.81])
     for forces, kick in ((with_field.kernel(), KICK), (compiled.forces.kernel(), 0.0)):  # only what each has
         F, tau = np.zeros((3, 3)), np.zeros((3, 3))
-        module.accumulate_wrench(model, forces, make_force_data(forces), 0.0, s.x, s.q, s.P, s.L, F, tau)
+        module.accumulate_wrench(bodies, forces, model.contact, force_data, 0.0, s.x, s.q, s.P, s.L, F, tau)
         assert np.array_equal(F[:, 0::2], expected[:, 0::2])
         assert np.array_equal(F[:, 1], np.array([0.0, kick, 0.0]))
 

@@ -63,7 +63,7 @@ def test_a_double_pendulum_loads_with_body_frame_anchors_in_the_principal_frame(
         + "  - {name: top, type: hinge, bodies: [world, upper], anchor: [0, 0, 1], axis: [0, 2, 0]}\n"
         + "  - {type: distance, bodies: [upper, lower], anchors: [[0, 0, -1], [0, 0, -0.5]]}\n"
     )
-    table = spec.compiled_model.forces.joint
+    table = spec.compiled_model.model.joint
     assert list(table.kind) == [JOINT_HINGE, JOINT_DISTANCE]
     assert [j.name for j in spec.joints] == ["top", "joint1"]
     # the world end is swapped to b; the rod's top (user z = 0) is 0.5 m above its centre of mass
@@ -172,7 +172,7 @@ def test_dampers_and_motors_reach_the_table():
         + "  - {type: slider, bodies: [lower, upper], anchor: [0, 0, 0], axis: [0, 0, 1], "
         "motor: {speed: 0.2, max_force: 7}}\n"
     )
-    table = spec.compiled_model.forces.joint
+    table = spec.compiled_model.model.joint
     assert table.damping.tolist() == [0.1, 0.0]
     assert table.motor_speed.tolist() == [-1.5, 0.2] and table.motor_cap.tolist() == [2.0, 7.0]
     assert np.isinf(table.limit_lower).all() and np.isinf(table.limit_upper).all()  # no limits given

@@ -20,7 +20,8 @@ from rbcli.physics.adaptive import (
     STEP_MIN_RELATIVE,
     initial_step,
 )
-from rbcli.physics.forces.stages import (
+from rbcli.physics.integrators.dopri5 import accept, advance, begin, error_norm, restore
+from rbcli.physics.stages import (
     contact_begin_stage,
     contact_commit_stage,
     contact_record_stage,
@@ -31,8 +32,7 @@ from rbcli.physics.forces.stages import (
     next_impulse_step_stage,
     schedule_step_floor,
 )
-from rbcli.physics.integrators.dopri5 import accept, advance, begin, error_norm, restore
-from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, chunk_status, record_if_due
+from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, chunk_status, model_bodies, record_if_due
 
 __all__ = ["run_chunk"]
 
@@ -51,15 +51,19 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
     """
     # taken out of their tuples once, as in the fixed-step loops
     x, q, P, L, F, tau = data.x, data.q, data.P, data.L, data.F, data.tau
-    force_data, contact = data.force, forces.contact
+    force_data = data.force
+    contact, kinematic, schedule = model.contact, model.kinematic, forces.schedule
     contact_work = force_data.contact
+    # from here on `model` is the model's body arrays alone (KernelBodies): one numba type for every
+    # kind of scene, so each stage kernel below is compiled once for all of them; tables go by name
+    model = model_bodies(model)
     adaptive = data.adaptive
     work, control, counters, tolerance = adaptive.work, adaptive.control, adaptive.counters, adaptive.tolerance
     index = step0
     end = step0 + n_steps
     land = end  # the next grid index a step-start stage needs the loop to stand on
     t = step0 * dt
-    h_max = contact_step_limit(forces)  # inf without contact
+    h_max = contact_step_limit(contact)  # inf without contact
     # steps shorter than h_floor are allowed the error of one that long: the step across a touch-down
     # or a schedule's window edge (adaptive.py)
     h_floor = max(CONTACT_STEP_FLOOR * h_max if h_max < np.inf else 0.0, schedule_step_floor(forces, dt))
@@ -78,7 +82,7 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
             land = min(land, next_impulse_step_stage(forces, dt, index))
             ts, h = t, 0.0  # k_1's evaluation: offset 0 into a step
             contact_begin_stage(contact, contact_work, ts, h)
-            begin(model, forces, force_data, t, x, q, P, L, F, tau, work)  # y0 and k_1
+            begin(model, forces, contact, force_data, t, x, q, P, L, F, tau, work)  # y0 and k_1
             if h_next <= 0.0:
                 h_next = initial_step(x, q, P, L, work, tolerance, record_every * dt)
             h_next = min(h_next, h_max)
@@ -91,19 +95,19 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
         # contact_begin: the contact springs measure time from the start of this (sub-)step
         contact_begin_stage(contact, contact_work, ts, h)
         # kinematic_begin: kinematic bodies at their exact pose, moving at their mean velocity over the (sub-)step
-        if kinematic_begin_stage(model, forces, ts, h, x, q, P, L):
+        if kinematic_begin_stage(model, kinematic, schedule, ts, h, x, q, P, L):
             moved = True
         if moved:  # the state changed since k_1 was evaluated: evaluate it again
             moved = False
-            begin(model, forces, force_data, t, x, q, P, L, F, tau, work)
+            begin(model, forces, contact, force_data, t, x, q, P, L, F, tau, work)
         # update: one attempt over [ts, ts + h), its 4th-order error estimate against the budget per step
-        advance(model, forces, force_data, t, h, x, q, P, L, F, tau, work)
-        err = error_norm(model, forces, force_data, t, h, per_time * max(h, h_floor), x, q, P, L, F, tau, work)
+        advance(model, forces, contact, force_data, t, h, x, q, P, L, F, tau, work)
+        err = error_norm(model, forces, contact, force_data, t, h, per_time * max(h, h_floor), x, q, P, L, F, tau, work)
         if err <= 1.0:
             counters[COUNT_ACCEPTED] += 1
             accept(x, q, P, L, work)
             # kinematic_end: kinematic bodies at their exact state at the end of the (sub-)step (closed form)
-            kinematic_end_stage(model, forces, te, x, q, P, L)
+            kinematic_end_stage(model, kinematic, schedule, te, x, q, P, L)
             # contact_commit: the (sub-)step is complete: its last evaluation's contacts become the history
             contact_commit_stage(model, contact, contact_work, x, q, P, L)
             factor = FAC_MAX if err == 0.0 else min(FAC_MAX, max(FAC_MIN, SAFETY * err**-0.25))

@@ -5,7 +5,9 @@ Regenerate with `python tests/physics/test_pipeline.py --regenerate` after chang
 
 import numba
 
-from rbcli.physics.forces.stages import (
+from rbcli.physics.integrators.exact import SCRATCH_WIDTH, materialise
+from rbcli.physics.integrators.exact import step as integrator_step
+from rbcli.physics.stages import (
     contact_begin_stage,
     contact_commit_stage,
     contact_record_stage,
@@ -13,9 +15,7 @@ from rbcli.physics.forces.stages import (
     kinematic_begin_stage,
     kinematic_end_stage,
 )
-from rbcli.physics.integrators.exact import SCRATCH_WIDTH, materialise
-from rbcli.physics.integrators.exact import step as integrator_step
-from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, chunk_status, record_if_due
+from rbcli.physics.step import CHUNK_KERNEL, STATUS_OK, chunk_status, model_bodies, record_if_due
 
 __all__ = ["SCRATCH_WIDTH", "integrator_step", "run_chunk"]
 
@@ -30,8 +30,12 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
     """
     # taken out of their tuples once: inside the loop each would be increfed and decrefed every step
     x, q, P, L, F, tau, scratch = data.x, data.q, data.P, data.L, data.F, data.tau, data.scratch
-    force_data, contact = data.force, forces.contact
+    force_data = data.force
+    contact, kinematic, schedule = model.contact, model.kinematic, forces.schedule
     contact_work = force_data.contact
+    # from here on `model` is the model's body arrays alone (KernelBodies): one numba type for every
+    # kind of scene, so each stage kernel below is compiled once for all of them; tables go by name
+    model = model_bodies(model)
     substeps = data.substeps
     h = dt / substeps
     for k in range(n_steps):
@@ -44,15 +48,16 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
             # contact_begin: the contact springs measure time from the start of this (sub-)step
             contact_begin_stage(contact, contact_work, ts, h)
             # kinematic_begin: kinematic bodies at their exact pose, moving at their mean velocity over the (sub-)step
-            kinematic_begin_stage(model, forces, ts, h, x, q, P, L)
+            kinematic_begin_stage(model, kinematic, schedule, ts, h, x, q, P, L)
             # update: the integrator's maths, its force evaluations through forces.wrench.accumulate_wrench
-            integrator_step(model, forces, force_data, ts, h, x, q, P, L, F, tau, scratch)
+            integrator_step(model, forces, contact, force_data, ts, h, x, q, P, L, F, tau, scratch)
             # kinematic_end: kinematic bodies at their exact state at the end of the (sub-)step (closed form)
-            kinematic_end_stage(model, forces, ts + h, x, q, P, L)
+            kinematic_end_stage(model, kinematic, schedule, ts + h, x, q, P, L)
             # contact_commit: the (sub-)step is complete: its last evaluation's contacts become the history
             contact_commit_stage(model, contact, contact_work, x, q, P, L)
         # materialise: exact defers torque-free bodies under constant forces; write them when due
-        materialise(model, forces, t, dt, x, q, P, L, scratch, (index + 1) % record_every == 0 or k + 1 == n_steps)
+        due = (index + 1) % record_every == 0 or k + 1 == n_steps
+        materialise(model, forces, contact, t, dt, x, q, P, L, scratch, due)
         # contact_record: on recording steps, the state's contact count, deepest overlap and energy
         contact_record_stage(contact, contact_work, x, q, frames, filled, (index + 1) % record_every == 0)
         # record: on recording steps, the divergence check and the state copied into the next frame

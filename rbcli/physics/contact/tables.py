@@ -1,4 +1,4 @@
-"""Contact parameters (read-only, in ForceTables) and contact work arrays (mutable, in the run's Data).
+"""Contact parameters (read-only, the model's `contact`) and contact work arrays (mutable, in the run's Data).
 
 Geometry: each contact body carries contact spheres, body-fixed, given in the PRINCIPAL frame about
 its centre of mass like every other body point (model.py). A sphere-shaped body is one sphere (its
@@ -282,6 +282,31 @@ def contact_table(
         stable_step=float(stable_step),
         excluded_pair=excluded_pair_keys(excluded_pair, bodies),
     )
+
+
+def contact_present(contact: ContactTable | None) -> bool:
+    """True when the scene has a contact stage: contact spheres or static bodies."""
+    return contact is not None and bool(contact.sphere_body.shape[0] or contact.static_body.shape[0])
+
+
+def check_contact_table(contact: ContactTable, body_count: int) -> None:
+    """ValueError unless the contact table's per-body arrays have body_count rows and its spheres and
+    static bodies name bodies in range (the kernels index with them unchecked)."""
+    if not contact.sphere_body.size:
+        return
+    for name in (
+        "body_inv_contact_mass",
+        "body_stiffness",
+        "body_plane_stiffness",
+        "body_damping_ratio",
+        "body_friction",
+    ):
+        if getattr(contact, name).shape != (body_count,):
+            raise ValueError(f"contact {name} has shape {getattr(contact, name).shape}, expected ({body_count},)")
+    for name in ("sphere_body", "static_body"):
+        body = getattr(contact, name)
+        if body.size and (body.min() < 0 or body.max() >= body_count):
+            raise ValueError(f"contact {name} names body {body.min()}..{body.max()}, outside 0..{body_count - 1}")
 
 
 def excluded_pair_keys(pairs: object, body_count: int) -> np.ndarray:

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from rbcli.physics.contact.tables import ContactTable, contact_table
+from rbcli.physics.contact.tables import ContactTable, check_contact_table
 from rbcli.physics.forces.tables import (
     NO_SCHEDULE,
     TERM_NAMES,
@@ -44,7 +44,6 @@ from rbcli.physics.forces.tables import (
     ForceData,
     ForceTables,
     ImpulseTable,
-    KinematicTable,
     PointForceTable,
     ScheduleTable,
     SpringTable,
@@ -52,7 +51,6 @@ from rbcli.physics.forces.tables import (
     drag_table,
     field_table,
     impulse_table,
-    kinematic_table,
     make_force_data,
     point_force_table,
     schedule_table,
@@ -94,9 +92,10 @@ def build_force_tables(
     drag: DragTable | None = None,
     impulse: ImpulseTable | None = None,
     contact: ContactTable | None = None,
-    kinematic: KinematicTable | None = None,
 ) -> ForceTables:
-    """Tables for a scene of body_count bodies from plain tables (a missing table = 0 rows).
+    """Tables for a scene of body_count bodies from plain tables (a missing table = 0 rows); contact:
+    the model's contact table (None: no contact), which only decides the bodies contact can give a
+    torque (`bodies_with_torque`): the table itself is the model's (physics/model.py).
 
     `rbcli.scene.compile_forces` builds the tables from a scene's force specs; this function only
     assembles them, checks that every row names a body in range, and derives the switches
@@ -114,16 +113,14 @@ def build_force_tables(
         impulse=impulse if impulse is not None else impulse_table(),
     )
     _check_bodies(body_count, **tables)
-    contact = contact if contact is not None else contact_table()
-    _check_contact(body_count, contact)
+    if contact is not None:
+        check_contact_table(contact, body_count)
     torque_body = bodies_with_torque(body_count, **tables, contact=contact)
     return ForceTables(
         gravity=g,
         has_gravity=gravity is not None and bool(np.any(g != 0.0)),
         has_torque=bool(torque_body.any()),
         torque_body=torque_body,
-        contact=contact,
-        kinematic=kinematic if kinematic is not None else kinematic_table(),
         **tables,
     )
 
@@ -212,28 +209,10 @@ def _check_bodies(body_count: int, **tables: Any) -> None:
             raise ValueError(f"{name} table names body {body.min()}..{body.max()}, outside 0..{body_count - 1}")
 
 
-def _check_contact(body_count: int, contact: ContactTable) -> None:
-    """ValueError unless the contact table's per-body arrays have body_count rows and its spheres and
-    static bodies name bodies in range (the kernels index with them unchecked)."""
-    if not contact.sphere_body.size:
-        return
-    for name in (
-        "body_inv_contact_mass",
-        "body_stiffness",
-        "body_plane_stiffness",
-        "body_damping_ratio",
-        "body_friction",
-    ):
-        if getattr(contact, name).shape != (body_count,):
-            raise ValueError(f"contact {name} has shape {getattr(contact, name).shape}, expected ({body_count},)")
-    for name in ("sphere_body", "static_body"):
-        body = getattr(contact, name)
-        if body.size and (body.min() < 0 or body.max() >= body_count):
-            raise ValueError(f"contact {name} names body {body.min()}..{body.max()}, outside 0..{body_count - 1}")
-
-
-def force_terms_present(forces: ForceTables) -> tuple[str, ...]:
-    """Names of the terms the compiled wrench (and `apply_impulses`) will evaluate, in TERM_NAMES order."""
-    special = {"gravity": 1 if forces.has_gravity else 0, "contact": int(forces.contact.sphere_body.shape[0])}
+def force_terms_present(forces: ForceTables, contact: ContactTable | None) -> tuple[str, ...]:
+    """Names of the terms the compiled wrench (and `apply_impulses`) will evaluate, in TERM_NAMES order;
+    contact: the model's contact table (`model.contact`; None: no contact)."""
+    spheres = 0 if contact is None else int(contact.sphere_body.shape[0])
+    special = {"gravity": 1 if forces.has_gravity else 0, "contact": spheres}
     rows = {name: special[name] if name in special else table_rows(getattr(forces, name)) for name in TERM_NAMES}
     return tuple(name for name in TERM_NAMES if rows[name])

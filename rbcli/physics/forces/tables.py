@@ -12,17 +12,25 @@ r = E^T (p_user - centre_user). Vectors flagged `body_frame` are in the principa
 frame too (v = E^T v_user); the others are world-frame. Every array of the tables is read-only; what
 the force pass writes at run time is a `ForceData`, owned by the run's Data (physics/data.py).
 
+Only force terms live here. The contact, joint and kinematic tables are the model's (physics/model.py:
+`model.contact`, `model.joint`, `model.kinematic`), as MuJoCo's mjModel holds them; the force pass
+reads the contact table beside these (contact is a force stage). The schedules stay here: they are
+the force terms' time profiles, and a kinematic body's motion borrows a row of the same table, so one
+table serves both (and the adaptive loop's step floor at a window edge: physics/adaptive.py).
+
 This module imports numpy only (no numba), so `scene/compile.py` can build tables cheaply.
 """
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
-from rbcli.physics.contact.tables import ContactTable, ContactWork, make_contact_work
-from rbcli.physics.joints.tables import JointTable, JointWork, make_joint_work
+from rbcli.physics.contact.tables import ContactTable, ContactWork, contact_present, make_contact_work
+
+if TYPE_CHECKING:
+    from rbcli.physics.model import KernelModel, Model
 
 # Row column `schedule` value meaning "no schedule": the force acts at full strength at all times.
 NO_SCHEDULE = -1
@@ -151,34 +159,6 @@ class ImpulseTable(NamedTuple):
     body_frame: np.ndarray  # bool (row_count,)
 
 
-class KinematicTable(NamedTuple):
-    """The prescribed motions of a scene's kinematic bodies, one row each (read-only; the closed form
-    and the stages that set it: physics/kinematic.py)."""
-
-    body: np.ndarray  # int64 (row_count,)
-    schedule: np.ndarray  # int64 (row_count,): NO_SCHEDULE (s = 1) or a ScheduleTable row of ForceTables
-    velocity: np.ndarray  # v0 [m/s] (row_count, 3), world
-    angular_velocity: np.ndarray  # w0 [rad/s] (row_count, 3), world
-    pivot: np.ndarray  # p0 [m] (row_count, 3), world, at t = 0
-    position: np.ndarray  # x0 [m] (row_count, 3), world, centre of mass at t = 0
-    orientation: np.ndarray  # q0 (row_count, 4) wxyz, world-from-principal at t = 0
-
-
-def kinematic_table(
-    body=(),  # noqa: ANN001
-    schedule=(),  # noqa: ANN001
-    velocity=(),  # noqa: ANN001
-    angular_velocity=(),  # noqa: ANN001
-    pivot=(),  # noqa: ANN001
-    position=(),  # noqa: ANN001
-    orientation=(),  # noqa: ANN001
-) -> KinematicTable:
-    """A KinematicTable with consistent dtypes (empty: a scene without kinematic bodies)."""
-
-    return KinematicTable(_i(body), _i(schedule), _f(velocity, 3), _f(angular_velocity, 3), _f(pivot, 3),
-                          _f(position, 3), _f(orientation, 4))  # fmt: skip
-
-
 # the fields of ForceTables that kernels take as they are (switches, gravity, the shared schedules);
 # every other field is a force type's table, None in KernelForceTables when it has no rows
 _KERNEL_AS_IS = ("gravity", "has_gravity", "has_torque", "torque_body", "schedule")
@@ -191,14 +171,9 @@ class ForceTables(NamedTuple):
     has_gravity: False when the scene has no gravity (the term is skipped).
     has_torque: False when no term can produce a torque: integrators may skip the torque kick, and
       the wrench leaves tau untouched (all zeros). Equal to torque_body.any().
-    contact: contact spheres, materials, planes and static bodies (contact/tables.py; 0 spheres: no
-      contact stage).
-    kinematic: the prescribed motions of kinematic bodies (KinematicTable; their stages: physics/kinematic.py;
-      0 rows: no kinematic stages).
-    joint: the joints (physics/joints/tables.py), None without joints: the joint stages compile to
-      nothing (physics/joints/stages.py) in either form of the tables.
     torque_body: bool (body_count,): True for a body that some term can give a torque (a field row,
-      a point force or spring end off its centre of mass, a pure torque, angular drag). Integrators
+      a point force or spring end off its centre of mass, a pure torque, angular drag, contact with
+      friction or spheres off the centre: the model's contact table is a force stage). Integrators
       run their torque path (L += h tau, the body-frame torque in Euler's equations) only for these
       bodies; every other body's tau is exactly zero, so skipping it changes nothing. Impulses act
       on L between steps, not through tau, so they flag nothing.
@@ -215,9 +190,6 @@ class ForceTables(NamedTuple):
     spring: SpringTable
     drag: DragTable
     impulse: ImpulseTable
-    contact: ContactTable
-    kinematic: KinematicTable = kinematic_table()
-    joint: JointTable | None = None
 
     def kernel(self) -> KernelForceTables:
         """The tables as compiled kernels take them: None for each table without rows (see
@@ -226,10 +198,6 @@ class ForceTables(NamedTuple):
         def kernel_field(name: str, value: Any) -> Any:  # noqa: ANN401 - a table or a switch
             if name in _KERNEL_AS_IS:
                 return value
-            if value is None:  # a table a scene may lack altogether (joint)
-                return None
-            if name == "contact":
-                return value if contact_present(value) else None
             return value if table_rows(value) else None  # every force type's table
 
         return KernelForceTables(*(kernel_field(name, getattr(self, name)) for name in self._fields))
@@ -237,10 +205,10 @@ class ForceTables(NamedTuple):
 
 class KernelForceTables(NamedTuple):
     """ForceTables as compiled kernels take them (`ForceTables.kernel()`, like Model.kernel()): the
-    same fields in the same order, each force type's table None when the scene has no rows of it
-    (contact: None without contact spheres and static bodies), so numba types it as NoneType and its
-    stage compiles to nothing (forces/stages.py). Kernels also accept a ForceTables (every stage then
-    compiled, skipped at run time for 0 rows), as tests and benchmarks that call them directly do."""
+    same fields in the same order, each force type's table None when the scene has no rows of it, so
+    numba types it as NoneType and its stage compiles to nothing (forces/stages.py, physics/stages.py).
+    Kernels also accept a ForceTables (every stage then compiled, skipped at run time for 0 rows), as
+    tests and benchmarks that call them directly do."""
 
     gravity: np.ndarray
     has_gravity: bool
@@ -253,14 +221,6 @@ class KernelForceTables(NamedTuple):
     spring: SpringTable | None
     drag: DragTable | None
     impulse: ImpulseTable | None
-    contact: ContactTable | None
-    kinematic: KinematicTable | None = None
-    joint: JointTable | None = None
-
-
-def contact_present(contact: ContactTable | None) -> bool:
-    """True when the scene has a contact stage: contact spheres or static bodies."""
-    return contact is not None and bool(contact.sphere_body.shape[0] or contact.static_body.shape[0])
 
 
 class ForceData(NamedTuple):
@@ -271,25 +231,24 @@ class ForceData(NamedTuple):
       evaluation of a term adds the rows (field: particles; impulse: impulses applied; contact: contacts
       found) it processed.
     contact: the contact stage's grid, per-evaluation arrays and contact history (contact/tables.py);
-      None when the scene has no contact stage (`contact_present`), as KernelForceTables.contact is.
-    joint: the joint stages' work arrays (physics/joints/tables.py); None without joints.
+      None when the scene has no contact stage (`contact_present`), as KernelModel.contact is. The force
+      pass's contact stage writes it; the pipeline's contact stages start, commit and record it.
     """
 
     term_evaluations: np.ndarray
     contact: ContactWork | None
-    joint: JointWork | None = None
 
 
-def make_force_data(forces: ForceTables | KernelForceTables, contact_threads: int = 1) -> ForceData:
-    """A zeroed ForceData for `forces` (either form: the same ForceData); contact_threads > 1: the
-    contact pair search runs on that many threads (contact/threaded.py)."""
-    contact = forces.contact
+def make_force_data(model: Model | KernelModel, contact_threads: int = 1) -> ForceData:
+    """A zeroed ForceData for the model `model` (Model, KernelModel: the same ForceData; what it needs is
+    the model's contact table); contact_threads > 1: the contact pair search runs on that many threads
+    (contact/threaded.py)."""
+    contact: ContactTable | None = model.contact
     return ForceData(
         term_evaluations=np.zeros(len(TERM_NAMES), dtype=np.int64),
-        contact=make_contact_work(contact, forces.torque_body.shape[0], threads=contact_threads)
+        contact=make_contact_work(contact, model.body_mass.shape[0], threads=contact_threads)
         if contact is not None and contact_present(contact)
         else None,
-        joint=make_joint_work(forces.joint) if forces.joint is not None and table_rows(forces.joint) else None,
     )
 
 

@@ -9,9 +9,10 @@ Impulses are not forces: they are applied between steps by `impulse.apply_impuls
 impulse stage).
 
 Only the stages a scene has are compiled. The kernels take `ForceTables.kernel()` (KernelForceTables,
-forces/tables.py), whose table of a force type the scene does not use is None; every stage but gravity
-is called through a dispatcher (forces/stages.py `force_stage`, a `numba.extending.overload`) that
-compiles to a no-op for a NoneType table and to the stage otherwise. A run-time `if table.rows:` test
+forces/tables.py), whose table of a force type the scene does not use is None, and the model's contact
+table (`Model.kernel().contact`, None without contact); every stage but gravity is called through a
+dispatcher (forces/stages.py `force_stage`, a `numba.extending.overload`) that compiles to a no-op for
+a NoneType table and to the stage otherwise. A run-time `if table.rows:` test
 alone skips the work but not the compilation: numba compiles both sides of a branch, so a gravity-only
 scene's first run compiled every force type. Why this design: the Python side keeps reading
 ForceTables as before (every table present, 0 rows when unused: `forces.spring.body_a`,
@@ -41,13 +42,15 @@ __all__ = ["accumulate_wrench", "potential_energy", "wrench_numpy"]
 def wrench_numpy(  # noqa: ANN001
     model, forces: ForceTables, t: float, x, q, P, L, dissipative: bool = True
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Plain numpy reference of `accumulate_wrench` (tests); model: Model or KernelModel. Contact forces
-    carry history, so they have their own reference (physics/contact/reference.py), not this one."""
+    """Plain numpy reference of `accumulate_wrench` (tests); model: Model, KernelModel or KernelBodies.
+    Contact forces carry history, so they have their own reference (physics/contact/reference.py), not
+    this one: ValueError for a model with contact spheres."""
     spring, drag = forces.spring, forces.drag
     if not dissipative:
         spring = spring._replace(damping=np.zeros_like(spring.damping))
         drag = drag._replace(**{name: getattr(drag, name)[:0] for name in drag._fields})
-    if forces.contact.sphere_body.shape[0]:
+    contact = getattr(model, "contact", None)  # KernelBodies has no tables
+    if contact is not None and contact.sphere_body.shape[0]:
         raise ValueError("wrench_numpy has no contact forces: compare contact with physics/contact/reference.py")
     F = np.zeros_like(x)
     tau = np.zeros_like(x)

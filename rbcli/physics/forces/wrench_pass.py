@@ -29,7 +29,7 @@ from rbcli.physics.step import STEP_ENTRY
 __all__ = ["accumulate_wrench"]
 
 
-def _field(model, forces, force_data, t, x, q, P, L, F, tau, counts, dissipative) -> None:  # noqa: ANN001
+def _field(model, forces, contact, force_data, t, x, q, P, L, F, tau, counts, dissipative) -> None:  # noqa: ANN001
     """The field stage of FORCE_STAGES; `field_stage` dispatches to it."""
     if forces.field.body.shape[0]:
         counts[TERM_FIELD] += accumulate_field(model, forces.field, forces.schedule, t, x, q, F, tau)
@@ -38,7 +38,7 @@ def _field(model, forces, force_data, t, x, q, P, L, F, tau, counts, dissipative
 field_stage = force_stage(_field, "forces.field")  # nothing when a table is None
 
 
-def _point_force(model, forces, force_data, t, x, q, P, L, F, tau, counts, dissipative) -> None:  # noqa: ANN001
+def _point_force(model, forces, contact, force_data, t, x, q, P, L, F, tau, counts, dissipative) -> None:  # noqa: ANN001
     """The point_force stage of FORCE_STAGES; `point_force_stage` dispatches to it."""
     if forces.point_force.body.shape[0]:
         counts[TERM_POINT_FORCE] += accumulate_point_force(forces.point_force, forces.schedule, t, q, F, tau)
@@ -47,7 +47,7 @@ def _point_force(model, forces, force_data, t, x, q, P, L, F, tau, counts, dissi
 point_force_stage = force_stage(_point_force, "forces.point_force")  # nothing when a table is None
 
 
-def _torque(model, forces, force_data, t, x, q, P, L, F, tau, counts, dissipative) -> None:  # noqa: ANN001
+def _torque(model, forces, contact, force_data, t, x, q, P, L, F, tau, counts, dissipative) -> None:  # noqa: ANN001
     """The torque stage of FORCE_STAGES; `torque_stage` dispatches to it."""
     if forces.torque.body.shape[0]:
         counts[TERM_TORQUE] += accumulate_torque(forces.torque, forces.schedule, t, q, tau)
@@ -56,7 +56,7 @@ def _torque(model, forces, force_data, t, x, q, P, L, F, tau, counts, dissipativ
 torque_stage = force_stage(_torque, "forces.torque")  # nothing when a table is None
 
 
-def _spring(model, forces, force_data, t, x, q, P, L, F, tau, counts, dissipative) -> None:  # noqa: ANN001
+def _spring(model, forces, contact, force_data, t, x, q, P, L, F, tau, counts, dissipative) -> None:  # noqa: ANN001
     """The spring stage of FORCE_STAGES; `spring_stage` dispatches to it."""
     if forces.spring.body_a.shape[0]:
         counts[TERM_SPRING] += accumulate_spring(model, forces.spring, x, q, P, L, F, tau, dissipative)
@@ -65,7 +65,7 @@ def _spring(model, forces, force_data, t, x, q, P, L, F, tau, counts, dissipativ
 spring_stage = force_stage(_spring, "forces.spring")  # nothing when a table is None
 
 
-def _drag(model, forces, force_data, t, x, q, P, L, F, tau, counts, dissipative) -> None:  # noqa: ANN001
+def _drag(model, forces, contact, force_data, t, x, q, P, L, F, tau, counts, dissipative) -> None:  # noqa: ANN001
     """The drag stage of FORCE_STAGES; `drag_stage` dispatches to it."""
     if forces.drag.body.shape[0]:
         counts[TERM_DRAG] += accumulate_drag(model, forces.drag, q, P, L, F, tau)
@@ -74,25 +74,26 @@ def _drag(model, forces, force_data, t, x, q, P, L, F, tau, counts, dissipative)
 drag_stage = force_stage(_drag, "forces.drag")  # nothing when a table is None
 
 
-def _contact(model, forces, force_data, t, x, q, P, L, F, tau, counts, dissipative) -> None:  # noqa: ANN001
+def _contact(model, forces, contact, force_data, t, x, q, P, L, F, tau, counts, dissipative) -> None:  # noqa: ANN001
     """The contact stage of FORCE_STAGES; `contact_stage` dispatches to it."""
     work = force_data.contact
-    if forces.contact.sphere_body.shape[0] and not contact_quiet(work, x, t):  # else nothing can touch
-        accumulate_contact(model, forces.contact, work, t, x, q, P, L, F, tau)
+    if contact.sphere_body.shape[0] and not contact_quiet(work, x, t):  # else nothing can touch
+        accumulate_contact(model, contact, work, t, x, q, P, L, F, tau)
         counts[TERM_CONTACT] += np.int64(work.stats[0])
-    if forces.contact.static_body.shape[0]:
-        hold_static_bodies(forces.contact, F, tau)
+    if contact.static_body.shape[0]:
+        hold_static_bodies(contact, F, tau)
 
 
-contact_stage = force_stage(_contact, "forces.contact", "force_data.contact")  # nothing when a table is None
+contact_stage = force_stage(_contact, "contact", "force_data.contact")  # nothing when a table is None
 
 
 @numba.njit(**STEP_ENTRY)
-def accumulate_wrench(model, forces, force_data, t, x, q, P, L, F, tau, dissipative=True) -> None:  # noqa: ANN001
+def accumulate_wrench(model, forces, contact, force_data, t, x, q, P, L, F, tau, dissipative=True) -> None:  # noqa: ANN001
     """Set F [N] and tau [N m] (body_count, 3), world frame, about each centre of mass, to the sum of the
     scene's force terms at time t [s]: the stages of FORCE_STAGES in order. tau is left untouched (zero)
     when forces.has_torque is False; otherwise it is exactly zero for every body that forces.torque_body
-    does not flag. forces: KernelForceTables (or ForceTables); force_data (ForceData) holds what the
+    does not flag. model: the body arrays (KernelBodies); forces: KernelForceTables (or ForceTables);
+    contact: the model's contact table (None without contact); force_data (ForceData) holds what the
     pass writes besides F and tau: the stage counters and the contact work. dissipative=False leaves out
     the spring dampers and drag, which the splitting integrators integrate as their own flow
     (forces/damping.py); contact's dashpots stay in (contact is not smooth, so no integrator keeps its
@@ -106,15 +107,15 @@ def accumulate_wrench(model, forces, force_data, t, x, q, P, L, F, tau, dissipat
         accumulate_gravity(model.body_mass, forces.gravity, F)
         counts[TERM_GRAVITY] += F.shape[0]
     # field: per-particle force or acceleration fields (forces/field.py)
-    field_stage(model, forces, force_data, t, x, q, P, L, F, tau, counts, dissipative)
+    field_stage(model, forces, contact, force_data, t, x, q, P, L, F, tau, counts, dissipative)
     # point_force: forces at body points (forces/point_force.py)
-    point_force_stage(model, forces, force_data, t, x, q, P, L, F, tau, counts, dissipative)
+    point_force_stage(model, forces, contact, force_data, t, x, q, P, L, F, tau, counts, dissipative)
     # torque: pure couples (forces/torque.py)
-    torque_stage(model, forces, force_data, t, x, q, P, L, F, tau, counts, dissipative)
+    torque_stage(model, forces, contact, force_data, t, x, q, P, L, F, tau, counts, dissipative)
     # spring: springs-dampers, the dampers only when dissipative (forces/spring.py)
-    spring_stage(model, forces, force_data, t, x, q, P, L, F, tau, counts, dissipative)
+    spring_stage(model, forces, contact, force_data, t, x, q, P, L, F, tau, counts, dissipative)
     # drag: linear and quadratic, translational and rotational (forces/drag.py)
     if dissipative:
-        drag_stage(model, forces, force_data, t, x, q, P, L, F, tau, counts, dissipative)
+        drag_stage(model, forces, contact, force_data, t, x, q, P, L, F, tau, counts, dissipative)
     # contact: contact forces, then the static bodies held, their wrench zeroed (physics/contact)
-    contact_stage(model, forces, force_data, t, x, q, P, L, F, tau, counts, dissipative)
+    contact_stage(model, forces, contact, force_data, t, x, q, P, L, F, tau, counts, dissipative)

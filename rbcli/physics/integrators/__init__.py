@@ -1,10 +1,11 @@
 """Registry of integrators: metadata here (cheap to import: no numba), kernels loaded on demand.
 
 Every integrator module defines only its update maths:
-  step(model, forces, t, dt, x, q, P, L, F, tau, scratch)   # numba njit, in place, all bodies
-  step_numpy(model, forces, t, dt, x, q, P, L)               # plain numpy reference, in place
-and `SCRATCH_WIDTH`, the float64 scratch columns per body its compiled step needs. The forces come
-only from `accumulate_wrench`. The chunk loop that runs a step's stages around it is generated from
+  step(model, forces, contact, force_data, t, dt, x, q, P, L, F, tau, scratch)   # numba njit, in place
+  step_numpy(model, forces, t, dt, x, q, P, L)                                  # numpy reference, in place
+and `SCRATCH_WIDTH`, the float64 scratch columns per body its compiled step needs. model: the body
+arrays (KernelBodies); contact: the model's contact table (None without contact), for the force pass.
+The forces come only from `accumulate_wrench`. The chunk loop that runs a step's stages around it is generated from
 physics/pipeline.py into physics/chunks/<module>.py (`IntegratorInfo.chunk`).
 `kinematics.py` holds the per-body kernels they share (not a method).
 Adaptive time stepping (a tolerance instead of dt) is `rbcli.physics.adaptive` (the method) and

@@ -65,38 +65,38 @@ E = np.array([71.0 / 57600.0, 0.0, -71.0 / 16695.0, 71.0 / 1920.0, -17253.0 / 33
 
 
 @numba.njit(**STEP_ENTRY)
-def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
+def step(model, forces, contact, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One fixed dopri5 step of every body (fifth order, six wrench evaluations), in place."""
-    begin(model, forces, force_data, t, x, q, P, L, F, tau, scratch)
-    advance(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch)
+    begin(model, forces, contact, force_data, t, x, q, P, L, F, tau, scratch)
+    advance(model, forces, contact, force_data, t, dt, x, q, P, L, F, tau, scratch)
     commit(q, L, scratch)
 
 
 @numba.njit(cache=True)
-def begin(model, forces, force_data, t, x, q, P, L, F, tau, work) -> None:  # noqa: ANN001
+def begin(model, forces, contact, force_data, t, x, q, P, L, F, tau, work) -> None:  # noqa: ANN001
     """Save y0 = the current state and its rates k_1 = f(t, y0) into work (one wrench evaluation); y0's
     m is the carried one when q and L are what the last step wrote, else R^T L (module docstring)."""
-    accumulate_wrench(model, forces, force_data, t, x, q, P, L, F, tau)
+    accumulate_wrench(model, forces, contact, force_data, t, x, q, P, L, F, tau)
     _stage_pass(model, forces.has_torque, forces.torque_body, 0, True, True, 0.0, x, q, P, L, F, tau, work)
 
 
 @numba.njit(cache=True)
-def advance(model, forces, force_data, t, h, x, q, P, L, F, tau, work) -> None:  # noqa: ANN001
+def advance(model, forces, contact, force_data, t, h, x, q, P, L, F, tau, work) -> None:  # noqa: ANN001
     """From y0, k_1 in work: stages 2..6, leaving the fifth-order y(t + h) in the state arrays."""
     _combine(model, 1, h, x, q, P, L, work)
     for i in range(1, 6):
-        accumulate_wrench(model, forces, force_data, t + C[i] * h, x, q, P, L, F, tau)
+        accumulate_wrench(model, forces, contact, force_data, t + C[i] * h, x, q, P, L, F, tau)
         _stage_pass(model, forces.has_torque, forces.torque_body, i, False, False, h, x, q, P, L, F, tau, work)
 
 
 @numba.njit(cache=True)
-def error_norm(model, forces, force_data, t, h, tolerance, x, q, P, L, F, tau, work) -> float:  # noqa: ANN001
+def error_norm(model, forces, contact, force_data, t, h, tolerance, x, q, P, L, F, tau, work) -> float:  # noqa: ANN001
     """k_7 = f(t + h, y_new) (kept for the next step) and the scaled error max_j |err_j| / sc_j.
 
     err = h sum_i E_i k_i per component of (x, q, P, L, m); sc_j = tolerance (1 + max(|y0_j|, |y1_j|))
     (Hairer-Norsett-Wanner's mixed absolute/relative scale with atol = rtol = tolerance). Accept <= 1.
     """
-    accumulate_wrench(model, forces, force_data, t + h, x, q, P, L, F, tau)
+    accumulate_wrench(model, forces, contact, force_data, t + h, x, q, P, L, F, tau)
     _stage_pass(model, forces.has_torque, forces.torque_body, 6, False, False, h, x, q, P, L, F, tau, work)
     worst = 0.0
     for b in range(x.shape[0]):

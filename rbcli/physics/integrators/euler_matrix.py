@@ -27,9 +27,9 @@ SCRATCH_WIDTH = 27
 # decrefed every array of the model and the force tables on each call and each scratch view: ~2/3 of a
 # one-body step (docs/performance.md)
 @numba.njit(**STEP_ENTRY)
-def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
+def step(model, forces, contact, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One explicit Euler step of every body, in place."""
-    accumulate_wrench(model, forces, force_data, t, x, q, P, L, F, tau)
+    accumulate_wrench(model, forces, contact, force_data, t, x, q, P, L, F, tau)
     R = scratch[0, 0:9].reshape((3, 3))
     Rn = scratch[0, 9:18].reshape((3, 3))
     Ru = scratch[0, 18:27].reshape((3, 3))

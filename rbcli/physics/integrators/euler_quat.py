@@ -22,9 +22,9 @@ SCRATCH_WIDTH = 0
 
 
 @numba.njit(**STEP_ENTRY)
-def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
+def step(model, forces, contact, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One explicit Euler step of every body, in place."""
-    accumulate_wrench(model, forces, force_data, t, x, q, P, L, F, tau)
+    accumulate_wrench(model, forces, contact, force_data, t, x, q, P, L, F, tau)
     for b in range(x.shape[0]):
         w, qx, qy, qz = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
         m0, m1, m2 = rotate_inverse(w, qx, qy, qz, L[b, 0], L[b, 1], L[b, 2])

@@ -88,9 +88,10 @@ WEIGHTS = np.array([1.0])
 _OPTIONS: Any = STEP_KERNEL
 
 
-def forces_are_constant(forces) -> bool:  # noqa: ANN001
-    """True when uniform gravity is the scene's only force (no other type, no impulses, no contact):
-    every body's F = M g is constant and its tau zero, so no state between recorded frames matters."""
+def forces_are_constant(forces, contact) -> bool:  # noqa: ANN001
+    """True when uniform gravity is the scene's only force (no other type, no impulses, no contact: the
+    model's contact table `contact` None or empty): every body's F = M g is constant and its tau zero,
+    so no state between recorded frames matters."""
     raise TypeError("forces_are_constant runs in compiled kernels only")
 
 
@@ -100,7 +101,7 @@ def _table_rows(table) -> int:  # noqa: ANN001
 
 @overload(_table_rows, jit_options=_OPTIONS)
 def _table_rows_overload(table):  # noqa: ANN001, ANN202
-    if isinstance(table, types.NoneType):  # absent from ForceTables.kernel(): known when compiling
+    if isinstance(table, types.NoneType):  # absent from ForceTables.kernel() or Model.kernel(): known when compiling
         return lambda table: 0
     if "sphere_body" in table.fields:  # the contact table: spheres or static bodies
         return lambda table: table.sphere_body.shape[0] + table.static_body.shape[0]
@@ -108,20 +109,20 @@ def _table_rows_overload(table):  # noqa: ANN001, ANN202
 
 
 @overload(forces_are_constant, jit_options=_OPTIONS)
-def _forces_are_constant_overload(forces):  # noqa: ANN001, ANN202
-    def run(forces):  # noqa: ANN001, ANN202
+def _forces_are_constant_overload(forces, contact):  # noqa: ANN001, ANN202
+    def run(forces, contact):  # noqa: ANN001, ANN202
         rows = _table_rows(forces.field) + _table_rows(forces.point_force) + _table_rows(forces.torque)
         rows += _table_rows(forces.spring) + _table_rows(forces.drag) + _table_rows(forces.impulse)
-        return rows + _table_rows(forces.contact) == 0
+        return rows + _table_rows(contact) == 0
 
     return run
 
 
 @numba.njit(**STEP_ENTRY)
-def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
+def step(model, forces, contact, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One `exact` step of every body, in place (one force evaluation, at t + dt/2, unless the forces are
     constant); defers writing the state only once a chunk loop's `materialise` stage has said it runs."""
-    _step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch)
+    _step(model, forces, contact, force_data, t, dt, x, q, P, L, F, tau, scratch)
 
 
 @numba.njit(cache=True, inline="always")
@@ -197,12 +198,12 @@ def _remember(b, x, q, P, L, scratch) -> None:  # noqa: ANN001
 
 
 @numba.njit(**STEP_KERNEL)
-def _step(model, forces, force_data, t, h, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001
+def _step(model, forces, contact, force_data, t, h, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001
     """The step of the module docstring."""
     n = x.shape[0]
     if n == 0:
         return
-    constant = forces_are_constant(forces)
+    constant = forces_are_constant(forces, contact)
     torque = forces.has_torque
     for b in range(n):
         _keep_anchors(model, forces, b, t, x, q, P, L, scratch, not (torque and forces.torque_body[b]), constant)
@@ -227,7 +228,7 @@ def _step(model, forces, force_data, t, h, x, q, P, L, F, tau, scratch) -> None:
             _free_rotation_exact_work(model.body_inertia[b], q[b], L[b], 0.5 * h, row[Q_MID : Q_MID + 4], work)
     # with dampers or drag the kick K(h) is K_c(h/2) D(h) K_c(h/2), as in split2 (forces/damping.py)
     dissipative = dissipation_present(forces.spring, forces.drag)
-    accumulate_wrench(model, forces, force_data, t + 0.5 * h, x, scratch, P, L, F, tau, not dissipative)
+    accumulate_wrench(model, forces, contact, force_data, t + 0.5 * h, x, scratch, P, L, F, tau, not dissipative)
     kick = h
     if dissipative:
         kick = 0.5 * h
@@ -292,11 +293,11 @@ def _half_kick(kick, P, L, F, tau, scratch) -> None:  # noqa: ANN001
 
 
 @numba.njit(**STEP_KERNEL)
-def materialise(model, forces, t, h, x, q, P, L, scratch, due) -> None:  # noqa: ANN001
+def materialise(model, forces, contact, t, h, x, q, P, L, scratch, due) -> None:  # noqa: ANN001
     """The chunk loop's stage after each step [t, t + h): when the forces are constant (the step then
     defers) and the state is due (a recording step or the chunk's last), write every body's state from
     its anchors. Its first call (after the scratch was cleared) tells `step` it may defer from now on."""
-    if x.shape[0] == 0 or not forces_are_constant(forces):
+    if x.shape[0] == 0 or not forces_are_constant(forces, contact):
         return
     if scratch[0, DEFERRED] != 1.0:
         scratch[0, DEFERRED] = 1.0  # this step was written already; the next ones need not be
@@ -308,7 +309,7 @@ def materialise(model, forces, t, h, x, q, P, L, scratch, due) -> None:  # noqa:
 
 
 @numba.njit(cache=True)
-def compose(model, forces, force_data, t, h, weights, x, q, P, L, F, tau, q_mid) -> None:  # noqa: ANN001
+def compose(model, forces, contact, force_data, t, h, weights, x, q, P, L, F, tau, q_mid) -> None:  # noqa: ANN001
     """The composition exact(w_{s-1} h) ... exact(w_0 h), adjacent half drifts merged, in place.
 
     With torques the kicks change L, so the flow is chained through the stages. Torque-free L stays
@@ -332,7 +333,7 @@ def compose(model, forces, force_data, t, h, weights, x, q, P, L, F, tau, q_mid)
         if not torque:
             free_rotation_exact_batch(model.body_inertia, q, L, elapsed, q_mid, work)
         q_now = q if torque else q_mid  # (one wrench call site: the compiled wrench is inlined once)
-        accumulate_wrench(model, forces, force_data, t + elapsed, x, q_now, P, L, F, tau, not dissipative)
+        accumulate_wrench(model, forces, contact, force_data, t + elapsed, x, q_now, P, L, F, tau, not dissipative)
         h_prev = weights[i] * h
         h_next = weights[i + 1] * h if i + 1 < count else 0.0
         if dissipative:  # K_c(h/2) D(h) K_c(h/2) (forces/damping.py)

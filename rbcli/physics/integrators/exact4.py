@@ -19,9 +19,9 @@ SCRATCH_WIDTH = exact.SCRATCH_WIDTH
 
 
 @numba.njit(**STEP_ENTRY)
-def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
+def step(model, forces, contact, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One exact4 step of every body, in place (five force evaluations)."""
-    exact.compose(model, forces, force_data, t, dt, WEIGHTS, x, q, P, L, F, tau, scratch)
+    exact.compose(model, forces, contact, force_data, t, dt, WEIGHTS, x, q, P, L, F, tau, scratch)
 
 
 def step_numpy(model, forces, t, dt, x, q, P, L) -> None:  # noqa: ANN001

@@ -110,11 +110,11 @@ _STAGE_REACH = np.array([0.5, 0.5, 1.0, 1.0])
 
 
 @numba.njit(**STEP_ENTRY)
-def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
+def step(model, forces, contact, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One RK4 step of every body, in place: four wrench evaluations (one call site, so the compiled
     wrench is inlined once, not four times)."""
     for stage in range(4):
-        accumulate_wrench(model, forces, force_data, t + _STAGE_TIME[stage] * dt, x, q, P, L, F, tau)
+        accumulate_wrench(model, forces, contact, force_data, t + _STAGE_TIME[stage] * dt, x, q, P, L, F, tau)
         kind = STAGE_FIRST if stage == 0 else (STAGE_LAST if stage == 3 else STAGE_MIDDLE)
         reach = _STAGE_REACH[stage] * dt
         _stage(model, forces.has_torque, forces.torque_body, kind, reach, dt, x, q, P, L, F, tau, scratch)

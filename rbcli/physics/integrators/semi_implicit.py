@@ -42,9 +42,9 @@ def exp_rotation(v0, v1, v2):  # noqa: ANN001, ANN201 - numba scalars
 
 
 @numba.njit(**STEP_ENTRY)
-def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
+def step(model, forces, contact, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One semi-implicit Euler step of every body, in place."""
-    accumulate_wrench(model, forces, force_data, t, x, q, P, L, F, tau)
+    accumulate_wrench(model, forces, contact, force_data, t, x, q, P, L, F, tau)
     for b in range(x.shape[0]):
         inv_mass = 1.0 / model.body_mass[b]
         for k in range(3):

@@ -29,9 +29,9 @@ SCRATCH_WIDTH = 0
 
 
 @numba.njit(**STEP_ENTRY)
-def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
+def step(model, forces, contact, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One step with the explicit gyroscopic term, in place."""
-    accumulate_wrench(model, forces, force_data, t, x, q, P, L, F, tau)
+    accumulate_wrench(model, forces, contact, force_data, t, x, q, P, L, F, tau)
     for b in range(x.shape[0]):
         inv_mass = 1.0 / model.body_mass[b]
         for k in range(3):

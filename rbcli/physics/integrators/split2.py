@@ -93,27 +93,27 @@ WEIGHTS = np.array([1.0])
 
 
 @numba.njit(**STEP_ENTRY)
-def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
+def step(model, forces, contact, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One split2 step of every body, in place (one force evaluation, at t + dt/2)."""
-    compose(model, forces, force_data, t, dt, WEIGHTS, x, q, P, L, F, tau, scratch, False)
+    compose(model, forces, contact, force_data, t, dt, WEIGHTS, x, q, P, L, F, tau, scratch, False)
 
 
 @numba.njit(**STEP_KERNEL, parallel=True)
-def step_parallel(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001
+def step_parallel(model, forces, contact, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001
     """`step` with its two passes over the bodies (`_drift_to_first_kick`, `_kick_and_drift`: prange
     loops, inlined here) spread over numba's threads; the force evaluation and the stages around the
     step stay serial. Each body's arithmetic is the serial step's, nothing is summed across bodies, so
     any thread count gives the same bits as `step` (tests/physics/test_threaded_loop.py). A function of its
     own, not `numba.njit(parallel=True)(step.py_func)`: numba's cache is keyed on the function's name
     and line, and the two would overwrite each other's cached code. docs/performance.md, "Threads"."""
-    compose(model, forces, force_data, t, dt, WEIGHTS, x, q, P, L, F, tau, scratch, False)
+    compose(model, forces, contact, force_data, t, dt, WEIGHTS, x, q, P, L, F, tau, scratch, False)
 
 
 # compose and its two passes are inlined at numba level: a call boundary costs a reference-count
 # update per array argument (the model and force tables hold dozens), measured 2.25 -> 1.65 us per
 # step for one body, and 93 -> 88 ns per body-step at 100 bodies.
 @numba.njit(cache=True, inline="always")
-def compose(model, forces, force_data, t, h, weights, x, q, P, L, F, tau, scratch, compensate) -> None:  # noqa: ANN001
+def compose(model, forces, contact, force_data, t, h, weights, x, q, P, L, F, tau, scratch, compensate) -> None:  # noqa: ANN001
     """The composition split2(w_{s-1} h) ... split2(w_0 h) of every body, in place.
 
     compensate: m's sums in the turns compensated (split4, which reaches the round-off floor; split2's
@@ -128,7 +128,7 @@ def compose(model, forces, force_data, t, h, weights, x, q, P, L, F, tau, scratc
     _drift_to_first_kick(model, weights[0] * h, x, q, P, L, scratch, compensate)
     elapsed = 0.5 * weights[0] * h
     for i in range(count):
-        accumulate_wrench(model, forces, force_data, t + elapsed, x, q, P, L, F, tau, not dissipative)
+        accumulate_wrench(model, forces, contact, force_data, t + elapsed, x, q, P, L, F, tau, not dissipative)
         h_prev = weights[i] * h
         h_next = weights[i + 1] * h if i + 1 < count else 0.0
         kick = h_prev

@@ -31,9 +31,9 @@ WEIGHTS = np.array([_P, _P, 1.0 - 4.0 * _P, _P, _P])
 
 
 @numba.njit(**STEP_ENTRY)
-def step(model, forces, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
+def step(model, forces, contact, force_data, t, dt, x, q, P, L, F, tau, scratch) -> None:  # noqa: ANN001 - numba types
     """One split4 step of every body, in place (five force evaluations)."""
-    split2.compose(model, forces, force_data, t, dt, WEIGHTS, x, q, P, L, F, tau, scratch, True)
+    split2.compose(model, forces, contact, force_data, t, dt, WEIGHTS, x, q, P, L, F, tau, scratch, True)
 
 
 def step_numpy(model, forces, t, dt, x, q, P, L) -> None:  # noqa: ANN001

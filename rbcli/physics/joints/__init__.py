@@ -1,6 +1,6 @@
 """Joints: constraints between bodies (or a body and the world) on the maximal state x, q, P, L.
 
-tables.py (numpy: the JointTable of the force tables, the JointWork of the run's Data), rows.py
+tables.py (numpy: the JointTable of the model, the JointWork of the run's Data), rows.py
 (the rows' residuals and Jacobians), solver.py + solver_graph.py (the O(n) solve of the
 multipliers, Baraff 1996: docs/joint_solver.md), dense.py + dense_layout.py (a dense implementation of the
 same solver interface: factor_rows, solve_rows, joint_graph, make_solver_work), stages.py (the RATTLE-type position

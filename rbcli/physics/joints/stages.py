@@ -34,8 +34,10 @@ the period error is second order with the energy error bounded.
 Static and kinematic bodies act as the world (W = 0, nothing applied to them) but their anchors move
 with their pose; a kinematic body's velocity enters G V. Stats go to work.stats (tables.STAT_*).
 
-The chunk loop calls the three stages directly with the joint table and work (ForceTables.joint,
-ForceData.joint), which are None in a scene without joints. Each stage begins with `if table is None or
+The chunk loop calls the three stages directly with the joint table and work (the model's joint
+table, Model.kernel().joint, and Data.joint), which are None in a scene without joints, and the body
+arrays alone as `model` (KernelBodies: one type for every scene, so a stage compiled for one kind of
+jointed scene serves every other). Each stage begins with `if table is None or
 work is None: return`, and numba prunes a branch on an argument's `is None` when it compiles (its
 dead-branch pruning, before typing): in a jointless scene each stage compiles to an empty function and
 none of the rows, solver or drive kernels is compiled. The three take the step kernels' options

@@ -1,4 +1,4 @@
-"""The joint table (read-only, part of the force tables) and the joints' work arrays (in the run's Data).
+"""The joint table (read-only, the model's `joint`) and the joints' work arrays (the run's Data.joint).
 
 Rows are grouped by joint: joint j connects body_a[j] and body_b[j] (WORLD = -1 for the world; body_a
 is never the world) and owns rows row_start[j] .. row_start[j] + row_count[j] - 1. Each row r is one
@@ -72,7 +72,7 @@ class JointTable(NamedTuple):
 
 
 class JointWork(NamedTuple):
-    """The joint stages' mutable arrays, allocated once per run (`make_joint_work`), in ForceData.joint."""
+    """The joint stages' mutable arrays, allocated once per run (`make_joint_work`), in Data.joint."""
 
     jac_a: np.ndarray  # (R, 6): d g_r / d(v_a, omega_a), world
     jac_b: np.ndarray  # (R, 6): d g_r / d(v_b, omega_b), world (unused for WORLD)
