@@ -1,8 +1,10 @@
-"""What a new user reads first (issue 44): `--help` as plain text."""
+"""What a new user reads first (issue 44): `--help` as plain text, and install hints that name the
+distribution that exists on the package index."""
 
 from __future__ import annotations
 
 import re
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -52,3 +54,19 @@ def test_study_options_still_take_their_values():
     assert context.params["integrator"] == ["split2", "rk4"]
     assert context.params["min_time"] == 0.1 and context.params["scene"] == Path("scene.yaml")
 
+
+def test_install_hints_name_the_rbsim_distribution():
+    """The distribution is `rbsim` (pyproject.toml); `rbcli` on the package index is an unrelated project, so
+    `pip install 'rbcli[bench]'` would install someone else's code. No doc or source of rbsim may say it."""
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert project["name"] == "rbsim"
+    assert any(dep.startswith("mujoco") for dep in project["optional-dependencies"]["bench"])
+    texts = [ROOT / "README.md", *(ROOT / "docs").rglob("*.md"), *(ROOT / "rbcli").rglob("*.py")]
+    texts += (ROOT / "benchmarks").rglob("*.py")
+    found = [
+        f"{path.relative_to(ROOT)}:{number}: {line.strip()}"
+        for path in texts
+        for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1)
+        if "rbcli[" in line
+    ]
+    assert found == [], "\n".join(found)
