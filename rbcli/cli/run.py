@@ -21,6 +21,7 @@ from rbcli.runner.threads import ENV as THREADS_ENV
 from rbcli.runner.threads import PARALLEL_MIN_BODIES, parse_threads
 
 if TYPE_CHECKING:
+    from rbcli.runner.compile_progress import CompileProgress
     from rbcli.runner.simulation import Simulation
     from rbcli.scene.compile import CompiledScene, RunOptions
 
@@ -147,7 +148,7 @@ def run(
     for warning in compiled.warnings:
         messages.issue(warning, scene)
     sim = Simulation(compiled)  # the one that runs: its kernels are loaded first
-    _warm_up_kernels(sim, quiet)
+    _load_kernels(sim, quiet)
     with _stop_signals() as stops:  # the whole rest of the command: a late signal never cuts the log short
         _run_and_report(sim, target, quiet, stops)
 
@@ -207,7 +208,7 @@ def _resume(log: Path, output: Path | None, compression: str | None, quiet: bool
         t = plan.checkpoint.t
         messages.status(f"resuming {log} ({plan.log_status}) at step {plan.checkpoint.step} (t = {t:.6g} s)")
     sim = Simulation(plan.compiled)  # the one that runs: resume_to_file restores the checkpoint into it
-    _warm_up_kernels(sim, quiet)
+    _load_kernels(sim, quiet)
     with _stop_signals() as stops:
         _run_and_report(
         sim, target, quiet, stops, start=plan.checkpoint.step,
@@ -351,14 +352,45 @@ def _stop_signals() -> Iterator[_Stops]:
             signal.signal(number, signal.SIG_IGN if stops.received else handler)
 
 
-def _warm_up_kernels(sim: Simulation, quiet: bool) -> None:
-    """Compile (or load from cache) the kernels of `sim`'s run, saying so if it takes noticeable time."""
-    timer = threading.Timer(0.5, lambda: messages.status("compiling kernels (first run only)…") if not quiet else None)
-    timer.start()
-    try:
+def _load_kernels(sim: Simulation, quiet: bool) -> None:
+    """Load the kernels `sim`'s run calls from numba's cache, compiling those it lacks (a scene's first run,
+    or the first after the physics sources changed); the compile is shown (_CompileStatus)."""
+    from rbcli.runner.compile_progress import watch_compiles
+
+    shown = _CompileStatus(quiet)
+    with watch_compiles(shown.update) as progress:
         sim.load_kernels()
-    finally:
-        timer.cancel()
+    shown.end(progress())
+
+
+class _CompileStatus:
+    """How `rbsim run` shows numba compiling its kernels (cache loads show nothing: they fire no compile
+    event): on a terminal one line rewritten as the compile goes, `compiling kernels: 14 functions, 23 s —
+    rbcli.physics.contact.search.find_contacts`; elsewhere (a pipe, a log) one line when compiling starts;
+    then a line with what it took; nothing with -q."""
+
+    def __init__(self, quiet: bool) -> None:
+        self.quiet = quiet
+        self.live = not quiet and messages.can_rewrite_status()
+        self.shown = False
+
+    def update(self, progress: CompileProgress) -> None:
+        if self.quiet:
+            return
+        if self.live:
+            count = f"{progress.functions} function{'s' if progress.functions != 1 else ''}"
+            now = f" — {progress.current}" if progress.current else ""
+            messages.live_status(f"compiling kernels: {count}, {progress.seconds:.0f} s{now}")
+        elif not self.shown:
+            messages.status(f"compiling kernels, from {progress.current} (once: later runs load them from the cache)…")
+        self.shown = True
+
+    def end(self, progress: CompileProgress) -> None:
+        if not self.shown:
+            return
+        if self.live:
+            messages.end_live_status()
+        messages.status(f"compiled kernels: {progress.functions} functions in {progress.seconds:.1f} s")
 
 
 def _run_with_progress(sim: Simulation, target: Path, quiet: bool, stops: _Stops, run=None, start: int = 0):  # noqa: ANN001, ANN202
