@@ -1,439 +1,65 @@
-"""MCAP recording: protobuf messages in zstd chunks, readable by Foxglove and by the Rerun viewer.
+"""The MCAP sink: a run recorded as protobuf messages in zstd chunks, readable by Foxglove and by the
+Rerun viewer.
 
-Topics; log_time = publish_time = simulated time [ns], so identical runs give byte-identical files:
-
-    /rbsim/state               rbsim.State per recorded step: the exact float64 record
-    /tf                        foxglove.FrameTransforms per recorded step: "world" -> each body
-    /bodies/<name>/particles   foxglove.PointCloud once at t = 0, in the body's frame (frame_id = name)
-    /rbsim/invariants          rbsim.Invariants per recorded step (only when the run has invariants)
-    /particles                 foxglove.PointCloud of all particles, world frame (only with that stream)
-    /contacts                  foxglove.PointCloud of the frame's contact points, world frame, fields
-                               x, y, z [m] and normal_force [N] (only with that stream)
-    /rbsim/checkpoint          rbsim.Checkpoint: what the run carries between steps, at most every
-                               10 s of wall time and when it stops (`rbsim run --resume`)
-
-Channel ids are 16-bit in MCAP, so a file holds at most 65,535 channels. A scene with more bodies than
-fit beside the fixed channels (BODY_CHANNELS_MAX) puts every body's cloud on one channel instead,
-`/bodies/particles`: the same messages (one PointCloud per body at t = 0, frame_id = the body's name,
-sequence = body index), so the clouds still follow the transforms; in Foxglove give that topic a decay
-time to see them all at once (a panel otherwise keeps one message per topic). The readers accept both.
-
-plus the attachment `scene.yaml` and the metadata records `rbsim` (run parameters, written at open)
-and `rbsim.summary` (how the run ended, written at close). The .proto text of the project messages
-lives in schemas/; here their descriptors are built at run time, so there is no protoc step.
-
-This is the only module that imports mcap, mcap_protobuf and foxglove_schemas_protobuf, so the
-readers of the files it writes live here too (`read_mcap_contents`, `iter_mcap_blocks`,
-`read_mcap_invariants`); `record.read` wraps them.
+The layout (topics, metadata records, the scene attachment) is `mcap_layout.py`; the messages are built
+by `mcap_messages.py` (protobuf) and, the per-step ones, by `mcap_encoders.py` (wire format); the file
+is written by `mcap_writer.py`. The readers of the files it writes live here too (`read_mcap_contents`,
+`iter_mcap_blocks`, `read_mcap_invariants`); `record.read` wraps them.
 """
 
 from __future__ import annotations
 
 import json
 import math
-import re
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
-from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
-from foxglove_schemas_protobuf.PackedElementField_pb2 import PackedElementField
-from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
-from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
-from mcap_protobuf.schema import build_file_descriptor_set
 
-from rbcli.record.frame import RECORDING_FORMAT_VERSION, Checkpoint, FrameBlock, RunHeader, RunSummary
-from rbcli.record.mcap_writer import COMPRESSIONS, MAX_ID, ZSTD_LEVEL, McapChunkWriter
+from rbcli.record.frame import Checkpoint, FrameBlock, RunHeader, RunSummary
+from rbcli.record.mcap_encoders import InvariantsEncoder, StateEncoder, TransformsEncoder, encode_joint_forces, time_ns
+from rbcli.record.mcap_layout import (
+    FORMAT_VERSION,
+    FRAME_TOPICS,
+    METADATA_RUN,
+    METADATA_SUMMARY,
+    SCENE_ATTACHMENT,
+    STATE_FIELDS,
+    TOPIC_BODY_PARTICLES,
+    TOPIC_CHECKPOINT,
+    TOPIC_CONTACTS,
+    TOPIC_INVARIANTS,
+    TOPIC_JOINT_FORCES,
+    TOPIC_PARTICLES,
+    TOPIC_STATE,
+    TOPIC_TF,
+    WORLD_FRAME,
+    particle_channels_shared,
+    particle_topic,
+)
+from rbcli.record.mcap_messages import (
+    POINT_CLOUD_MESSAGE,
+    TRANSFORMS_MESSAGE,
+    checkpoint_file_proto,
+    cloud_points,
+    contact_cloud,
+    decode_checkpoint,
+    decoder_factory,
+    encode_checkpoint,
+    invariant_field_names,
+    invariants_file_proto,
+    joint_forces_file_proto,
+    point_cloud,
+    schema_data,
+    schema_name,
+    state_file_proto,
+)
+from rbcli.record.mcap_writer import COMPRESSIONS, ZSTD_LEVEL, McapChunkWriter
 
 # A run's file is fsynced after a chunk when the last fsync is this old [s] (docs/robustness.md "Crashes").
 FSYNC_SECONDS = 1.0
-
-TOPIC_STATE = "/rbsim/state"
-TOPIC_TF = "/tf"
-TOPIC_INVARIANTS = "/rbsim/invariants"
-TOPIC_PARTICLES = "/particles"
-TOPIC_CONTACTS = "/contacts"
-TOPIC_CHECKPOINT = "/rbsim/checkpoint"
-TOPIC_JOINT_FORCES = "/rbsim/joint_forces"
-TOPIC_BODY_PARTICLES = "/bodies/particles"  # every body's cloud, when one channel per body would not fit
-WORLD_FRAME = "world"
-METADATA_RUN = "rbsim"
-METADATA_SUMMARY = "rbsim.summary"
-SCENE_ATTACHMENT = "scene.yaml"
-FORMAT_VERSION = str(RECORDING_FORMAT_VERSION)
-
-# (FrameBlock attribute, rbsim.State field name, field number, components per body)
-STATE_FIELDS = (
-    ("x", "position", 3, 3),
-    ("q", "orientation", 4, 4),
-    ("v", "linear_velocity", 5, 3),
-    ("omega", "angular_velocity", 6, 3),
-    ("P", "momentum", 7, 3),
-    ("L", "angular_momentum", 8, 3),
-)
-
-
-# Channels besides the per-body clouds: /rbsim/state, /tf, /rbsim/invariants, /particles, /contacts,
-# /rbsim/checkpoint, /rbsim/joint_forces.
-FIXED_CHANNELS = 7
-BODY_CHANNELS_MAX = MAX_ID - FIXED_CHANNELS  # 65,529 bodies still get a channel each
-
-
-def particle_topic(body_name: str) -> str:
-    """The topic of a body's static particle cloud (in a file of at most BODY_CHANNELS_MAX bodies)."""
-    return f"/bodies/{body_name}/particles"
-
-
-def particle_channels_shared(body_count: int) -> bool:
-    """True when the bodies' clouds share TOPIC_BODY_PARTICLES: one channel each would not fit in MCAP."""
-    return body_count > BODY_CHANNELS_MAX
-
-
-def _decoder_factory() -> Any:  # noqa: ANN401 - mcap_protobuf's DecoderFactory
-    """The protobuf decoder of the readers (imported here: writing a run needs no reader, ~0.02 s)."""
-    from mcap_protobuf.decoder import DecoderFactory
-
-    return DecoderFactory()
-
-
-def _reader(f: IO[bytes]) -> Any:  # noqa: ANN401 - mcap's McapReader
-    """An MCAP reader of `f` that decodes protobuf messages."""
-    from mcap.reader import make_reader
-
-    return make_reader(f, decoder_factories=[_decoder_factory()])
-
-
-# --- project message descriptors, built at run time (their text is schemas/rbsim_*.proto) ----------
-
-
-_FDP = descriptor_pb2.FieldDescriptorProto
-
-
-def invariant_field_names(names: Sequence[str]) -> tuple[str, ...]:
-    """Protobuf field names for invariant names: [A-Za-z0-9_] kept, others -> '_', a leading digit
-    prefixed with 'f_'; ValueError on a clash or on 'step' / 'time'."""
-    fields = []
-    for name in names:
-        f = re.sub(r"[^A-Za-z0-9_]", "_", name)
-        fields.append(f if f and (f[0].isalpha() or f[0] == "_") else f"f_{f}")
-    taken = {"step", "time"}
-    for f in fields:
-        if f in taken:
-            raise ValueError(f"invariant names {list(names)!r} give the protobuf field {f!r} twice")
-        taken.add(f)
-    return tuple(fields)
-
-
-def _file_proto(file_name: str, message: str, fields: Sequence[tuple[str, int, int, int]]):
-    """A proto3 FileDescriptorProto in package rbsim with one message; fields: (name, number, type, label)."""
-    fdp = descriptor_pb2.FileDescriptorProto(name=file_name, package="rbsim", syntax="proto3")
-    msg = fdp.message_type.add(name=message)
-    for name, number, ftype, label in fields:
-        msg.field.add(name=name, number=number, type=ftype, label=label, json_name=_json_name(name))
-    return fdp
-
-
-def _json_name(name: str) -> str:
-    head, *rest = name.split("_")
-    return head + "".join(p[:1].upper() + p[1:] for p in rest)
-
-
-def state_file_proto() -> descriptor_pb2.FileDescriptorProto:
-    """rbsim/state.proto as a descriptor (text: schemas/rbsim_state.proto)."""
-    fields = [("step", 1, _FDP.TYPE_UINT64, _FDP.LABEL_OPTIONAL), ("time", 2, _FDP.TYPE_DOUBLE, _FDP.LABEL_OPTIONAL)]
-    fields += [(name, num, _FDP.TYPE_DOUBLE, _FDP.LABEL_REPEATED) for _, name, num, _ in STATE_FIELDS]
-    return _file_proto("rbsim/state.proto", "State", fields)
-
-
-def checkpoint_file_proto() -> descriptor_pb2.FileDescriptorProto:
-    """rbsim/checkpoint.proto as a descriptor (text: schemas/rbsim_checkpoint.proto)."""
-    fields = [("step", 1, _FDP.TYPE_UINT64, _FDP.LABEL_OPTIONAL), ("time", 2, _FDP.TYPE_DOUBLE, _FDP.LABEL_OPTIONAL)]
-    lists = ("names", "dtypes", "shapes")
-    fields += [(name, 3 + i, _FDP.TYPE_STRING, _FDP.LABEL_REPEATED) for i, name in enumerate(lists)]
-    fields += [("data", 6, _FDP.TYPE_BYTES, _FDP.LABEL_REPEATED)]
-    return _file_proto("rbsim/checkpoint.proto", "Checkpoint", fields)
-
-
-def encode_checkpoint(checkpoint: Checkpoint) -> bytes:
-    """A Checkpoint as an rbsim.Checkpoint message (arrays little endian, C order)."""
-    message = message_class(checkpoint_file_proto())(step=int(checkpoint.step), time=float(checkpoint.t))
-    for name, array in checkpoint.arrays.items():
-        a = np.ascontiguousarray(array)
-        a = a.astype(a.dtype.newbyteorder("<"), copy=False)
-        message.names.append(name)
-        message.dtypes.append(a.dtype.str)
-        message.shapes.append(json.dumps(list(a.shape)))
-        message.data.append(a.tobytes())
-    return message.SerializeToString()
-
-
-def decode_checkpoint(message: Any) -> Checkpoint:
-    """A decoded rbsim.Checkpoint message back as a Checkpoint (writable copies)."""
-    arrays = {}
-    for name, dtype, shape, data in zip(message.names, message.dtypes, message.shapes, message.data, strict=True):
-        arrays[name] = np.frombuffer(data, dtype=np.dtype(dtype)).reshape(json.loads(shape)).copy()
-    return Checkpoint(step=int(message.step), t=float(message.time), arrays=arrays)
-
-
-def invariants_file_proto(invariant_names: Sequence[str]) -> descriptor_pb2.FileDescriptorProto:
-    """rbsim/invariants.proto for this run's invariants (text: schemas/rbsim_invariants.proto)."""
-    fields = [("step", 1, _FDP.TYPE_UINT64, _FDP.LABEL_OPTIONAL), ("time", 2, _FDP.TYPE_DOUBLE, _FDP.LABEL_OPTIONAL)]
-    fields += [
-        (f, 3 + i, _FDP.TYPE_DOUBLE, _FDP.LABEL_OPTIONAL) for i, f in enumerate(invariant_field_names(invariant_names))
-    ]
-    return _file_proto("rbsim/invariants.proto", "Invariants", fields)
-
-
-def joint_forces_file_proto() -> descriptor_pb2.FileDescriptorProto:
-    """rbsim/joint_forces.proto as a descriptor (text: schemas/rbsim_joint_forces.proto)."""
-    fields = [("step", 1, _FDP.TYPE_UINT64, _FDP.LABEL_OPTIONAL), ("time", 2, _FDP.TYPE_DOUBLE, _FDP.LABEL_OPTIONAL)]
-    fields += [("reaction", 3, _FDP.TYPE_DOUBLE, _FDP.LABEL_REPEATED)]
-    return _file_proto("rbsim/joint_forces.proto", "JointForces", fields)
-
-
-def message_class(fdp: descriptor_pb2.FileDescriptorProto) -> Any:
-    """The generated class of the file's first message, in a private pool (runs may differ in schema)."""
-    pool = descriptor_pool.DescriptorPool()
-    pool.Add(fdp)
-    return message_factory.GetMessageClass(pool.FindMessageTypeByName(f"rbsim.{fdp.message_type[0].name}"))
-
-
-# --- wire-format encoders --------------------------------------------------------------------------
-# One protobuf object per body per step costs microseconds each (1000 bodies: milliseconds per frame),
-# so the two per-step messages are written straight in protobuf wire format with numpy structured
-# arrays: a packed `repeated double` is key, byte length, raw little-endian float64; a message field is
-# key, length, payload. The tests decode every message with the real classes and compare.
-
-
-def _varint(value: int) -> bytes:
-    out = bytearray()
-    while value >= 0x80:
-        out.append((value & 0x7F) | 0x80)
-        value >>= 7
-    out.append(value)
-    return bytes(out)
-
-
-def _key(number: int, wire_type: int) -> bytes:
-    return _varint(number << 3 | wire_type)
-
-
-def _u1(data: bytes) -> np.ndarray:
-    return np.frombuffer(data, dtype=np.uint8)
-
-
-def _time_ns(t: np.ndarray) -> np.ndarray:
-    """Simulated time [s] -> integer ns, rounded (t = k dt is rarely an exact float)."""
-    return np.rint(np.asarray(t, dtype=np.float64) * 1e9).astype(np.int64)
-
-
-def _varints(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Protobuf varints of non-negative integers, vectorised: (bytes (K, 10) uint8, lengths (K,))."""
-    v = np.asarray(values, dtype=np.uint64)
-    groups = ((v[:, None] >> (np.arange(10, dtype=np.uint64) * np.uint64(7))) & np.uint64(0x7F)).astype(np.uint8)
-    lengths = np.maximum(1, (np.ceil(np.log2(v.astype(np.float64) + 1.0) / 7.0)).astype(np.int64))
-    # float log2 can be off by one right at 2**(7m): fix with the exact test "value >> 7 * length == 0"
-    lengths += (v >> (lengths.astype(np.uint64) * np.uint64(7))) != 0
-    lengths -= (lengths > 1) & ((v >> ((lengths - 1).astype(np.uint64) * np.uint64(7))) == 0)
-    more = np.arange(10)[None, :] < (lengths[:, None] - 1)
-    groups[more] |= 0x80
-    return groups, lengths
-
-
-def _step_time_heads(step: np.ndarray, t: np.ndarray) -> list[bytes]:
-    """Per frame, fields 1 (uint64 step) and 2 (double time), each omitted when zero as proto3
-    serializers do (+0.0 only: -0.0 has bits set and is written)."""
-    k_count = len(step)
-    digits, lengths = _varints(step)
-    buf = np.zeros((k_count, 20), dtype=np.uint8)
-    buf[:, 0] = 0x08
-    buf[:, 1:11] = digits
-    rows = np.arange(k_count)[:, None]
-    time_at = 1 + lengths[:, None] + np.arange(9)[None, :]  # key byte then 8 bytes, after the varint
-    tb = np.asarray(t, dtype="<f8").reshape(k_count, 1).view(np.uint8)
-    buf[rows, time_at] = np.concatenate([np.full((k_count, 1), 0x11, np.uint8), tb], axis=1)
-    start = np.where(np.asarray(step) == 0, 1 + lengths, 0)  # step 0: skip its "08 00"
-    end = 1 + lengths + np.where(tb.any(axis=1), 9, 0)  # time +0.0: nothing after the varint
-    return [buf[k, start[k] : end[k]].tobytes() for k in range(k_count)]
-
-
-class StateEncoder:
-    """rbsim.State bytes for every frame of a block, identical to the canonical SerializeToString."""
-
-    def __init__(self, body_count: int) -> None:
-        n = body_count
-        spec: list[tuple[str, Any, tuple[int, ...]]] = []
-        self._keys = {}
-        for attr, _, number, width in STATE_FIELDS if n else ():
-            key = _key(number, 2) + _varint(8 * width * n)
-            spec += [(f"k_{attr}", np.uint8, (len(key),)), (attr, "<f8", (n * width,))]
-            self._keys[attr] = _u1(key)
-        self.dtype = np.dtype(spec)
-
-    def encode(self, block: FrameBlock) -> list[bytes]:
-        k_count = len(block)
-        rec = np.empty(k_count, dtype=self.dtype)
-        for attr, key in self._keys.items():
-            rec[f"k_{attr}"] = key
-            rec[attr] = np.asarray(getattr(block, attr), dtype=np.float64).reshape(k_count, -1)
-        heads = _step_time_heads(block.step, block.t)
-        return [heads[k] + rec[k].tobytes() for k in range(k_count)]
-
-
-class InvariantsEncoder:
-    """rbsim.Invariants bytes for every frame of a block: step and time as canonical proto3 (omitted
-    when zero), then every invariant as a double field, zeros included (valid proto3 that decodes to
-    the same values; a fixed layout, so numpy writes all frames at once)."""
-
-    def __init__(self, invariant_names: Sequence[str]) -> None:
-        self.names = tuple(invariant_names)
-        spec = []
-        for i, _ in enumerate(self.names):
-            spec += [(f"k{i}", np.uint8, (len(_key(3 + i, 1)),)), (f"v{i}", "<f8")]
-        self.dtype = np.dtype(spec)
-        self._keys = [_u1(_key(3 + i, 1)) for i in range(len(self.names))]
-
-    def encode(self, block: FrameBlock) -> list[bytes]:
-        k_count = len(block)
-        rec = np.empty(k_count, dtype=self.dtype)
-        for i, name in enumerate(self.names):
-            rec[f"k{i}"] = self._keys[i]
-            rec[f"v{i}"] = np.asarray(block.invariants[name], dtype=np.float64)
-        heads = _step_time_heads(block.step, block.t)
-        return [heads[k] + rec[k].tobytes() for k in range(k_count)]
-
-
-def encode_joint_forces(block: FrameBlock) -> list[bytes]:
-    """rbsim.JointForces bytes for every frame of a block (block.joint_force (K, J, 12)): step and time
-    as canonical proto3, then `reaction` packed (key, byte length, raw little-endian float64)."""
-    assert block.joint_force is not None
-    k_count = len(block)
-    flat = np.ascontiguousarray(block.joint_force, dtype="<f8").reshape(k_count, -1)
-    head = (_key(3, 2) + _varint(8 * flat.shape[1])) if flat.shape[1] else b""
-    heads = _step_time_heads(block.step, block.t)
-    return [heads[k] + head + flat[k].tobytes() for k in range(k_count)]
-
-
-def _timestamp_payloads(ns: np.ndarray) -> list[bytes]:
-    """google.protobuf.Timestamp payloads (seconds = 1, nanos = 2; zero fields omitted), vectorised."""
-    sec, nanos = np.divmod(np.asarray(ns, dtype=np.int64), 1_000_000_000)
-    (sd, sl), (nd, nl) = _varints(sec), _varints(nanos)
-    k_count = len(sec)
-    buf = np.zeros((k_count, 22), dtype=np.uint8)
-    rows = np.arange(k_count)[:, None]
-    buf[:, 0] = 0x08
-    buf[:, 1:11] = sd
-    has_sec = sec != 0
-    at = np.where(has_sec, 1 + sl, 0)[:, None] + np.arange(11)[None, :]
-    buf[rows, at] = np.concatenate([np.full((k_count, 1), 0x10, np.uint8), nd], axis=1)
-    end = at[:, 0] + np.where(nanos != 0, 1 + nl, 0)
-    return [buf[k, : end[k]].tobytes() for k in range(k_count)]
-
-
-class TransformsEncoder:
-    """foxglove.FrameTransforms bytes (world -> each body) for every frame of a block.
-
-    Each FrameTransform is written as: timestamp, parent_frame_id, child_frame_id, translation
-    (x, y, z), rotation (x, y, z, w), with every double present even when zero (valid proto3; it keeps
-    the layout fixed). A record's length then depends only on its frame ids and on the timestamp, which
-    is the same for all bodies of a frame; transforms are grouped by the byte length of their ids (body
-    order within a group), so within a frame each group is a run of equal-size records that numpy fills
-    with strided views. Consumers key transforms by child_frame_id, so the order is free.
-    """
-
-    # A record is: head (0x0a, length, 0x0a, ts length), ts, ids, then this fixed 67-byte tail:
-    # 0x22 0x1b (Vector3, 27 bytes) 0x09 x 0x11 y 0x19 z, 0x2a 0x24 (Quaternion, 36 bytes) 0x09 qx 0x11 qy
-    # 0x19 qz 0x21 qw. Doubles sit 9 bytes apart (key byte + 8).
-    _TAIL = b"\x22\x1b\x09" + bytes(8) + b"\x11" + bytes(8) + b"\x19" + bytes(8)
-    _TAIL += b"\x2a\x24\x09" + bytes(8) + b"\x11" + bytes(8) + b"\x19" + bytes(8) + b"\x21" + bytes(8)
-    _TAIL_X, _TAIL_QX = 3, 32
-
-    def __init__(self, body_names: Sequence[str], parent: str = WORLD_FRAME) -> None:
-        pb = parent.encode()
-        ids = [
-            b"\x12" + _varint(len(pb)) + pb + b"\x1a" + _varint(len(nb)) + nb for nb in (s.encode() for s in body_names)
-        ]
-        by_length: dict[int, list[int]] = {}
-        for i, b in enumerate(ids):
-            by_length.setdefault(len(b), []).append(i)
-        # (bodies: a slice when contiguous, else an index array; their id bytes)
-        self._runs: list[tuple[slice | np.ndarray, list[bytes]]] = []
-        for _, idx in sorted(by_length.items()):
-            contiguous = idx == list(range(idx[0], idx[0] + len(idx)))
-            self._runs.append((slice(idx[0], idx[-1] + 1) if contiguous else np.array(idx), [ids[i] for i in idx]))
-        self._layouts: dict[int, tuple[np.ndarray, list[tuple[int, int, int, int]]]] = {}
-
-    def _layout(self, ts_len: int) -> tuple[np.ndarray, list[tuple[int, int, int, int]]]:
-        """A frame's constant bytes and, per run: (offset, record count, record size, ts offset)."""
-        if ts_len not in self._layouts:
-            parts, runs, offset = [], [], 0
-            for _, id_list in self._runs:
-                payload = 2 + ts_len + len(id_list[0]) + len(self._TAIL)
-                head = b"\x0a" + _varint(payload) + b"\x0a" + _varint(ts_len)
-                size = len(head) + payload - 2
-                parts += [head + bytes(ts_len) + ids + self._TAIL for ids in id_list]
-                runs.append((offset, len(id_list), size, len(head)))
-                offset += size * len(id_list)
-            self._layouts[ts_len] = (_u1(b"".join(parts)), runs)
-        return self._layouts[ts_len]
-
-    def encode(self, block: FrameBlock) -> list[bytes]:
-        k_count = len(block)
-        ts = _timestamp_payloads(_time_ns(block.t))
-        x, q = np.asarray(block.x, dtype=np.float64), np.asarray(block.q, dtype=np.float64)
-        out: list[bytes] = [b""] * k_count
-        ts_lens = np.array([len(s) for s in ts])
-        for ts_len in np.unique(ts_lens).tolist():
-            frames = np.flatnonzero(ts_lens == ts_len)
-            rows = slice(None) if len(frames) == k_count else frames
-            template, runs = self._layout(ts_len)
-            g, size = len(frames), template.size
-            buf = np.empty((g, size), dtype=np.uint8)
-            buf[...] = template
-            ts_arr = _u1(b"".join(ts[f] for f in frames.tolist())).reshape(g, ts_len)
-            for (bodies, _), (offset, count, rec, ts_off) in zip(self._runs, runs, strict=True):
-                # each field of this run is a strided view: frames apart by `size`, records by `rec`
-                tail = offset + rec - len(self._TAIL)
-                if ts_len:
-                    _strided(buf, offset + ts_off, (g, count, ts_len), "u1", (size, rec, 1))[...] = ts_arr[:, None, :]
-                _strided(buf, tail + self._TAIL_X, (g, count, 3), "<f8", (size, rec, 9))[...] = x[rows][:, bodies]
-                rot = _strided(buf, tail + self._TAIL_QX, (g, count, 4), "<f8", (size, rec, 9))
-                qs = q[rows][:, bodies]
-                rot[..., :3], rot[..., 3] = qs[..., 1:], qs[..., 0]
-            for row, f in enumerate(frames.tolist()):
-                out[f] = buf[row].tobytes()
-        return out
-
-
-def _strided(buf: np.ndarray, offset: int, shape: tuple[int, ...], dtype: str, strides: tuple[int, ...]) -> np.ndarray:
-    """A writable view into a contiguous byte buffer (unaligned doubles are fine for numpy)."""
-    return np.ndarray(shape, dtype, buffer=buf, offset=offset, strides=strides)
-
-
-def _point_cloud(points: np.ndarray, frame_id: str, ns: int) -> PointCloud:
-    """A foxglove.PointCloud of float64 x, y, z (exact) with an identity pose."""
-    cloud = PointCloud(frame_id=frame_id, point_stride=24, data=np.ascontiguousarray(points, "<f8").tobytes())
-    cloud.timestamp.FromNanoseconds(int(ns))
-    # the pose written out in full: protobuf omits an unset submessage, and an absent position is not (0, 0, 0)
-    # to every reader (Rerun's MCAP loader leaves its InstancePoses3D translation null, which `rerun rrd
-    # verify` rejects); SetInParent writes the empty Vector3, which Foxglove's schema reads as zeros
-    cloud.pose.position.SetInParent()
-    cloud.pose.orientation.w = 1.0  # an all-zero quaternion would be invalid
-    for i, axis in enumerate("xyz"):
-        cloud.fields.add(name=axis, offset=8 * i, type=PackedElementField.FLOAT64)
-    return cloud
-
-
-def _contact_cloud(points: np.ndarray, force: np.ndarray, ns: int) -> PointCloud:
-    """A foxglove.PointCloud of contact points: float64 x, y, z [m] and normal_force [N], world frame."""
-    packed = np.empty((len(points), 4), "<f8")
-    packed[:, :3], packed[:, 3] = points, force
-    cloud = _point_cloud(np.zeros((0, 3)), WORLD_FRAME, ns)
-    cloud.point_stride, cloud.data = 32, packed.tobytes()
-    cloud.fields.add(name="normal_force", offset=24, type=PackedElementField.FLOAT64)
-    return cloud
 
 
 # --- the sink --------------------------------------------------------------------------------------
@@ -485,7 +111,7 @@ class SinkMcap:
         self._tf = TransformsEncoder(header.body_names)
         self._invariant_names = tuple(header.invariant_names)
         self._ch_state = self._channel(TOPIC_STATE, state_file_proto())
-        self._ch_tf = self._channel(TOPIC_TF, FrameTransforms)
+        self._ch_tf = self._channel(TOPIC_TF, TRANSFORMS_MESSAGE)
         self._ch_inv: int | None = None
         if self._invariant_names:
             fdp = invariants_file_proto(self._invariant_names)
@@ -503,11 +129,11 @@ class SinkMcap:
         w.add_attachment(0, 0, SCENE_ATTACHMENT, "application/yaml", header.scene_text.encode())
         shared: int | None = None
         if particle_channels_shared(len(header.body_names)):
-            shared = self._channel(TOPIC_BODY_PARTICLES, PointCloud)
+            shared = self._channel(TOPIC_BODY_PARTICLES, POINT_CLOUD_MESSAGE)
         for i, (name, offsets) in enumerate(zip(header.body_names, header.body_particle_offset, strict=True)):
-            cloud = _point_cloud(np.asarray(offsets).reshape(-1, 3), name, 0).SerializeToString()
+            cloud = point_cloud(np.asarray(offsets).reshape(-1, 3), name, 0).SerializeToString()
             if shared is None:
-                self._add(self._channel(particle_topic(name), PointCloud), 0, cloud)
+                self._add(self._channel(particle_topic(name), POINT_CLOUD_MESSAGE), 0, cloud)
             else:
                 self._add(shared, 0, cloud, sequence=i)  # the body index orders the shared channel's messages
         w.flush_chunk()  # schemas, channels and clouds on disk before the first frame
@@ -515,11 +141,9 @@ class SinkMcap:
     def _channel(self, topic: str, schema: Any, metadata: dict[str, str] | None = None) -> int:
         """Register a protobuf schema (a generated class or a FileDescriptorProto) and a channel on it."""
         assert self._writer is not None
-        is_file = isinstance(schema, descriptor_pb2.FileDescriptorProto)
-        name = f"rbsim.{schema.message_type[0].name}" if is_file else schema.DESCRIPTOR.full_name
+        name = schema_name(schema)
         if name not in self._schemas:  # one schema record per message type, however many channels
-            fds = descriptor_pb2.FileDescriptorSet(file=[schema]) if is_file else build_file_descriptor_set(schema)
-            self._schemas[name] = self._writer.register_schema(name, "protobuf", fds.SerializeToString())
+            self._schemas[name] = self._writer.register_schema(name, "protobuf", schema_data(schema))
         schema_id = self._schemas[name]
         return self._writer.register_channel(topic, "protobuf", schema_id, metadata or {})
 
@@ -532,14 +156,14 @@ class SinkMcap:
             raise RuntimeError("SinkMcap.write before open() or after close()")
         k_count = len(block)
         states, tfs = self._state.encode(block), self._tf.encode(block)
-        ns, steps = _time_ns(block.t).tolist(), block.step.tolist()
+        ns, steps = time_ns(block.t).tolist(), block.step.tolist()
         inv = self._inv.encode(block) if self._ch_inv is not None else None
         particles = block.particle_position
         if particles is not None and self._ch_particles is None:
-            self._ch_particles = self._channel(TOPIC_PARTICLES, PointCloud)
+            self._ch_particles = self._channel(TOPIC_PARTICLES, POINT_CLOUD_MESSAGE)
         contacts, forces = block.contact_point, block.contact_force
         if contacts is not None and self._ch_contacts is None:
-            self._ch_contacts = self._channel(TOPIC_CONTACTS, PointCloud)
+            self._ch_contacts = self._channel(TOPIC_CONTACTS, POINT_CLOUD_MESSAGE)
         joints = (
             encode_joint_forces(block) if block.joint_force is not None and self._ch_joint_forces is not None else None
         )
@@ -550,10 +174,10 @@ class SinkMcap:
             if inv is not None and self._ch_inv is not None:
                 self._add(self._ch_inv, ns[k], inv[k], seq)
             if particles is not None and self._ch_particles is not None:
-                cloud = _point_cloud(particles[k], WORLD_FRAME, ns[k]).SerializeToString()
+                cloud = point_cloud(particles[k], WORLD_FRAME, ns[k]).SerializeToString()
                 self._add(self._ch_particles, ns[k], cloud, seq)
             if contacts is not None and forces is not None and self._ch_contacts is not None:
-                cloud = _contact_cloud(contacts[k], forces[k], ns[k]).SerializeToString()
+                cloud = contact_cloud(contacts[k], forces[k], ns[k]).SerializeToString()
                 self._add(self._ch_contacts, ns[k], cloud, seq)
             if joints is not None and self._ch_joint_forces is not None:
                 self._add(self._ch_joint_forces, ns[k], joints[k], seq)
@@ -567,7 +191,7 @@ class SinkMcap:
             raise RuntimeError("SinkMcap.write_checkpoint before open() or after close()")
         if self._ch_checkpoint is None:
             self._ch_checkpoint = self._channel(TOPIC_CHECKPOINT, checkpoint_file_proto())
-        ns = int(_time_ns(np.array([checkpoint.t]))[0])
+        ns = int(time_ns(np.array([checkpoint.t]))[0])
         self._add(self._ch_checkpoint, ns, encode_checkpoint(checkpoint), checkpoint.step & 0xFFFFFFFF)
         self._writer.flush_chunk()
 
@@ -598,6 +222,13 @@ class McapContents:
     particle_offset: dict[str, np.ndarray] = field(default_factory=dict)  # body -> (n_i, 3) body frame [m]
     invariant_names: tuple[str, ...] = ()
     library: str = ""
+
+
+def _reader(f: IO[bytes]) -> Any:  # noqa: ANN401 - mcap's McapReader
+    """An MCAP reader of `f` that decodes protobuf messages."""
+    from mcap.reader import make_reader
+
+    return make_reader(f, decoder_factories=[decoder_factory()])
 
 
 def _invariant_names(summary: Any) -> tuple[str, ...]:
@@ -637,17 +268,8 @@ def read_mcap_contents(path: str | Path) -> McapContents:
         clouds = {t for t in counts if t.startswith("/bodies/") and t.endswith("/particles")}
         offsets: dict[str, np.ndarray] = {}
         for _, _, _, cloud in reader.iter_decoded_messages(topics=clouds, log_time_order=False):
-            offsets[cloud.frame_id] = _cloud_points(cloud)
+            offsets[cloud.frame_id] = cloud_points(cloud)
     return McapContents(metadata, scene, counts, offsets, inv_names, header.library)
-
-
-def _cloud_points(cloud: Any) -> np.ndarray:
-    """(n, 3) float64 x, y, z of a foxglove.PointCloud written by this module or by any float writer."""
-    types = {PackedElementField.FLOAT64: "<f8", PackedElementField.FLOAT32: "<f4"}
-    offs = {f.name: (f.offset, types[f.type]) for f in cloud.fields if f.name in ("x", "y", "z") and f.type in types}
-    raw = np.frombuffer(cloud.data, dtype=np.uint8).reshape(-1, cloud.point_stride)
-    cols = [raw[:, o : o + np.dtype(t).itemsize].copy().view(t)[:, 0] for o, t in (offs[a] for a in "xyz")]
-    return np.stack(cols, axis=1).astype(np.float64) if cols[0].size else np.zeros((0, 3))
 
 
 def joint_names_of(summary: Any) -> tuple[str, ...] | None:
@@ -736,12 +358,6 @@ def read_mcap_invariants(path: str | Path) -> tuple[np.ndarray, np.ndarray, dict
         step,
         {n: np.array([getattr(m, f) for m in rows], dtype=np.float64) for n, f in zip(names, fields, strict=True)},
     )
-
-
-# --- reading a file cut short (a run killed before its summary and index were written) ---------------
-
-# Topics with one message per recorded frame: a frame is complete when each of those present has it.
-FRAME_TOPICS = (TOPIC_STATE, TOPIC_TF, TOPIC_INVARIANTS, TOPIC_PARTICLES, TOPIC_JOINT_FORCES)
 
 
 @dataclass
@@ -861,7 +477,7 @@ def read_mcap_prefix(path: str | Path) -> McapPrefix:
     last_states: list[Message] = []  # the last two: the last complete frame is one of them
     inv_rows: list[Any] = []
     decoders: dict[int, Any] = {}
-    factory = _decoder_factory()
+    factory = decoder_factory()
     for record in _prefix_records(path, cut):
         if isinstance(record, Message):
             topic = topics.get(record.channel_id, "")
@@ -1041,7 +657,7 @@ def read_mcap_resume_point(path: str | Path) -> McapResumePoint:
     checkpoint = None
     if last is not None:
         channel = channels[last.channel_id]
-        decode = _decoder_factory().decoder_for(channel.message_encoding, schemas.get(channel.schema_id))
+        decode = decoder_factory().decoder_for(channel.message_encoding, schemas.get(channel.schema_id))
         if decode is None:
             raise ValueError(f"no decoder for {TOPIC_CHECKPOINT} ({channel.message_encoding})")
         checkpoint = decode_checkpoint(decode(last.data))
@@ -1056,7 +672,7 @@ def iter_mcap_frames_before(path: str | Path, step: int, block_frames: int = 256
     schemas: dict[int, Schema] = {}
     channels: dict[int, Channel] = {}
     decoders: dict[int, Any] = {}
-    factory = _decoder_factory()
+    factory = decoder_factory()
     inv_names: tuple[str, ...] = ()
     rows: list[Any] = []
     inv_rows: dict[int, Any] = {}

@@ -112,8 +112,8 @@ def test_replay_save_must_be_an_rrd(tmp_path, mcap_path):
 
 WRITER_OWNERS = {
     "mcap": ("rbcli/record/mcap_sink.py", "rbcli/record/mcap_writer.py"),
-    "mcap_protobuf": ("rbcli/record/mcap_sink.py",),
-    "foxglove_schemas_protobuf": ("rbcli/record/mcap_sink.py",),
+    "mcap_protobuf": ("rbcli/record/mcap_messages.py",),
+    "foxglove_schemas_protobuf": ("rbcli/record/mcap_messages.py",),
     "zstandard": ("rbcli/record/mcap_writer.py",),
     "lz4": ("rbcli/record/mcap_writer.py",),
     "rerun": ("rbcli/record/rerun_sink.py",),
