@@ -24,10 +24,10 @@ Nothing is lost when workers die:
   times (12 by default), the last of them alone.
 - A worker lost while the sweep starts, or as it joins, is a lost worker too, never the sweep's end: killed
   while the local cluster starts (its nanny fails to start), the cluster is started again (up to
-  LOCAL_START_TRIES times); killed before its version check or its warm-up ended (tasks pinned to it,
-  which would wait for it for good), it is left out. The sweep goes on with the workers that live (and
-  those that replace them: a local worker's nanny starts a new one) and notes each loss in
-  ClusterInfo.incidents.
+  LOCAL_START_TRIES times); killed before its version check or its warm-up at the start ended (tasks
+  pinned to it, which would wait for it for good), or as it is asked its versions after joining (a broken
+  comm for an answer), it is left out. The sweep goes on with the workers that live (and those that
+  replace them: a local worker's nanny starts a new one) and notes each loss in ClusterInfo.incidents.
 Rows come back to the client, which writes each batch's part as it arrives (table.write_part): a part is
 never written by a worker.
 """
@@ -490,24 +490,48 @@ def _workers_ignore_interrupts() -> Iterator[None]:
 
 
 def _check_versions(client: Any, addresses: list[str]) -> list[str]:
-    """Refuse workers whose rbsim or numba differ from this process's (one line naming both); return those
-    lost before they answered (died as they joined), which the sweep goes on without."""
+    """Refuse workers at the start whose rbsim or numba differ from this process's (one line naming both);
+    return those lost before they answered, which the sweep goes on without. Asked with a task pinned to
+    each (_run_on_each): nothing runs on them yet, and a task asks nothing of a worker that died."""
     if not addresses:
         return []
-    mine = runtime_versions()
     answers, lost = _run_on_each(client, addresses, runtime_versions)
-    for address in sorted(answers):
-        future = answers[address]
-        if future.status == "error":  # its own answer: the task could not run there (no rbcli, say)
-            got = future.exception()
-            raise ClusterRefused(f"worker {address} cannot run rbsim {mine[0]}'s variants: {type(got).__name__}: {got}")
-        versions = tuple(future.result())
-        if versions != mine:
-            raise ClusterRefused(
-                f"worker {address} runs rbsim {versions[0]} with numba {versions[1]}, this rbsim is {mine[0]} with "
-                f"numba {mine[1]}: install the same versions on every worker"
-            )
+    _refuse_mismatched({a: f.exception() if f.status == "error" else f.result() for a, f in answers.items()})
     return lost
+
+
+def _check_joined_versions(client: Any, addresses: list[str]) -> list[str]:
+    """Refuse workers that joined while the sweep runs whose rbsim or numba differ from this process's;
+    return those lost as they were asked. Asked with client.run, which runs in each worker's event loop at
+    once, beside the batch the scheduler may already have given it (a task would wait for that batch,
+    and the client's loop with it). An answer that is a comm error (CommClosedError, a connection timeout:
+    OSErrors) is not the worker's answer but the worker lost; before, it was refused as one that "cannot
+    run rbsim". (A worker that died before the scheduler's connection reached it costs that connection's
+    retries, distributed.comm.timeouts.connect, 30 s by default.)"""
+    if not addresses:
+        return []
+    try:
+        theirs = client.run(runtime_versions, workers=addresses, on_error="return")
+    except Exception as exc:  # noqa: BLE001 - told as the refusal it is
+        raise ClusterRefused(f"cannot ask the workers for their versions: {type(exc).__name__}: {exc}") from None
+    lost = [address for address in addresses if isinstance(theirs.get(address), OSError)]
+    _refuse_mismatched({address: got for address, got in theirs.items() if address not in lost})
+    return lost
+
+
+def _refuse_mismatched(answers: dict[str, Any]) -> None:
+    """Raise ClusterRefused (one line naming both versions) for the first worker, by address, whose answer
+    to runtime_versions is an exception (no rbcli there, say) or versions other than this process's."""
+    mine = runtime_versions()
+    for address in sorted(answers):
+        got = answers[address]
+        if isinstance(got, BaseException):
+            raise ClusterRefused(f"worker {address} cannot run rbsim {mine[0]}'s variants: {type(got).__name__}: {got}")
+        if tuple(got) != mine:
+            raise ClusterRefused(
+                f"worker {address} runs rbsim {got[0]} with numba {got[1]}, this rbsim is {mine[0]} with numba "
+                f"{mine[1]}: install the same versions on every worker"
+            )
 
 
 def _run_on_each(client: Any, addresses: list[str], function: Callable, *args: Any) -> tuple[dict[str, Any], list[str]]:
@@ -684,7 +708,7 @@ class _Batches:
         self.polled = now
         slots_by_worker = self.client.nthreads()
         joined = [address for address in slots_by_worker if address not in self.known]
-        for address in _check_versions(self.client, joined):  # lost before it answered: gone from the cluster
+        for address in _check_joined_versions(self.client, joined):  # lost as it was asked: gone from the cluster
             self.info.incidents.append(f"worker {address} was lost as it joined; the sweep goes on without it")
             del slots_by_worker[address]
             joined.remove(address)

@@ -171,3 +171,40 @@ def test_workers_killed_while_the_local_cluster_starts_cost_no_variant(tmp_path,
         output = _run_until_done(proc)
     assert len(killed) == 2, f"the workers were not killed as they started:\n{output}"
     _check_finished_with_one_line(output, proc.returncode, out, "the local cluster failed to start", serial_rows)
+
+
+def test_a_worker_that_dies_as_it_joins_mid_sweep_is_lost_not_refused(monkeypatch):
+    """Workers that join while the sweep runs are asked for their versions with client.run (a task would
+    wait behind the batch the scheduler may already have given them): one that dies as it is asked answers
+    with the broken comm, which is the worker lost, returned for the sweep to go on without it, not a worker
+    that "cannot run rbsim" (before: ClusterRefused, exit 1). A real worker of a real LocalCluster dies in
+    the call; its nanny's replacement is asked next and passes."""
+    import distributed
+
+    from rbcli.sweeps import dask_runner
+
+    real = dask_runner.runtime_versions
+
+    def dies_in_a_worker() -> tuple[str, str]:  # defined here: pickled by value into the worker
+        import multiprocessing
+
+        if multiprocessing.current_process().name != "MainProcess":
+            os.kill(os.getpid(), signal.SIGKILL)
+        return real()
+
+    cluster = distributed.LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None
+    )
+    try:
+        with distributed.Client(cluster) as client:
+            (joined,) = client.nthreads()
+            monkeypatch.setattr(dask_runner, "runtime_versions", dies_in_a_worker)
+            assert dask_runner._check_joined_versions(client, [joined]) == [joined]
+            monkeypatch.undo()
+            deadline = time.monotonic() + 60
+            while not (replacements := [a for a in client.nthreads() if a != joined]):
+                assert time.monotonic() < deadline, "the nanny started no replacement"
+                time.sleep(0.05)
+            assert dask_runner._check_joined_versions(client, replacements) == []
+    finally:
+        cluster.close()
