@@ -111,7 +111,7 @@ def test_replay_save_must_be_an_rrd(tmp_path, mcap_path):
 # --- import rules ----------------------------------------------------------------------------------
 
 WRITER_OWNERS = {
-    "mcap": ("rbcli/record/mcap_sink.py", "rbcli/record/mcap_writer.py"),
+    "mcap": ("rbcli/record/mcap_writer.py", "rbcli/record/mcap_read.py", "rbcli/record/mcap_recovery.py"),
     "mcap_protobuf": ("rbcli/record/mcap_messages.py",),
     "foxglove_schemas_protobuf": ("rbcli/record/mcap_messages.py",),
     "zstandard": ("rbcli/record/mcap_writer.py",),
