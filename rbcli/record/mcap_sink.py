@@ -59,16 +59,13 @@ from rbcli.record.mcap_recovery import iter_mcap_frames_before, read_mcap_resume
 FSYNC_SECONDS = 1.0
 
 
-# --- the sink --------------------------------------------------------------------------------------
-
-
 def run_metadata(header: RunHeader) -> dict[str, str]:
     """The `rbsim` metadata record: the run parameters and the MCAP layout's format version."""
     return {"format_version": FORMAT_VERSION, **header.parameters()}
 
 
 class SinkMcap:
-    """Records a run to an MCAP file (see the module docstring for the layout).
+    """Records a run to an MCAP file (its layout: the docstring of mcap_layout.py).
 
     compression: "zstd" (default, at mcap_writer.ZSTD_LEVEL), "lz4" or "none"; chunk_size: uncompressed
     bytes per chunk. The file is written by `mcap_writer.McapChunkWriter` (why: its docstring).
