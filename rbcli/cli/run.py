@@ -144,12 +144,13 @@ def run(
                 f"--output {str(output)!r}: unknown format {suffix or '(no extension)'!r}{guess}",
                 expected="a file name ending in .mcap or .rrd",
             )
-    compiled, target = _prepare_run(scene, output, options, allow_large)
-    for warning in compiled.warnings:
-        messages.issue(warning, scene)
-    sim = Simulation(compiled)  # the one that runs: its kernels are loaded first
-    _load_kernels(sim, quiet)
-    with _stop_signals() as stops:  # the whole rest of the command: a late signal never cuts the log short
+    with _stop_signals() as stops:  # the whole rest of the command: no signal raises in it (_stop_signals)
+        compiled, target = _prepare_run(scene, output, options, allow_large)
+        for warning in compiled.warnings:
+            messages.issue(warning, scene)
+        _end_if_stopped(stops, "before the run started")
+        sim = Simulation(compiled)  # the one that runs: its kernels are loaded first
+        _load_kernels(sim, quiet, stops)
         _run_and_report(sim, target, quiet, stops)
 
 
@@ -193,27 +194,28 @@ def _resume(log: Path, output: Path | None, compression: str | None, quiet: bool
 
     if compression is not None and compression not in COMPRESSIONS:
         raise messages.fail_unknown("--compression", compression, COMPRESSIONS, "compression")
-    try:
-        plan = plan_resume(log, compression=compression)
-        target = output or resumed_output_path(log)
-        if target.resolve() == log.resolve():
-            raise ValueError(f"{target}: the resumed log must go to another file than the one it resumes")
-        check_output(target, expected_bytes=expected_run_bytes(plan.compiled, target))
-    except SceneError as exc:  # the attached scene no longer loads (a mesh file it names changed or went away)
-        messages.issues(exc.issues, log)
-        raise typer.Exit(ExitCode.INVALID) from None
-    except (ResumeError, OutputError, ValueError, KeyError) as exc:
-        raise messages.fail(str(exc.args[0] if exc.args else exc)) from None
-    if not quiet:
-        t = plan.checkpoint.t
-        messages.status(f"resuming {log} ({plan.log_status}) at step {plan.checkpoint.step} (t = {t:.6g} s)")
-    sim = Simulation(plan.compiled)  # the one that runs: resume_to_file restores the checkpoint into it
-    _load_kernels(sim, quiet)
     with _stop_signals() as stops:
+        try:
+            plan = plan_resume(log, compression=compression)
+            target = output or resumed_output_path(log)
+            if target.resolve() == log.resolve():
+                raise ValueError(f"{target}: the resumed log must go to another file than the one it resumes")
+            check_output(target, expected_bytes=expected_run_bytes(plan.compiled, target))
+        except SceneError as exc:  # the attached scene no longer loads (a mesh file it names changed or went away)
+            messages.issues(exc.issues, log)
+            raise typer.Exit(ExitCode.INVALID) from None
+        except (ResumeError, OutputError, ValueError, KeyError) as exc:
+            raise messages.fail(str(exc.args[0] if exc.args else exc)) from None
+        if not quiet:
+            t = plan.checkpoint.t
+            messages.status(f"resuming {log} ({plan.log_status}) at step {plan.checkpoint.step} (t = {t:.6g} s)")
+        _end_if_stopped(stops, "before the run started")
+        sim = Simulation(plan.compiled)  # the one that runs: resume_to_file restores the checkpoint into it
+        _load_kernels(sim, quiet, stops)
         _run_and_report(
-        sim, target, quiet, stops, start=plan.checkpoint.step,
-        run=lambda path, progress: resume_to_file(plan, path, progress=progress, simulation=sim),
-    )  # fmt: skip
+            sim, target, quiet, stops, start=plan.checkpoint.step,
+            run=lambda path, progress: resume_to_file(plan, path, progress=progress, simulation=sim),
+        )  # fmt: skip
 
 
 def resumed_output_path(log: Path) -> Path:
@@ -324,11 +326,17 @@ class _Stops:
 @contextlib.contextmanager
 def _stop_signals() -> Iterator[_Stops]:
     """SIGINT (Ctrl-C), SIGTERM (kill, a job scheduler's or container's stop) and SIGHUP (a closed
-    terminal) end the run at the end of a chunk, with the log up to there complete and renamed into place.
+    terminal) end the command: before the run, with nothing written; in the run, at the end of a chunk,
+    with the log up to there complete and renamed into place.
 
+    - While the scene loads and its kernels load or compile (the output not opened yet), a signal ends
+      the command with exit 128 + the signal, one line, no file: after loading (`_end_if_stopped`), or
+      at the next safe point of numba's compile (runner/compile_progress.py: a raise anywhere in a compile
+      broke numba's cache save, issue 44).
     - While the run loop runs, a signal sets its stop flag (the loop's own SIGINT handler).
-    - Before the loop (opening the output and the sinks), the stop waits for the end of the first chunk
-      (the progress callback forwards it), so a signal never lands half-way through opening a file.
+    - Between the kernels and the loop (opening the output and the sinks), the stop waits for the end of
+      the first chunk (the progress callback forwards it), so a signal never lands half-way through
+      opening a file.
     - After the loop (finalising: the last blocks, the MCAP summary and index, the rename), a further
       signal is recorded and ignored: it cannot cut the log short. Once a stop signal arrived, the stop
       signals stay ignored when the block ends, until the process exits (SIGKILL still ends it).
@@ -352,15 +360,28 @@ def _stop_signals() -> Iterator[_Stops]:
             signal.signal(number, signal.SIG_IGN if stops.received else handler)
 
 
-def _load_kernels(sim: Simulation, quiet: bool) -> None:
+def _end_if_stopped(stops: _Stops, when: str) -> None:
+    """A stop signal before the run loop (`when`) ends the command here: one line, exit 128 + the signal,
+    nothing written (the output is opened by the run)."""
+    if stops.received:
+        messages.status(f"stopped by {signal.Signals(stops.received[0]).name} {when}; nothing written")
+        raise typer.Exit(stops.exit_status())
+
+
+def _load_kernels(sim: Simulation, quiet: bool, stops: _Stops) -> None:
     """Load the kernels `sim`'s run calls from numba's cache, compiling those it lacks (a scene's first run,
-    or the first after the physics sources changed); the compile is shown (_CompileStatus)."""
-    from rbcli.runner.compile_progress import watch_compiles
+    or the first after the physics sources changed); the compile is shown (_CompileStatus) and a stop
+    signal during it ends the command, nothing written."""
+    from rbcli.runner.compile_progress import CompileInterrupted, watch_compiles
 
     shown = _CompileStatus(quiet)
-    with watch_compiles(shown.update) as progress:
-        sim.load_kernels()
-    shown.end(progress())
+    try:
+        with watch_compiles(shown.update, stop_requested=lambda: bool(stops.received)) as progress:
+            sim.load_kernels()
+    except CompileInterrupted:
+        pass
+    shown.end(progress(), stopped=bool(stops.received))
+    _end_if_stopped(stops, "while compiling kernels (those finished are cached for the next run)")
 
 
 class _CompileStatus:
@@ -385,12 +406,13 @@ class _CompileStatus:
             messages.status(f"compiling kernels, from {progress.current} (once: later runs load them from the cache)…")
         self.shown = True
 
-    def end(self, progress: CompileProgress) -> None:
+    def end(self, progress: CompileProgress, stopped: bool) -> None:
         if not self.shown:
             return
         if self.live:
             messages.end_live_status()
-        messages.status(f"compiled kernels: {progress.functions} functions in {progress.seconds:.1f} s")
+        if not stopped:
+            messages.status(f"compiled kernels: {progress.functions} functions in {progress.seconds:.1f} s")
 
 
 def _run_with_progress(sim: Simulation, target: Path, quiet: bool, stops: _Stops, run=None, start: int = 0):  # noqa: ANN001, ANN202
