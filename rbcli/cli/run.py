@@ -380,8 +380,10 @@ def _load_kernels(sim: Simulation, quiet: bool, stops: _Stops) -> None:
             sim.load_kernels()
     except CompileInterrupted:
         pass
-    shown.end(progress(), stopped=bool(stops.received))
-    _end_if_stopped(stops, "while compiling kernels (those finished are cached for the next run)")
+    done = progress()
+    shown.end(done, stopped=bool(stops.received))
+    compiling = "while compiling kernels (those finished are cached for the next run)"
+    _end_if_stopped(stops, compiling if done.functions else "while loading the kernels")
 
 
 class _CompileStatus:
