@@ -1,6 +1,11 @@
 """Start-up of `rbsim run`: whole-process wall time against a MuJoCo script, and the first run.
 
     python benchmarks/bench_startup.py [--repeats 7] [--steps 100000] [--integrator NAME] [--no-cold]
+    python benchmarks/bench_startup.py --cold [--integrators all|NAME,...] [--top 8] [--json FILE]
+
+`--cold` measures first runs per kind of scene instead (benchmarks/startup_kinds.py: free bodies,
+forces, contact, joints, joints with contact, each integrator; every compiled function with its types
+and compile time from numba's event API; warm; the kinds one after another in one cache).
 
 Every number is a whole process, from before the fork to after the exit: interpreter start, imports,
 numba's cache (or compiler), the steps and the output file. In a temporary folder:
@@ -196,7 +201,19 @@ def main() -> None:
     parser.add_argument("--integrator", default=None, help="default: the scene format's default (euler-matrix)")
     parser.add_argument("--cold-repeats", type=int, default=1, help="first runs, each with a new empty cache")
     parser.add_argument("--no-cold", action="store_true", help="skip the first-run measurements")
+    parser.add_argument("--cold", action="store_true", help="first runs per kind of scene (startup_kinds.py)")
+    parser.add_argument("--integrators", default="all", help="with --cold: free-body rows per integrator")
+    parser.add_argument("--top", type=int, default=8, help="with --cold: functions listed per kind")
+    parser.add_argument("--json", type=Path, default=None, help="with --cold: every record, as JSON")
     args = parser.parse_args()
+    if args.cold:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        import startup_kinds
+        from rbcli.physics.integrators import INTEGRATORS
+
+        names = list(INTEGRATORS) if args.integrators == "all" else [n for n in args.integrators.split(",") if n]
+        startup_kinds.measure(names, args.top, args.json)
+        return
 
     load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
     print(f"python {platform.python_version()}, {os.cpu_count()} logical cores, load average "

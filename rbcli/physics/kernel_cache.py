@@ -171,6 +171,10 @@ def install() -> None:
     from numba.core.caching import Cache
 
     _install_guard(Cache)
+    if tuple(int(p) for p in numba.__version__.split(".")[:2]) in VERIFIED_NUMBA:
+        from rbcli.physics import kernel_link
+
+        kernel_link.install()  # each stage kernel compiled once, called by symbol (kernel_link.py)
     try:
         from numba.core.runtime import rtsys
     except ImportError:  # pragma: no cover - a numba without these internals: leave its loads as they are

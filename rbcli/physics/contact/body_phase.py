@@ -44,6 +44,7 @@ import numpy as np
 
 from rbcli.physics.contact.broad_phase import _PRIME_X, _PRIME_Y, _PRIME_Z, HALF_SHELL, _cell
 from rbcli.physics.contact.tables import ACTIVE_PAIR, ACTIVE_PLANE, SWEEP_CHECKS, SWEEP_PAIRS, SWEEP_SPHERES
+from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.rotation_kernels import rotate
 from rbcli.physics.step import STEP_KERNEL
 
@@ -185,6 +186,7 @@ def excluded_key(keys, body_count, bi, bj) -> bool:  # noqa: ANN001
 # a function of its own, not inlined: the body phase runs it once per evaluation (a call is nothing
 # beside it), and inlined into the force stage, the recorded statistics and quiet.py's try it made each
 # contact loop compile ~3 s longer per copy (numba's compile events)
+@separately_compiled
 @numba.njit(**STEP_KERNEL)
 def box_pairs(inv_mass, large, excluded_pair, lo, hi, cell_size, active, cell, bucket, start, order, pairs, flag):  # noqa: ANN001, ANN201
     """Step 2 of the module docstring for the boxes (lo, hi) (empty: lo > hi), boxes of half extent at

@@ -42,6 +42,7 @@ from rbcli.physics.contact.quiet import try_quiet
 from rbcli.physics.contact.search import contact_found, sphere_positions
 from rbcli.physics.contact.tables import COUNT_CANDIDATES, COUNT_EVALUATIONS
 from rbcli.physics.contact.threaded import contact_search
+from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.step import STEP_KERNEL
 
 _OPTIONS: Any = STEP_KERNEL  # typed Any: numba's stubs type jit_options as a TypedDict without `_nrt`
@@ -68,6 +69,7 @@ def begin_contact_step(work, t, h) -> None:  # noqa: ANN001
     work.clock[1] = h
 
 
+@separately_compiled
 @numba.njit(**STEP_KERNEL)
 def commit_contacts(model, contact, work, x, q, P, L) -> None:  # noqa: ANN001
     """The step is complete: the contacts of its last force evaluation become the history (contacts
@@ -137,6 +139,7 @@ def hold_static_bodies(contact, F, tau) -> None:  # noqa: ANN001
         tau[b, 0] = tau[b, 1] = tau[b, 2] = 0.0
 
 
+@separately_compiled
 @numba.njit(**STEP_KERNEL)
 def accumulate_contact(model, contact, work, t, x, q, P, L, F, tau) -> None:  # noqa: ANN001
     """Add every contact's force and torque to F and tau (world frame, about each centre of mass)."""

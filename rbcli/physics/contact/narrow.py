@@ -29,6 +29,7 @@ import numpy as np
 from rbcli.physics.contact.body_phase import whole_grid_hashed
 from rbcli.physics.contact.broad_phase import grid_box
 from rbcli.physics.contact.tables import SWEEP_PAIRS
+from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.step import STEP_KERNEL
 
 # The pair path gives way to the walk when its tests would cost more than the walk's estimated ones: the
@@ -40,6 +41,7 @@ _RADIX_BITS = 11
 _CULL = 1.0 + 1e-6  # a sphere's radius in the box test, widened far beyond any rounding of p +- r
 
 
+@separately_compiled
 @numba.njit(**STEP_KERNEL)
 def pair_candidates(contact, work, gridded) -> int:  # noqa: ANN001
     """The overlapping sphere pairs of the body pairs in work.body_pair, sorted in the walk's order into

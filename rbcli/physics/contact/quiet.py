@@ -41,6 +41,7 @@ import numpy as np
 
 from rbcli.physics.contact.body_phase import box_clearance, box_pairs
 from rbcli.physics.contact.tables import COUNT_EVALUATIONS, QUIET_ARMED, QUIET_ON, QUIET_WAIT
+from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.step import STEP_KERNEL
 
 WINDOW_STEPS = np.array([1024.0, 128.0, 16.0])  # the windows tried, longest first
@@ -87,6 +88,7 @@ def contact_quiet(work, x, t) -> bool:  # noqa: ANN001
     return True
 
 
+@separately_compiled
 @numba.njit(**STEP_KERNEL)  # a call of its own: it runs rarely (inlined, ~2 s more compile of each contact loop)
 def try_quiet(contact, work, x) -> None:  # noqa: ANN001
     """At the end of a (sub-)step that holds no contact (commit_contacts), with work.body_velocity the

@@ -51,6 +51,7 @@ from rbcli.physics.contact.body_phase import body_phase, excluded, place_spheres
 from rbcli.physics.contact.broad_phase import HALF_SHELL, bucket_of, build_grid_of
 from rbcli.physics.contact.narrow import pair_candidates, pair_candidates_threaded
 from rbcli.physics.contact.tables import ACTIVE_PLANE, PLANE_PARTNER_BASE, SWEEP_SPHERES
+from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.step import STEP_KERNEL
 
 _OPTIONS: Any = STEP_KERNEL  # typed Any: numba's stubs type jit_options as a TypedDict without `_nrt`
@@ -80,6 +81,7 @@ def sphere_positions(contact, work, x, q) -> int:  # noqa: ANN001
     return flagged
 
 
+@separately_compiled
 @numba.njit(**STEP_KERNEL)
 def find_contacts(contact, work, sink) -> int:  # noqa: ANN001
     """Every contact of the sphere positions in work.sphere_position, plane contacts first (by sphere,

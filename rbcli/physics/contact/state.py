@@ -29,6 +29,7 @@ from rbcli.physics.contact.law import history_elongation
 from rbcli.physics.contact.quiet import quiet_at_step_end
 from rbcli.physics.contact.search import contact_found, find_contacts, sphere_positions
 from rbcli.physics.contact.tables import COUNT_OVERFLOW, STAT_CONTACTS, STAT_ENERGY, STAT_MAX_PENETRATION, STAT_OVERFLOW
+from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.step import STEP_KERNEL
 
 _OPTIONS: Any = STEP_KERNEL  # typed Any: numba's stubs type jit_options as a TypedDict without `_nrt`
@@ -41,6 +42,7 @@ class ContactStateSink(NamedTuple):
     row: int
 
 
+@separately_compiled
 @numba.njit(**STEP_KERNEL)
 def record_contact_state(contact, work, x, q, out, row) -> None:  # noqa: ANN001
     """out[row] = the contact statistics of the state (x, q; internal principal frame) with the history

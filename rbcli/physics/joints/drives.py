@@ -33,6 +33,7 @@ from rbcli.physics.integrators.kinematics import rotate
 from rbcli.physics.joints.impulses import apply_body_impulses, body_omega, gather_impulses
 from rbcli.physics.joints.solver import solve_rows
 from rbcli.physics.joints.tables import JOINT_HINGE
+from rbcli.physics.kernel_link import separately_compiled
 
 # a coordinate within this of a bound [rad or m] is at it (the velocity stage stops outward motion):
 # the position stage leaves it at round-off (~1e-16) from the bound, and no motion meant to stay clear of
@@ -170,6 +171,7 @@ def _rate(model, q, P, L, a, b, ja, jb) -> float:  # noqa: ANN001
     return rate
 
 
+@separately_compiled
 @numba.njit(cache=True)
 def drive_velocities(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
     """The velocity stage's motors and dampers, then its limit stops (module docstring), with the end
@@ -205,6 +207,7 @@ def drive_velocities(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
                         _push(table, work, j, a, b, ja, jb, -rate / k_inv, 0.0, x, q, P, L)
 
 
+@separately_compiled
 @numba.njit(cache=True)
 def limit_positions(table, work, h, x, q, P, L) -> bool:  # noqa: ANN001
     """The position stage's limits: each coordinate beyond a bound at the end of the step is put back by

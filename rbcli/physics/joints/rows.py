@@ -22,8 +22,10 @@ import numba
 
 from rbcli.physics.integrators.kinematics import rotate
 from rbcli.physics.joints.tables import JOINT_BALL, JOINT_DISTANCE, JOINT_FIXED, JOINT_HINGE, JOINT_SLIDER
+from rbcli.physics.kernel_link import separately_compiled
 
 
+@separately_compiled
 @numba.njit(cache=True)
 def joint_rows(table, x, q, jac_a, jac_b, residual, with_jacobian) -> float:  # noqa: ANN001
     """g (residual) of every row at (x, q), and G (jac_a, jac_b) when with_jacobian; returns max |g|."""

@@ -33,6 +33,7 @@ import numba
 
 from rbcli.physics.joints.solver_graph import NODE_JOINT
 from rbcli.physics.joints.solver_layout import JointGraph, SolverWork, joint_graph, make_solver_work  # noqa: F401
+from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.step import STEP_KERNEL
 
 # A pivot |d| <= PIVOT_TOLERANCE * A_rr is a redundant row. Round-off leaves ~eps A_rr (1e-16..1e-15) in
@@ -369,6 +370,7 @@ def _factor_loops(graph, work, row_start, row_count, body_a, jac_a, jac_b, inv_m
     return k - rank
 
 
+@separately_compiled
 @numba.njit(**STEP_KERNEL)
 def factor_rows(graph, work, row_start, row_count, body_a, body_b, jac_a, jac_b, inv_mass, inv_inertia_world) -> int:  # noqa: ANN001, E501
     """Factor A = G W G^T (module docstring) into `work`; returns the number of rows found redundant,
@@ -467,6 +469,7 @@ def _residual(graph, work, row_start, row_count, body_a, body_b, rhs, lam) -> No
             work.refine_residual[r] = v
 
 
+@separately_compiled
 @numba.njit(**STEP_KERNEL)
 def solve_rows(graph, work, row_start, row_count, body_a, body_b, rhs, out) -> None:  # noqa: ANN001
     """out = A^-1 rhs (shape (row_total,), rows 0 .. row_total - 1) after factor_rows; redundant rows get 0.

@@ -62,6 +62,7 @@ from rbcli.physics.joints.impulses import (
 from rbcli.physics.joints.rows import joint_rows
 from rbcli.physics.joints.solver import factor_rows, solve_rows
 from rbcli.physics.joints.tables import STAT_FLOOR, STAT_ITERATIONS, STAT_POSITION, STAT_REDUNDANT, STAT_VELOCITY
+from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.step import STEP_KERNEL
 
 # the Newton iteration stops when |g| falls by less than this factor in one iteration (round-off
@@ -84,6 +85,7 @@ LIMIT_ROUNDS = 8
 VELOCITY_SLACK = 1e-12
 
 
+@separately_compiled
 @numba.njit(**STEP_KERNEL)
 def joint_position(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
     """The position stage: the midpoint impulse that puts the end configuration on g = 0 (module
@@ -122,6 +124,7 @@ def joint_position(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
     work.stats[STAT_REDUNDANT] = redundant
 
 
+@separately_compiled
 @numba.njit(cache=True)
 def _newton(table, work, h, x, q, P, L):  # noqa: ANN001, ANN202
     """Simplified Newton on the end configuration's residual with the midpoint factor; (max |g|, iterations)."""
@@ -146,6 +149,7 @@ def _newton(table, work, h, x, q, P, L):  # noqa: ANN001, ANN202
     return worst, iterations
 
 
+@separately_compiled
 @numba.njit(**STEP_KERNEL)
 def joint_velocity(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
     """The velocity stage: (P, L) -= G^T mu with G V = 0 after it, G at the end configuration; then the
@@ -157,6 +161,7 @@ def joint_velocity(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
     work.stats[STAT_VELOCITY] = row_velocities(model, table, work, q, P, L)
 
 
+@separately_compiled
 @numba.njit(**STEP_KERNEL)
 def joint_begin(model, table, work, x, q, P, L) -> None:  # noqa: ANN001
     """Before a step: velocities that break the joints' rows (initial velocities given without regard to
@@ -171,6 +176,7 @@ def joint_begin(model, table, work, x, q, P, L) -> None:  # noqa: ANN001
         _project(model, table, work, x, q, P, L)
 
 
+@separately_compiled
 @numba.njit(cache=True)
 def _project(model, table, work, x, q, P, L) -> None:  # noqa: ANN001
     """(P, L) -= G^T mu, mu = A^-1 G V at (x, q): G V = 0 after it; mu is added to work.impulse."""
@@ -188,6 +194,7 @@ def _project(model, table, work, x, q, P, L) -> None:  # noqa: ANN001
     apply_body_impulses(table, work, 0.0, x, q, P, L)
 
 
+@separately_compiled
 @numba.njit(**STEP_KERNEL)
 def joint_record(table, work, h, frames, filled, due) -> None:  # noqa: ANN001
     """On a recording step, each joint's reaction over the (sub-)step just taken, work.joint_impulse / h

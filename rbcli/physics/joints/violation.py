@@ -12,8 +12,10 @@ import numba
 
 from rbcli.physics.joints.impulses import row_velocities
 from rbcli.physics.joints.rows import joint_rows
+from rbcli.physics.kernel_link import separately_compiled
 
 
+@separately_compiled
 @numba.njit(cache=True)
 def joint_violations(model, table, work, x, q, P, L, out) -> None:  # noqa: ANN001
     """out[k] = (max |g|, max |G V|) of frame k of the (K, N, ...) states; work: a JointWork (scratch)."""

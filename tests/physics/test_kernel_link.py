@@ -1,0 +1,140 @@
+"""Each kernel compiled once (physics/kernel_link.py): a second kind of scene reuses the first's compiled
+stages instead of compiling copies of them into its own loop, in the same process and from the cache.
+
+Scene A is a hinge pendulum; scene B is the same pendulum with a drag force: another kind of scene, so
+another signature of the chunk loop (its force tables hold a drag table), whose joint stages take the
+same types as A's. Checked with numba's compile events (they fire only for real compilations) and with
+the machine code of B's loop: it must not define the joint stages' functions (numba's own linking puts
+a copy of every callee's code into each caller, so the loop would define them all)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numba
+import pytest
+
+from rbcli.physics import kernel_link
+from rbcli.physics.kernel_cache import VERIFIED_NUMBA
+
+ROOT = Path(__file__).resolve().parents[2]
+
+PENDULUM = """\
+name: {name}
+simulation: {{dt: 0.001, duration: 0.1, integrator: split2}}
+gravity: [0, 0, -9.81]
+bodies:
+  - name: rod
+    particles: {{positions: [[0, 0, -0.2], [0.05, 0, -0.6], [0, 0.03, -1.0]], masses: 0.2, radius: 0.02}}
+    position: [-0.1, 0.0, 0.41]
+    angular_momentum: [0.001, 0.002, 0.0005]
+joints:
+  - {{name: pivot, type: hinge, bodies: [rod, world], anchor: [0, 0, 1], axis: [0, 1, 0]}}
+{forces}"""
+
+SCENE_A = PENDULUM.format(name="pendulum", forces="")
+SCENE_B = PENDULUM.format(name="pendulum-drag", forces="forces:\n  - {type: drag, bodies: all, linear: 0.3}\n")
+
+# the joint stages the split2 loop calls (physics/joints/stages.py), and what the pendulum's solve calls
+JOINT_STAGES = ("joint_begin", "joint_position", "joint_velocity", "joint_record")
+
+SCRIPT = """
+import json, sys
+import numba.core.event as ev
+
+compiled = []
+
+class Recorder(ev.Listener):
+    def on_start(self, event):
+        f = event.data["dispatcher"].py_func
+        compiled.append([f"{f.__module__}.{f.__qualname__}", str(event.data["args"])])
+
+    def on_end(self, event):
+        pass
+
+ev.register("numba:compile", Recorder())
+
+from rbcli.physics import kernel_link
+from rbcli.physics.chunks.split2 import run_chunk
+from rbcli.runner.simulation import Simulation
+
+out = {"runs": [], "separate": None}
+for path in sys.argv[1:]:
+    start = len(compiled)
+    sim = Simulation(path)
+    sim.step(50)
+    state = sim.data.state
+    out["runs"].append({"compiled": compiled[start:],
+                        "bits": [a.tobytes().hex() for a in (state.x, state.q, state.P, state.L)]})
+out["separate"] = kernel_link.active()
+# the functions the machine code of each freshly compiled loop defines (a cache load cannot be inspected)
+out["loop_functions"] = [[f.name for f in cres.library.get_defined_functions()]
+                         for cres in run_chunk.overloads.values() if cres.metadata is not None]
+print(json.dumps(out))
+"""
+
+
+def _run(cache: Path, *scenes: Path, link: bool = False) -> dict:
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), env.get("PYTHONPATH")]))
+    if link:
+        env["RBSIM_LINK_KERNELS"] = "1"
+    done = subprocess.run([sys.executable, "-c", SCRIPT, *map(str, scenes)], env=env, cwd=ROOT,
+                          capture_output=True, text=True, timeout=900)  # fmt: skip
+    assert done.returncode == 0, done.stderr[-3000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def _verified() -> bool:
+    return tuple(int(p) for p in numba.__version__.split(".")[:2]) in VERIFIED_NUMBA
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not _verified(), reason="kernel_link is installed only on the numba versions it was verified on")
+def test_a_second_kind_of_scene_compiles_none_of_the_first_ones_functions_and_links_no_copies(tmp_path):
+    scene_a, scene_b = tmp_path / "a.yaml", tmp_path / "b.yaml"
+    scene_a.write_text(SCENE_A)
+    scene_b.write_text(SCENE_B)
+    cache = tmp_path / "numba_cache"
+
+    first = _run(cache, scene_a, scene_b)
+    assert first["separate"]
+    run_a, run_b = first["runs"]
+    compiled_a = {tuple(item) for item in run_a["compiled"]}
+    compiled_b = {tuple(item) for item in run_b["compiled"]}
+    names_a = {name for name, _ in compiled_a}
+    # the empty cache really compiled A's loop and joint stages, and B compiled a loop of its own types...
+    assert {f"rbcli.physics.joints.stages.{stage}" for stage in JOINT_STAGES} <= names_a, sorted(names_a)
+    assert any(name == "rbcli.physics.chunks.split2.run_chunk" for name, _ in compiled_b)
+    # ...but no function with the types A already compiled it for (its stages are reused, not recompiled)
+    assert not compiled_a & compiled_b, sorted(compiled_a & compiled_b)
+    # and neither loop carries a copy of the joint stages' code: they are called by symbol
+    assert len(first["loop_functions"]) == 2
+    for functions in first["loop_functions"]:
+        copies = [name for name in functions if any(f"{len(stage)}{stage}" in name for stage in JOINT_STAGES)]
+        assert not copies, copies
+
+    # a new process on the same cache compiles nothing, loading each loop's callees before the loop
+    again = _run(cache, scene_b, scene_a)
+    assert [run["compiled"] for run in again["runs"]] == [[], []]
+    assert [run["bits"] for run in again["runs"]] == [run_b["bits"], run_a["bits"]]
+
+
+def test_stage_kernels_are_called_by_symbol_and_small_kernels_stay_linked():
+    """Stage-sized kernels (a joint stage, the solver's factor) are separate; kernels called per body stay
+    linked so LLVM can inline them into their loops, and numba-inlined ones are never linked at all."""
+    from rbcli.physics.contact import search
+    from rbcli.physics.integrators import kinematics
+    from rbcli.physics.joints import solver, stages
+
+    for kernel in (stages.joint_position, stages.joint_velocity, solver.factor_rows, solver.solve_rows,
+                   search.find_contacts):  # fmt: skip
+        assert kernel_link.is_separate_kernel(kernel), kernel
+    assert not kernel_link.is_separate_kernel(kinematics.turn)
+    inlined = [kernel for kernel in vars(solver).values()
+               if getattr(kernel, "targetoptions", {}).get("inline") == "always"]  # fmt: skip
+    assert inlined and not any(kernel_link.is_separate_kernel(kernel) for kernel in inlined)
