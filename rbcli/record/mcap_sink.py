@@ -49,12 +49,6 @@ from rbcli.record.mcap_messages import (
 )
 from rbcli.record.mcap_writer import COMPRESSIONS, ZSTD_LEVEL, McapChunkWriter
 
-# isort: split
-# Still imported from this module by rbcli/runner/resume.py (with METADATA_RUN and METADATA_SUMMARY,
-# above), which is being edited elsewhere: when it imports them from mcap_recovery and mcap_layout,
-# delete this import.
-from rbcli.record.mcap_recovery import iter_mcap_frames_before, read_mcap_resume_point  # noqa: F401
-
 # A run's file is fsynced after a chunk when the last fsync is this old [s] (docs/robustness.md "Crashes").
 FSYNC_SECONDS = 1.0
 

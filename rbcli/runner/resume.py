@@ -44,7 +44,8 @@ class ResumePlan:
 def plan_resume(log: str | Path, *, compression: str | None = None) -> ResumePlan:
     """Read `log` (an rbsim .mcap file, complete or cut short by a kill) and rebuild its run; ResumeError
     when it cannot be resumed (no checkpoint, completed or diverged, another format)."""
-    from rbcli.record.mcap_sink import METADATA_RUN, METADATA_SUMMARY, read_mcap_resume_point
+    from rbcli.record.mcap_layout import METADATA_RUN, METADATA_SUMMARY
+    from rbcli.record.mcap_recovery import read_mcap_resume_point
     from rbcli.record.read import RecordingTooNew, check_format_version, recording_format
     from rbcli.scene.compile import compile_scene
     from rbcli.scene.load import load_scene_text
@@ -97,7 +98,7 @@ def _copied_frames(plan: ResumePlan) -> Iterator[FrameBlock]:
     log does not hold in a form read back here, recomputed from each frame's state)."""
     from rbcli.physics.frames import internal_orientation
     from rbcli.physics.rotation import quat_to_matrix
-    from rbcli.record.mcap_sink import iter_mcap_frames_before
+    from rbcli.record.mcap_recovery import iter_mcap_frames_before
     from rbcli.runner.blocks import frame_contacts
 
     model = plan.compiled.model
