@@ -209,6 +209,7 @@ def main() -> None:
     if args.cold:
         sys.path.insert(0, str(Path(__file__).resolve().parent))
         import startup_kinds
+
         from rbcli.physics.integrators import INTEGRATORS
 
         names = list(INTEGRATORS) if args.integrators == "all" else [n for n in args.integrators.split(",") if n]

@@ -216,13 +216,14 @@ def test_physics_imports_only_numpy_and_numba():
 
 
 # what physics/contact/ may import besides itself: the one-body rotation kernels, the kernel options and
-# the kernel cache's guard (it imports nothing of rbcli), nothing that uses contact (forces, integrators,
-# the pipeline) and no kinematic bodies (physics/kinematic.py)
+# the kernel cache's guard and linker (they import nothing of rbcli), nothing that uses contact (forces,
+# integrators, the pipeline) and no kinematic bodies (physics/kinematic.py)
 CONTACT_MAY_IMPORT = (
     "rbcli.physics.rotation",
     "rbcli.physics.rotation_kernels",
     "rbcli.physics.step",
     "rbcli.physics.kernel_cache",
+    "rbcli.physics.kernel_link",
 )
 
 
