@@ -37,8 +37,6 @@ import os
 import sys
 from typing import Any
 
-from numba.core import types
-
 _installed = False
 
 
@@ -102,6 +100,8 @@ def _prunes_to_nothing(args: tuple[Any, ...]) -> bool:
     """A stage compiled for an absent table (a None argument: the joint stages of a scene without joints)
     is empty; linked, LLVM removes the call, where a call by symbol would pass every argument each step
     (a free body's split2 step went 82 -> 160 ns with its four empty joint stages called)."""
+    from numba.core import types  # numba inside functions only: this module defines no kernel
+
     return any(isinstance(arg, types.NoneType) for arg in args)
 
 
