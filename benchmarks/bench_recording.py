@@ -169,7 +169,7 @@ def main() -> None:
             f"{per_frame:9.0f} {best['cpu'] / frames * 1e6:9.0f} {per_frame / args.step_us:6.1f}x "
             f"{best['total'] / gen:5.1f}x {size:7.1f}  {needed}"
         )
-    from rbcli.record.mcap_sink import StateEncoder, TransformsEncoder
+    from rbcli.record.mcap_encoders import StateEncoder, TransformsEncoder
 
     encoders = {"/rbsim/state": StateEncoder(args.bodies), "/tf": TransformsEncoder(header.body_names)}
     print("\nMCAP encoders alone (numpy, wire format):")

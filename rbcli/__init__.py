@@ -1,11 +1,11 @@
 """rbsim: rigid-body dynamics from YAML scenes (package `rbcli`).
 
 Public API: `load_scene`, `simulate`, `Simulation` (step, read and write the state, reset, run),
-`BodyState`, `prepare`, `run_to_file`, `resume_to_file` (continue a stopped .mcap log bit for bit),
-`Trajectory` (`to_npz`, `from_npz`, `to_csv`), `read_recording`
-(a .mcap or .rrd back as a Trajectory), `SimulationDiverged`, `sweep` (a scene over many parameter values,
-on Dask: a pyarrow table), `__version__`. Units are SI throughout
-(m, kg, s, rad); quaternions are (w, x, y, z), world-from-body.
+`BodyState`, `RunOptions` (a run's dt, duration, integrator, ... as one object), `prepare`, `run_to_file`,
+`resume_to_file` (continue a stopped .mcap log bit for bit), `Trajectory` (`to_npz`, `from_npz`, `to_csv`),
+`read_recording` (a .mcap or .rrd back as a Trajectory), `SimulationDiverged`, `sweep` (a scene over many
+parameter values, on Dask: a pyarrow table), `__version__`. Units are SI throughout (m, kg, s, rad);
+quaternions are (w, x, y, z), world-from-body.
 Attributes are imported lazily so that `rbsim --help` and `rbsim validate` stay light.
 """
 
@@ -21,6 +21,7 @@ __all__ = [
     "simulate",
     "Simulation",
     "BodyState",
+    "RunOptions",
     "prepare",
     "run_to_file",
     "resume_to_file",
@@ -33,6 +34,7 @@ __all__ = [
 if TYPE_CHECKING:
     from rbcli.api import (
         BodyState,
+        RunOptions,
         Simulation,
         SimulationDiverged,
         load_scene,

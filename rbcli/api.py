@@ -13,22 +13,23 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Unpack
 
 from rbcli.physics import integrators as _integrators
 from rbcli.physics.integrators import INTEGRATORS, IntegratorInfo, IntegratorRefusal, get_integrator
 from rbcli.record.frame import RunSummary, Sink
 from rbcli.record.memory_sink import SinkMemory, Trajectory
 from rbcli.runner.simulation import BodyState, Simulation, SimulationDiverged
-from rbcli.scene.compile import CompiledScene, compile_scene
+from rbcli.scene.compile import CompiledScene, RunOptions, RunOverrides, compile_scene
 from rbcli.scene.spec import SceneSpec
 
 if TYPE_CHECKING:
+    from rbcli.runner.loop import ProgressCallback
     from rbcli.runner.resume import ResumePlan
 
 __all__ = [
-    "BodyState", "Simulation", "SimulationDiverged", "load_scene", "prepare", "resume_to_file", "run_to_file",
-    "simulate",
+    "BodyState", "RunOptions", "Simulation", "SimulationDiverged", "load_scene", "prepare", "resume_to_file",
+    "run_to_file", "simulate",
 ]  # fmt: skip
 
 
@@ -57,16 +58,10 @@ def integrator_info(name: str) -> IntegratorInfo:
 
 
 def prepare(
-    scene: SceneSpec | str | Path,
-    *,
-    dt: float | None = None,
-    duration: float | None = None,
-    integrator: str | None = None,
-    record_every: int | None = None,
-    tolerance: float | None = None,
-    compression: str | None = None,
+    scene: SceneSpec | str | Path, options: RunOptions | None = None, **overrides: Unpack[RunOverrides]
 ) -> CompiledScene:
-    """Load (when given a path) and compile a scene with overrides.
+    """Load (when given a path) and compile a scene with run options (RunOptions: dt, duration, integrator,
+    record_every, tolerance, compression), given as one object, as keywords, or both (keywords win).
 
     compression: MCAP chunk compression for `run_to_file` ("zstd", "lz4" or "none").
 
@@ -74,37 +69,24 @@ def prepare(
     the spacing of the output times, not the step.
     """
     spec = scene if isinstance(scene, SceneSpec) else load_scene(scene)
-    return compile_scene(
-        spec,
-        dt=dt,
-        duration=duration,
-        integrator=integrator,
-        record_every=record_every,
-        tolerance=tolerance,
-        compression=compression,
-    )
+    return compile_scene(spec, options, **overrides)
 
 
 def simulate(
     scene: SceneSpec | str | Path,
+    options: RunOptions | None = None,
     *,
-    dt: float | None = None,
-    duration: float | None = None,
-    integrator: str | None = None,
-    record_every: int | None = None,
-    tolerance: float | None = None,
     sinks: Sequence[Sink] = (),
     on_diverge: str = "raise",
+    **overrides: Unpack[RunOverrides],
 ) -> Trajectory:
     """Run a scene once and return its recorded Trajectory (also streaming to any extra sinks): the same
     as `Simulation(scene, ...).run(sinks=[memory, *sinks])`. For repeated runs of one scene, make a
-    Simulation once and call its `run` or `step`: compiling is then paid once.
+    Simulation once and call its `run` or `step`: compiling is then paid once. Run options as `prepare`.
 
     on_diverge: "raise" (SimulationDiverged, carrying the partial trajectory) or "return".
     """
-    sim = Simulation(
-        scene, dt=dt, duration=duration, integrator=integrator, record_every=record_every, tolerance=tolerance
-    )
+    sim = Simulation(scene, options, **overrides)
     memory = SinkMemory()
     summary = sim.run(sinks=[memory, *sinks])
     trajectory = memory.trajectory()
@@ -113,38 +95,45 @@ def simulate(
     return trajectory
 
 
-def run_to_file(compiled: CompiledScene, output: str | Path, *, progress=None) -> RunSummary:  # noqa: ANN001
-    """Run a compiled scene streaming to an .mcap or .rrd file (memory stays flat).
+def run_to_file(
+    compiled: CompiledScene | Simulation,
+    output: str | Path,
+    *,
+    progress: ProgressCallback | None = None,
+) -> RunSummary:
+    """Run a compiled scene from its initial state (or a Simulation from its current state: `rbsim run`
+    loads its kernels first) streaming to an .mcap or .rrd file (memory stays flat).
 
     The run writes `x.partial.mcap` beside `x.mcap` and renames it onto `x.mcap` when it ends (completed,
     interrupted or diverged); a run that fails leaves `x.mcap` as it was (record/output_file.py).
     Raises OutputError (a ValueError) before any work when the file cannot be written, another run is
     writing it, or the disk is too full for the estimated size.
     """
-    from rbcli.runner.simulation import run
-
-    return _to_file(compiled, output, lambda sinks: run(compiled, sinks, progress=progress))
+    sim = compiled if isinstance(compiled, Simulation) else Simulation(compiled)
+    return _to_file(sim.compiled, output, lambda sinks: sim.run(sinks=sinks, progress=progress))
 
 
 def resume_to_file(
     log: str | Path | ResumePlan,
     output: str | Path,
     *,
-    progress=None,
-    compression: str | None = None,  # noqa: ANN001
+    progress: ProgressCallback | None = None,
+    compression: str | None = None,
+    simulation: Simulation | None = None,
 ) -> RunSummary:
     """Continue the run a stopped .mcap log holds (interrupted by a signal, or killed: `log` may be the
     `x.partial.mcap` a kill left) from its last checkpoint to its planned end, writing a new complete log
     to `output`: the old frames, then the continued run, bit for bit as if never stopped
     (runner/resume.py; `log` may also be a plan_resume result). ResumeError (a ValueError) when the log
-    cannot be resumed."""
+    cannot be resumed. simulation: a Simulation of the plan's compiled scene to continue in (`rbsim run
+    --resume` loads its kernels first); the checkpoint is restored into it."""
     from rbcli.runner.resume import ResumePlan, plan_resume, resume_run
 
     plan = log if isinstance(log, ResumePlan) else plan_resume(log, compression=compression)
     log = plan.log
     if Path(output).resolve() == Path(log).resolve():
         raise ValueError(f"{output}: the resumed log must go to another file than the one it resumes")
-    return _to_file(plan.compiled, output, lambda sinks: resume_run(plan, sinks, progress=progress))
+    return _to_file(plan.compiled, output, lambda sinks: resume_run(plan, sinks, progress=progress, sim=simulation))
 
 
 def _to_file(compiled: CompiledScene, output: str | Path, run) -> RunSummary:  # noqa: ANN001

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import signal
+import threading
+
 import numpy as np
 import pytest
 
@@ -38,6 +42,21 @@ def pytest_xdist_make_scheduler(config, log):  # noqa: ANN001, ANN201
             return kernel_unit(nodeid)
 
     return KernelFamilyScheduling(config, log)
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_sessionfinish(session):  # noqa: ANN001, ANN201
+    """An xdist worker whose tests and session fixtures are done ignores SIGINT until it exits.
+
+    When the run ends, execnet gives each worker 5 s to finish its session and then sends it SIGINT
+    (execnet's `WorkerGateway._terminate_execution`), meant for a test still running. A worker finishing
+    its unconfigure (full garbage collections of numba's objects, on a loaded machine) takes longer, and the
+    KeyboardInterrupt lands wherever its main thread is, often inside a gc callback (hypothesis installs
+    one), which Python prints as "Exception ignored in: ... gc_callback" on the suite's stderr although
+    every test passed. No test is left to interrupt here; a worker that hangs is still ended by execnet
+    10 s later (os._exit). Runs without workers (-n0) keep Ctrl-C as it is."""
+    if os.environ.get("PYTEST_XDIST_WORKER") and threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def make_body(name: str = "b", **overrides) -> BodySpec:

@@ -127,7 +127,9 @@ def _recorded_scene(file: Path, fmt: str):  # noqa: ANN202 - a SceneSpec
     from rbcli.scene.load import load_scene_text
 
     if fmt == "mcap":
-        from rbcli.record.mcap_sink import METADATA_RUN, read_mcap_contents, read_mcap_prefix
+        from rbcli.record.mcap_layout import METADATA_RUN
+        from rbcli.record.mcap_read import read_mcap_contents
+        from rbcli.record.mcap_recovery import read_mcap_prefix
 
         try:
             contents = read_mcap_contents(file)

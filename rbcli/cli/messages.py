@@ -7,7 +7,8 @@ One message is one line, never wrapped (editors, CI annotators and `grep` parse 
 text when stderr is not a terminal and coloured only on a terminal (not with NO_COLOR or TERM=dumb;
 FORCE_COLOR forces it). Text is written as it is: no markup language is interpreted, so nothing such as
 `[red]` can ever appear, and brackets in paths and units print as typed. Status lines (a run's summary, "wrote
-FILE") go through `status`, on stderr too, so stdout carries only what a command produces. A list of
+FILE") go through `status`, on stderr too, so stdout carries only what a command produces; a line that
+rewrites itself as work goes on (`live_status`: numba compiling) only where `can_rewrite_status`. A list of
 issues prints its first MAX_SHOWN_ISSUES and a note with the count of the rest.
 """
 
@@ -28,6 +29,7 @@ Severity = Literal["error", "warning", "note"]
 
 # ANSI SGR codes, as gcc and clang colour their diagnostics: bold location, bold red/magenta/cyan labels
 _BOLD, _RESET = "\x1b[1m", "\x1b[0m"
+_ERASE_TO_END = "\x1b[K"  # ANSI EL: erase from the cursor to the end of the line
 _LABEL_COLOUR = {"error": "\x1b[1;31m", "warning": "\x1b[1;35m", "note": "\x1b[1;36m"}
 # a file with thousands of errors (a generated scene with one slip repeated) prints this many and a count:
 # the first ones locate the slip, and a screen of the same message hides the verdict
@@ -146,6 +148,29 @@ def issues(found: Iterable[_Located], file: object | None = None) -> None:
 def status(text: str) -> None:
     """A line that is not a diagnostic (a run's summary, "wrote FILE"): stderr, one line, never wrapped."""
     sys.stderr.write(one_line(text) + "\n")
+    sys.stderr.flush()
+
+
+def can_rewrite_status() -> bool:
+    """Whether stderr shows `live_status` lines: a terminal that erases a line (not TERM=dumb); elsewhere
+    (a pipe, a log file, CI) a line written is there for good, so say things once with `status`."""
+    isatty = getattr(sys.stderr, "isatty", None)
+    return bool(isatty and isatty()) and os.environ.get("TERM") != "dumb"
+
+
+def live_status(text: str) -> None:
+    """A status line on a terminal that the next live_status, or end_live_status, replaces in place: cut
+    to the terminal's width (a wrapped line would leave its first rows behind on every rewrite)."""
+    import shutil
+
+    width = shutil.get_terminal_size().columns
+    sys.stderr.write("\r" + one_line(text)[: max(1, width - 1)] + _ERASE_TO_END)
+    sys.stderr.flush()
+
+
+def end_live_status() -> None:
+    """Erase the live_status line, leaving the cursor at its start for the next line."""
+    sys.stderr.write("\r" + _ERASE_TO_END)
     sys.stderr.flush()
 
 

@@ -44,7 +44,7 @@ def recover(
     ] = "zstd",
 ) -> None:
     """Rewrite what FILE holds (every complete frame) as a complete MCAP with a summary and index."""
-    from rbcli.record.mcap_sink import recover_mcap
+    from rbcli.record.mcap_recovery import recover_mcap
     from rbcli.record.output_file import being_written
 
     fail = messages.fail

@@ -12,6 +12,7 @@ import subprocess
 import sys
 import threading
 import time
+import urllib.parse
 from pathlib import Path
 from typing import IO, Annotated
 
@@ -44,7 +45,10 @@ def replay(
         Path, typer.Argument(metavar="FILE", help="A recording: .rrd, or .mcap (the Rerun viewer reads both).")
     ],
     web: Annotated[
-        bool, typer.Option("--web", help="Serve a web viewer on http://127.0.0.1:PORT instead of opening a window")
+        bool,
+        typer.Option(
+            "--web", help="Serve a web viewer on http://127.0.0.1:PORT instead of opening a window; prints its address"
+        ),
     ] = False,
     save: Annotated[
         Path | None, typer.Option("--save", metavar="FILE.rrd", help="Write the recording as an .rrd file and exit")
@@ -75,8 +79,10 @@ def replay(
     from rbcli.record.rerun_sink import open_viewer_command
 
     if web:
-        command = [*open_viewer_command(file, web=True), "--web-viewer-port", str(port), "--port", str(grpc_port)]
-        _serve_web(file, command, (port, grpc_port))
+        # --serve-web: the viewer's page and the gRPC proxy the file is fed into, both on 127.0.0.1; unlike
+        # --web-viewer it opens no browser itself (rbsim opens the address it prints, where a browser exists)
+        serve = ["--serve-web", "--bind", "127.0.0.1", "--web-viewer-port", str(port), "--port", str(grpc_port)]
+        _serve_web(file, [*open_viewer_command(file), *serve], (port, grpc_port))
         return
 
     if not has_display():
@@ -87,6 +93,40 @@ def replay(
         )
     process = subprocess.Popen(open_viewer_command(file), start_new_session=True)
     messages.status(f"opened {file} in the Rerun viewer (pid {process.pid})")
+
+
+def web_viewer_address(web_port: int, grpc_port: int) -> str:
+    """The address that opens the web viewer on the served recording, not on its welcome page.
+
+    The viewer takes its data source as the `url` query parameter, here the gRPC proxy that `rerun
+    --serve-web FILE` feeds the file into (`rerun+http://HOST:PORT/proxy`), percent-encoded as rerun-sdk's
+    own WebViewerConfig encodes it (every character but letters and digits). rerun says `localhost`;
+    rbsim names 127.0.0.1, the one address both servers are bound to."""
+    source = f"rerun+http://127.0.0.1:{grpc_port}/proxy"
+    return f"http://127.0.0.1:{web_port}/?url={urllib.parse.quote(source, safe='')}"
+
+
+def browser_available() -> bool:
+    """Whether rbsim should open a browser: a display, or a browser the user named in $BROWSER, and one
+    that Python's webbrowser finds. Without a display webbrowser falls back to a console browser (lynx,
+    w3m), which would take over the terminal rbsim reports in."""
+    import webbrowser
+
+    if not (has_display() or os.environ.get("BROWSER")):
+        return False
+    try:
+        webbrowser.get()
+    except webbrowser.Error:
+        return False
+    return True
+
+
+def _open_in_browser(address: str) -> None:
+    """Open `address` in the browser; a browser that fails to start is no reason to stop serving."""
+    import webbrowser
+
+    with contextlib.suppress(webbrowser.Error, OSError):
+        webbrowser.open(address)
 
 
 class _Stop(Exception):
@@ -129,10 +169,14 @@ def _serve_web(file: Path, command: list[str], ports: tuple[int, int]) -> None:
             process = subprocess.Popen(command, start_new_session=True, env=env, stderr=subprocess.PIPE)
             forward = threading.Thread(target=_forward_viewer_log, args=(process.stderr, quiet), daemon=True)
             forward.start()
-            messages.status(
-                f"serving {file} at http://127.0.0.1:{web} (bound to 127.0.0.1 only; recording on port {grpc}); "
-                "Ctrl-C to stop"
-            )
+            if _wait_listening(process, ports):  # an address printed (or opened) earlier would not load yet
+                address = web_viewer_address(web, grpc)
+                messages.status(
+                    f"serving {file} at {address} (the viewer on port {web}, the recording on port {grpc}, "
+                    "bound to 127.0.0.1 only); Ctrl-C to stop"
+                )
+                if browser_available():  # in a thread: a browser command may run until the browser closes
+                    threading.Thread(target=_open_in_browser, args=(address,), daemon=True).start()
             code = process.wait()
         except _Stop as exc:
             stopped_by, code = exc.signum, 0
@@ -170,6 +214,22 @@ def _forward_viewer_log(stream: IO[bytes] | None, quiet: bool) -> None:
                 messages.status(f"rerun: {line}")
             elif traced[1] in ("WARN", "ERROR"):
                 messages.emit("warning" if traced[1] == "WARN" else "error", f"rerun: {traced[3]}")
+
+
+def _wait_listening(process: subprocess.Popen, ports: tuple[int, ...]) -> bool:
+    """Wait until every port accepts connections on 127.0.0.1 (True) or the viewer exits (False)."""
+    while process.poll() is None:
+        if all(_listening(port) for port in ports):
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def _listening(port: int) -> bool:
+    """Whether a server accepts connections on 127.0.0.1:port now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.settimeout(0.5)
+        return probe.connect_ex(("127.0.0.1", port)) == 0
 
 
 def _port_free(port: int) -> bool:

@@ -11,6 +11,7 @@ import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from types import FrameType
+from typing import TYPE_CHECKING
 
 import typer
 
@@ -18,6 +19,11 @@ from rbcli.cli import messages
 from rbcli.cli.exit_codes import ExitCode, signal_exit
 from rbcli.runner.threads import ENV as THREADS_ENV
 from rbcli.runner.threads import PARALLEL_MIN_BODIES, parse_threads
+
+if TYPE_CHECKING:
+    from rbcli.runner.compile_progress import CompileProgress
+    from rbcli.runner.simulation import Simulation
+    from rbcli.scene.compile import CompiledScene, RunOptions
 
 _STOP_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")  # each ends a run at a step boundary (_stop_signals)
 COMPRESSIONS = ("zstd", "lz4", "none")  # as schemas/scene.schema.json's record.compression
@@ -98,14 +104,7 @@ def run(
     ),
 ) -> None:
     """Integrate SCENE and record it; exits 1 on an invalid scene or output (writing nothing), 3 on divergence."""
-    from rbcli.api import check_integrator, integrator_info, prepare
-    from rbcli.record.output_file import (
-        OutputError,
-        check_output,
-        default_output_path,
-        expected_run_bytes,
-    )
-    from rbcli.scene.spec import SceneError
+    from rbcli.api import RunOptions, Simulation, check_integrator
 
     if threads is not None:  # checked first, then this process's RBSIM_THREADS: every run path reads it there
         try:
@@ -113,9 +112,10 @@ def run(
         except ValueError as exc:
             raise messages.fail(str(exc), code=ExitCode.USAGE) from None
         os.environ[THREADS_ENV] = str(count)
+    options = RunOptions(dt=dt, duration=duration, integrator=integrator, record_every=record_every,
+                         tolerance=tolerance, compression=compression)  # fmt: skip
     if resume is not None:
-        overrides = {"dt": dt, "duration": duration, "integrator": integrator, "record_every": record_every}
-        fixed = [f"--{k.replace('_', '-')}" for k, v in {**overrides, "tolerance": tolerance}.items() if v is not None]
+        fixed = [f"--{name.replace('_', '-')}" for name in options.given() if name != "compression"]
         if scene is not None or fixed:
             extra = ["SCENE"] if scene is not None else []
             raise messages.fail(
@@ -144,16 +144,27 @@ def run(
                 f"--output {str(output)!r}: unknown format {suffix or '(no extension)'!r}{guess}",
                 expected="a file name ending in .mcap or .rrd",
             )
+    with _stop_signals() as stops:  # the whole rest of the command: no signal raises in it (_stop_signals)
+        compiled, target = _prepare_run(scene, output, options, allow_large)
+        for warning in compiled.warnings:
+            messages.issue(warning, scene)
+        _end_if_stopped(stops, "before the run started")
+        sim = Simulation(compiled)  # the one that runs: its kernels are loaded first
+        _load_kernels(sim, quiet, stops)
+        _run_and_report(sim, target, quiet, stops)
+
+
+def _prepare_run(
+    scene: Path, output: Path | None, options: RunOptions, allow_large: bool
+) -> tuple[CompiledScene, Path]:
+    """(the compiled scene, the output path), each checked before any work; on an invalid scene, option or
+    output, the error (located where it can be) and typer.Exit."""
+    from rbcli.api import integrator_info, prepare
+    from rbcli.record.output_file import OutputError, check_output, default_output_path, expected_run_bytes
+    from rbcli.scene.spec import SceneError
+
     try:
-        compiled = prepare(
-            scene,
-            dt=dt,
-            duration=duration,
-            integrator=integrator,
-            record_every=record_every,
-            tolerance=tolerance,
-            compression=compression,
-        )
+        compiled = prepare(scene, options)
         integrator_info(compiled.settings.integrator)  # an unknown name: KeyError listing the known ones
         scene_output = compiled.spec.simulation.output
         target = output or (Path(scene_output) if scene_output else default_output_path(compiled.spec.name))
@@ -162,53 +173,48 @@ def run(
             check_output(target, expected_bytes=expected_run_bytes(compiled, target))
         except OutputError as exc:
             if not allow_large:  # too much work is the first thing to say (a too-full disk often follows from it)
-                _check_planned_work(compiled, dt=dt, duration=duration, also=str(exc))
+                _check_planned_work(compiled, options, also=str(exc))
             raise
         if not allow_large:
-            _check_planned_work(compiled, dt=dt, duration=duration)
+            _check_planned_work(compiled, options)
     except SceneError as exc:
         messages.issues(exc.issues, scene)
         raise typer.Exit(ExitCode.INVALID) from None
     except (KeyError, ValueError) as exc:
-        given = {"dt": dt, "duration": duration, "integrator": integrator, "record_every": record_every}
-        message = _name_the_option(str(exc.args[0] if exc.args else exc), {**given, "tolerance": tolerance})
-        raise messages.fail(message) from None
-
-    for warning in compiled.warnings:
-        messages.issue(warning, scene)
-    _warm_up_kernels(compiled, quiet)
-    with _stop_signals() as stops:  # the whole rest of the command: a late signal never cuts the log short
-        _run_and_report(compiled, target, quiet, stops)
+        raise messages.fail(_name_the_option(str(exc.args[0] if exc.args else exc), options.given())) from None
+    return compiled, target
 
 
 def _resume(log: Path, output: Path | None, compression: str | None, quiet: bool) -> None:
     """`run --resume LOG`: plan from the log alone, check the output, then run as `run` does."""
-    from rbcli.api import resume_to_file
+    from rbcli.api import Simulation, resume_to_file
     from rbcli.record.output_file import OutputError, check_output, expected_run_bytes
     from rbcli.runner.resume import ResumeError, plan_resume
     from rbcli.scene.spec import SceneError
 
     if compression is not None and compression not in COMPRESSIONS:
         raise messages.fail_unknown("--compression", compression, COMPRESSIONS, "compression")
-    try:
-        plan = plan_resume(log, compression=compression)
-        target = output or resumed_output_path(log)
-        if target.resolve() == log.resolve():
-            raise ValueError(f"{target}: the resumed log must go to another file than the one it resumes")
-        check_output(target, expected_bytes=expected_run_bytes(plan.compiled, target))
-    except SceneError as exc:  # the attached scene no longer loads (a mesh file it names changed or went away)
-        messages.issues(exc.issues, log)
-        raise typer.Exit(ExitCode.INVALID) from None
-    except (ResumeError, OutputError, ValueError, KeyError) as exc:
-        raise messages.fail(str(exc.args[0] if exc.args else exc)) from None
-    if not quiet:
-        t = plan.checkpoint.t
-        messages.status(f"resuming {log} ({plan.log_status}) at step {plan.checkpoint.step} (t = {t:.6g} s)")
-    _warm_up_kernels(plan.compiled, quiet)
     with _stop_signals() as stops:
+        try:
+            plan = plan_resume(log, compression=compression)
+            target = output or resumed_output_path(log)
+            if target.resolve() == log.resolve():
+                raise ValueError(f"{target}: the resumed log must go to another file than the one it resumes")
+            check_output(target, expected_bytes=expected_run_bytes(plan.compiled, target))
+        except SceneError as exc:  # the attached scene no longer loads (a mesh file it names changed or went away)
+            messages.issues(exc.issues, log)
+            raise typer.Exit(ExitCode.INVALID) from None
+        except (ResumeError, OutputError, ValueError, KeyError) as exc:
+            raise messages.fail(str(exc.args[0] if exc.args else exc)) from None
+        if not quiet:
+            t = plan.checkpoint.t
+            messages.status(f"resuming {log} ({plan.log_status}) at step {plan.checkpoint.step} (t = {t:.6g} s)")
+        _end_if_stopped(stops, "before the run started")
+        sim = Simulation(plan.compiled)  # the one that runs: resume_to_file restores the checkpoint into it
+        _load_kernels(sim, quiet, stops)
         _run_and_report(
-            plan.compiled, target, quiet, stops,
-            run=lambda path, progress: resume_to_file(plan, path, progress=progress), start=plan.checkpoint.step,
+            sim, target, quiet, stops, start=plan.checkpoint.step,
+            run=lambda path, progress: resume_to_file(plan, path, progress=progress, simulation=sim),
         )  # fmt: skip
 
 
@@ -220,14 +226,15 @@ def resumed_output_path(log: Path) -> Path:
     return log.with_name(f"{stem}.resumed{log.suffix or '.mcap'}")
 
 
-def _run_and_report(compiled, target: Path, quiet: bool, stops: _Stops, run=None, start: int = 0) -> None:  # noqa: ANN001
-    """Run to `target` (with `run(target, progress)`, default `run_to_file` of `compiled`), then say how
-    the run ended (one line for an interruption: where the log is and up to which step and time it
-    holds); raises typer.Exit with the exit status. start: the step the run starts from."""
+def _run_and_report(sim: Simulation, target: Path, quiet: bool, stops: _Stops, run=None, start: int = 0) -> None:  # noqa: ANN001
+    """Run the Simulation `sim` to `target` (with `run(target, progress)`, default `run_to_file` of `sim`),
+    then say how the run ended (one line for an interruption: where the log is and up to which step and
+    time it holds); raises typer.Exit with the exit status. start: the step the run starts from."""
     from rbcli.record.output_file import OutputError, partial_path
 
+    compiled = sim.compiled
     try:
-        summary, wall = _run_with_progress(compiled, target, quiet, stops, run, start)
+        summary, wall = _run_with_progress(sim, target, quiet, stops, run, start)
     except OutputError as exc:  # the output was taken or went away after the check
         raise messages.fail(str(exc)) from None
     except (OSError, ValueError, KeyboardInterrupt) as exc:  # the disk or a sink failed
@@ -280,15 +287,16 @@ def _name_the_option(message: str, given: dict[str, object]) -> str:
     return message
 
 
-def _check_planned_work(compiled, *, dt: float | None, duration: float | None, also: str = "") -> None:  # noqa: ANN001
+def _check_planned_work(compiled: CompiledScene, options: RunOptions, also: str = "") -> None:
     """ValueError when the run plans more than MAX_BODY_STEPS body-steps (steps x sub-steps x bodies),
     naming the options that set the step count; `also`: another refusal to add to the same line."""
     settings, bodies = compiled.settings, compiled.model.body_count
     planned = settings.steps * settings.substeps * bodies
     if planned <= MAX_BODY_STEPS:
         return
-    options = [f"--{name} {value:g}" for name, value in (("dt", dt), ("duration", duration)) if value is not None]
-    source = " and ".join(options) if options else "the scene's dt and duration"
+    steps_from = (("dt", options.dt), ("duration", options.duration))
+    named = [f"--{name} {value:g}" for name, value in steps_from if value is not None]
+    source = " and ".join(named) if named else "the scene's dt and duration"
     raise ValueError(
         f"{source}: the run plans {settings.steps:.3g} steps x {bodies:,} bod{'y' if bodies == 1 else 'ies'}"
         + (f" x {settings.substeps} sub-steps" if settings.substeps > 1 else "")
@@ -318,11 +326,17 @@ class _Stops:
 @contextlib.contextmanager
 def _stop_signals() -> Iterator[_Stops]:
     """SIGINT (Ctrl-C), SIGTERM (kill, a job scheduler's or container's stop) and SIGHUP (a closed
-    terminal) end the run at the end of a chunk, with the log up to there complete and renamed into place.
+    terminal) end the command: before the run, with nothing written; in the run, at the end of a chunk,
+    with the log up to there complete and renamed into place.
 
+    - While the scene loads and its kernels load or compile (the output not opened yet), a signal ends
+      the command with exit 128 + the signal, one line, no file: after loading (`_end_if_stopped`), or
+      at the next safe point of numba's compile (runner/compile_progress.py: a raise anywhere in a compile
+      broke numba's cache save, issue 44).
     - While the run loop runs, a signal sets its stop flag (the loop's own SIGINT handler).
-    - Before the loop (opening the output and the sinks), the stop waits for the end of the first chunk
-      (the progress callback forwards it), so a signal never lands half-way through opening a file.
+    - Between the kernels and the loop (opening the output and the sinks), the stop waits for the end of
+      the first chunk (the progress callback forwards it), so a signal never lands half-way through
+      opening a file.
     - After the loop (finalising: the last blocks, the MCAP summary and index, the rename), a further
       signal is recorded and ignored: it cannot cut the log short. Once a stop signal arrived, the stop
       signals stay ignored when the block ends, until the process exits (SIGKILL still ends it).
@@ -346,25 +360,71 @@ def _stop_signals() -> Iterator[_Stops]:
             signal.signal(number, signal.SIG_IGN if stops.received else handler)
 
 
-def _warm_up_kernels(compiled, quiet: bool) -> None:  # noqa: ANN001
-    """Compile (or load from cache) the step kernels, saying so if it takes noticeable time."""
-    from rbcli.runner.simulation import warm_up
+def _end_if_stopped(stops: _Stops, when: str) -> None:
+    """A stop signal before the run loop (`when`) ends the command here: one line, exit 128 + the signal,
+    nothing written (the output is opened by the run)."""
+    if stops.received:
+        messages.status(f"stopped by {signal.Signals(stops.received[0]).name} {when}; nothing written")
+        raise typer.Exit(stops.exit_status())
 
-    timer = threading.Timer(0.5, lambda: messages.status("compiling kernels (first run only)…") if not quiet else None)
-    timer.start()
+
+def _load_kernels(sim: Simulation, quiet: bool, stops: _Stops) -> None:
+    """Load the kernels `sim`'s run calls from numba's cache, compiling those it lacks (a scene's first run,
+    or the first after the physics sources changed); the compile is shown (_CompileStatus) and a stop
+    signal during it ends the command, nothing written."""
+    from rbcli.runner.compile_progress import CompileInterrupted, watch_compiles
+
+    shown = _CompileStatus(quiet)
     try:
-        warm_up(compiled)
-    finally:
-        timer.cancel()
+        with watch_compiles(shown.update, stop_requested=lambda: bool(stops.received)) as progress:
+            sim.load_kernels()
+    except CompileInterrupted:
+        pass
+    done = progress()
+    shown.end(done, stopped=bool(stops.received))
+    compiling = "while compiling kernels (those finished are cached for the next run)"
+    _end_if_stopped(stops, compiling if done.functions else "while loading the kernels")
 
 
-def _run_with_progress(compiled, target: Path, quiet: bool, stops: _Stops, run=None, start: int = 0):  # noqa: ANN001, ANN202
+class _CompileStatus:
+    """How `rbsim run` shows numba compiling its kernels (cache loads show nothing: they fire no compile
+    event): on a terminal one line rewritten as the compile goes, `compiling kernels: 14 functions, 23 s —
+    rbcli.physics.contact.search.find_contacts`; elsewhere (a pipe, a log) one line when compiling starts;
+    then a line with what it took; nothing with -q."""
+
+    def __init__(self, quiet: bool) -> None:
+        self.quiet = quiet
+        self.live = not quiet and messages.can_rewrite_status()
+        self.shown = False
+
+    def update(self, progress: CompileProgress) -> None:
+        if self.quiet:
+            return
+        if self.live:
+            count = f"{progress.functions} function{'s' if progress.functions != 1 else ''}"
+            now = f" — {progress.current}" if progress.current else ""
+            messages.live_status(f"compiling kernels: {count}, {progress.seconds:.0f} s{now}")
+        elif not self.shown:
+            messages.status(f"compiling kernels, from {progress.current} (once: later runs load them from the cache)…")
+        self.shown = True
+
+    def end(self, progress: CompileProgress, stopped: bool) -> None:
+        if not self.shown:
+            return
+        if self.live:
+            messages.end_live_status()
+        if not stopped:
+            messages.status(f"compiled kernels: {progress.functions} functions in {progress.seconds:.1f} s")
+
+
+def _run_with_progress(sim: Simulation, target: Path, quiet: bool, stops: _Stops, run=None, start: int = 0):  # noqa: ANN001, ANN202
     from rbcli.api import run_to_file
 
+    compiled = sim.compiled
     if run is None:
 
         def run(path: Path, progress):  # noqa: ANN001, ANN202
-            return run_to_file(compiled, path, progress=progress)
+            return run_to_file(sim, path, progress=progress)
 
     started = time.perf_counter()
     if quiet or not sys.stderr.isatty():

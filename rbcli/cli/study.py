@@ -57,38 +57,51 @@ REPORT_WIDTH = 132
 
 
 def study(
-    scene: Annotated[Path, typer.Argument(help="Scene YAML file.")],
+    scene: Annotated[Path, typer.Argument(metavar="SCENE", help="Scene YAML file")],
     integrator: Annotated[
         list[str] | None,
-        typer.Option("--integrator", "-i", help="Integrator to study (repeat for several) [default: all]."),
+        typer.Option(
+            "--integrator", "-i", metavar="NAME", help="Integrator to study (repeat for several) [default: all]"
+        ),
     ] = None,
     dt: Annotated[
         list[float] | None,
-        typer.Option("--dt", help="Step size [s] (repeat; ratios powers of 2) [default: scene dt x 2^(3..-3)]."),
+        typer.Option(
+            "--dt",
+            metavar="SECONDS",
+            help="Step size [s] (repeat; ratios powers of 2) [default: the scene's dt x 2^(3..-3)]",
+        ),
     ] = None,
     duration: Annotated[
-        float | None, typer.Option("--duration", help="Simulated time [s] [default: the scene's].")
+        float | None,
+        typer.Option("--duration", metavar="SECONDS", help="Simulated time [s] [default: the scene's]"),
     ] = None,
-    out: Annotated[Path, typer.Option("--out", help="Folder for the CSV, JSON and plots.")] = Path("outputs"),
+    out: Annotated[
+        Path,
+        typer.Option(
+            "--out", metavar="FOLDER", help="Folder for the CSV, JSON and plots [default: outputs]", show_default=False
+        ),
+    ] = Path("outputs"),
     quick: Annotated[
         bool,
-        typer.Option("--quick", help="Three steps, a short run, 0.05 s of timing per point (for CI)."),
+        typer.Option("--quick", help="Three steps, a short run, 0.05 s of timing per point (for CI)"),
     ] = False,
     min_time: Annotated[
         float | None,
         typer.Option(
             "--min-time",
             min=0.0,
-            help="Time \\[s] spent timing each (integrator, dt) point (CPU time of the run's thread, serially in "
-            "this process); the median and the spread over samples are reported \\[default: 0.2; 0.05 with --quick].",
+            metavar="SECONDS",
+            help="Time [s] spent timing each (integrator, dt) point (CPU time of the run's thread, serially in "
+            "this process); the median and the spread over samples are reported [default: 0.2; 0.05 with --quick]",
         ),
     ] = None,
     mujoco: Annotated[
         bool | None,
         typer.Option(
             "--mujoco/--no-mujoco",
-            help="Add MuJoCo's Euler and RK4 rows (free bodies under uniform gravity) \\[default: when mujoco is "
-            "installed].",
+            help="Add MuJoCo's Euler and RK4 rows (free bodies under uniform gravity) [default: when mujoco is "
+            "installed]",
             show_default=False,
         ),
     ] = None,
@@ -96,8 +109,9 @@ def study(
         Path | None,
         typer.Option(
             "--rerun",
+            metavar="FILE",
             help="Also write the study to this .rrd: the errors and costs as Rerun scalars per integrator "
-            "(timelines dt and cost) and the plot as an image.",
+            "(timelines dt and cost) and the plot as an image",
         ),
     ] = None,
 ) -> None:

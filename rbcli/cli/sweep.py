@@ -60,7 +60,7 @@ def sweep(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar"),
 ) -> None:
     """Run a sweep (a base scene over a grid, a list or random samples of its values); resumes by default."""
-    from rbcli.sweeps.dask_runner import ClusterRefused  # (it imports Dask only inside its functions)
+    from rbcli.sweeps.dask_runner import ClusterRefused, ClusterStartFailed  # (Dask only inside its functions)
     from rbcli.sweeps.load import analyse_sweep
     from rbcli.sweeps.run import SERIAL, SweepOutputError, run_sweep
 
@@ -91,7 +91,7 @@ def sweep(
                 retry_failed=retry_failed,
                 host=host,
             )
-    except (SweepOutputError, ClusterRefused) as exc:
+    except (SweepOutputError, ClusterRefused, ClusterStartFailed) as exc:
         progress.stop()
         raise messages.fail(str(exc)) from None
     except (OSError, TimeoutError) as exc:  # no scheduler at that address, or no workers joined it
@@ -107,6 +107,7 @@ def sweep(
         messages.status(f"interrupted: {done or 'before any variant ran'}; run the same command again to resume")
         raise typer.Exit(signal_exit(received[0]) if received else ExitCode.SIGINT) from None
     progress.stop()
+    progress.incidents(result.cluster)  # workers lost as they joined, after the start was reported
     from rbcli.sweeps.report import failures, status_counts
     from rbcli.sweeps.table import RESULTS_FILE
 
@@ -138,15 +139,18 @@ class _Progress:
         self.finished = 0
         self.failed = 0
         self.started = False  # the workers are ready, the variants running
+        self.told = 0  # the cluster's incidents reported so far
 
     def start(self, total: int, done: int, cluster: Any) -> None:
         self.total, self.finished, self.started = total, done, True
         if cluster is not None:
             dashboard = f"; dashboard: {cluster.dashboard}" if cluster.dashboard else ""
+            workers = f"{cluster.workers} worker{'s' * (cluster.workers != 1)}"
             messages.status(
-                f"Dask: {cluster.workers} worker{'s' * (cluster.workers != 1)} ({cluster.slots} slots) ready in "
+                f"Dask: {workers} ({cluster.slots} slot{'s' * (cluster.slots != 1)}) ready in "
                 f"{cluster.startup_s:.1f} s, kernels warm in {cluster.warmup_s:.1f} s{dashboard}"
             )
+            self.incidents(cluster)
         if done:
             messages.status(f"resuming: {done} of {total} variants already finished, {total - done} to run")
         if self.quiet or not sys.stderr.isatty():
@@ -164,6 +168,14 @@ class _Progress:
         self.bar = Progress(*columns, console=Console(stderr=True, highlight=False), transient=True)
         self.bar.start()
         self.task = self.bar.add_task("sweep", total=total, completed=done, failed=0)
+
+    def incidents(self, cluster: Any) -> None:
+        """A line for each worker the cluster lost while the sweep started or as it joined, not yet told."""
+        if cluster is None:
+            return
+        for line in cluster.incidents[self.told :]:
+            messages.status(f"Dask: {line}")
+        self.told = len(cluster.incidents)
 
     def advance(self, rows: list[dict[str, Any]]) -> None:
         self.finished += len(rows)

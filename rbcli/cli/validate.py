@@ -1,6 +1,7 @@
 """`rbsim validate`: check scene files (and sweep files, docs/sweeps.md) and print every issue on
 stderr as `file:line:col: error: message; expected ...` (cli/messages.py); the verdict per file
-("ok (...)", the mass properties with -v) goes to stdout.
+("ok (...)"; with -v each body's mass properties, the joints, what the run will cost and which kernels
+it needs) goes to stdout.
 
 Nothing is simulated or written. Exit status: 0 when every file is valid (warnings allowed), 1 when any
 file has errors or cannot be read, 2 for usage errors (cli/exit_codes.py).
@@ -8,6 +9,7 @@ file has errors or cannot be read, 2 for usage errors (cli/exit_codes.py).
 
 from __future__ import annotations
 
+from collections import Counter
 from pathlib import Path
 from typing import Annotated
 
@@ -22,7 +24,13 @@ def validate(
         list[Path], typer.Argument(metavar="FILE", help="Scene or sweep files (YAML) to check.", show_default=False)
     ],
     verbose: Annotated[
-        bool, typer.Option("-v", "--verbose", help="Also print each body's mass, centre of mass and principal inertia.")
+        bool,
+        typer.Option(
+            "-v",
+            "--verbose",
+            help="Also print each body's mass, centre of mass and principal inertia, the joints (by type, "
+            "constraint rows, loops), the run's size (steps, body-steps) and the kernel families it compiles",
+        ),
     ] = False,
 ) -> None:
     """Check scene files against the scene format and physics sanity rules; simulate nothing."""
@@ -53,6 +61,10 @@ def validate(
             substeps = spec.contact.substeps if spec.contact is not None else None
             typer.echo(f"  {contact.describe(substeps)}" + ("; sub-steps: auto" if substeps is None else ""))
         if verbose:
+            if spec.joints:
+                typer.echo(f"  {_joints_line(spec)}")
+            for line in _run_lines(spec):
+                typer.echo(f"  {line}")
             for body in spec.bodies:
                 props = mass_properties(body.particle_position, body.particle_mass, body.particle_radius)
                 typer.echo(
@@ -77,6 +89,63 @@ def _validate_sweep(file: Path) -> bool:
     axes = f"{len(sweep.axes)} ax{'is' if len(sweep.axes) == 1 else 'es'}"
     typer.echo(f"{file}: ok (sweep: {sweep.variant_count} variants of {sweep.scene_path}, {axes})")
     return True
+
+
+def _joints_line(spec) -> str:  # noqa: ANN001 - a SceneSpec with joints
+    """The joints by type, their constraint rows, and the loops they close: a joint whose two ends the
+    earlier joints already connect (through the world too) closes a loop, and the solver takes its rows as
+    auxiliary rows (docs/joint_solver.md, "Loops")."""
+    kinds = Counter(joint.kind for joint in spec.joints)
+    text = "joints: " + ", ".join(f"{count} {kind}" for kind, count in kinds.items())
+    table = spec.compiled_model.forces.joint
+    text += f"; {int(table.row_count.sum()):,} constraint rows"
+    closing = [int(j) for j in (table.graph.joint_node < 0).nonzero()[0]]  # the solver's loop joints
+    if not closing:
+        return text + "; no loop"
+    names = ", ".join(repr(spec.joints[j].name) for j in closing)
+    loops = f"{len(closing)} loop{'s' * (len(closing) != 1)}"
+    return text + f"; {loops}, closed by {names} ({table.graph.loop_joint.shape[0]:,} auxiliary rows)"
+
+
+def _run_lines(spec) -> list[str]:  # noqa: ANN001 - a SceneSpec
+    """What running the scene as it stands costs (bodies, particles, contact spheres, steps, body-steps =
+    steps x sub-steps x bodies, as `rbsim run` counts them) and the kernel families its chunk loop
+    compiles: each combination is compiled by its first run on a machine and loaded from numba's cache
+    after (docs/performance.md, "Start-up")."""
+    from rbcli.api import force_terms
+    from rbcli.scene.compile import compile_scene
+
+    try:
+        compiled = compile_scene(spec)
+    except ValueError as exc:  # settings that cannot run: say so here, the run refuses them the same way
+        return [f"cost: the run cannot be planned: {exc}"]
+    settings, bodies = compiled.settings, compiled.model.body_count
+    particles = sum(len(body.particle_mass) for body in spec.bodies)
+    kernel_tables = compiled.forces.kernel()  # None for each table the loop compiles without
+    size = [f"{bodies:,} bod{'y' if bodies == 1 else 'ies'}", f"{particles:,} particles"]
+    if kernel_tables.contact is not None:
+        size.append(f"{compiled.forces.contact.sphere_radius.shape[0]:,} contact spheres")
+    steps = f"{settings.steps:,} steps of {settings.dt:g} s"
+    if settings.substeps > 1:
+        steps += f" x {settings.substeps} sub-steps"
+    body_steps = settings.steps * settings.substeps * bodies
+    if settings.tolerance is None:
+        cost = f"{steps} ({settings.integrator}): {body_steps:,} body-steps"
+    else:  # an adaptive run lands a step on every recorded time, and takes as many more as its error needs
+        cost = (
+            f"{steps} on the output grid ({settings.integrator}, tolerance {settings.tolerance:g}): at least "
+            f"{body_steps:,} body-steps"
+        )
+    forces = [term for term in force_terms(spec) if term != "contact"]
+    families = ["free bodies"] + ([f"forces ({', '.join(forces)})"] if forces else [])
+    optional = {"contact": kernel_tables.contact, "kinematic": kernel_tables.kinematic, "joints": kernel_tables.joint}
+    families += [name for name, table in optional.items() if table is not None]
+    loop = f"{settings.integrator} {'adaptive ' if settings.tolerance is not None else ''}loop"
+    return [
+        f"cost: {', '.join(size)}, {cost}",
+        f"kernels: the {loop} for {' + '.join(families)} (compiled by the first run of this combination on a "
+        "machine, then loaded from numba's cache)",
+    ]
 
 
 def _vector(v) -> str:

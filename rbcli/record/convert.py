@@ -44,7 +44,8 @@ def header_from_mcap_metadata(
 
 def mcap_to_rrd(source: str | Path, destination: str | Path, *, block_frames: int = 256) -> int:
     """Write `destination` (.rrd) from an rbsim MCAP file, streaming blocks; returns the frame count."""
-    from rbcli.record.mcap_sink import METADATA_RUN, METADATA_SUMMARY, iter_mcap_blocks, read_mcap_contents
+    from rbcli.record.mcap_layout import METADATA_RUN, METADATA_SUMMARY
+    from rbcli.record.mcap_read import iter_mcap_blocks, read_mcap_contents
     from rbcli.record.read import check_format_version
     from rbcli.record.rerun_sink import SinkRerun
 

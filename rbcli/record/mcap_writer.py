@@ -26,7 +26,7 @@ next call.
 Durability (what a killed or crashed run leaves, docs/robustness.md "Crashes"): every file task ends by
 flushing the stream to the operating system, so a process killed (SIGKILL, a crash) loses nothing that a
 task wrote, and each chunk is self-contained, so a non-seeking reader recovers every chunk written before
-the cut (`mcap_sink.read_mcap_prefix`). With `fsync_seconds` set (SinkMcap: FSYNC_SECONDS), the file is
+the cut (`mcap_recovery.read_mcap_prefix`). With `fsync_seconds` set (SinkMcap: FSYNC_SECONDS), the file is
 also fsynced after a task when the last fsync is that old, so a power cut or kernel crash loses at most
 that much wall time of written chunks. `flush_chunk()` closes the open chunk early (SinkMcap does so at the
 end of every block of frames, so no frame waits in the open chunk for the next block).

@@ -1,11 +1,11 @@
 """Read rbsim recordings back (.mcap or .rrd) for `rbsim info`, `rbsim replay`, `rbcli.read_recording`
 and the tests.
 
-The file formats are owned by their sinks: the MCAP readers live in `record/mcap_sink.py` and the RRD
-reader in `record/rerun_sink.py` (each third-party library is imported by exactly one module). This
-module imports them lazily and turns what they find into one shape, `RecordedRun`, into the public
-`Trajectory` (`read_trajectory`, which is `rbcli.read_recording`), and into the summary `rbsim info`
-prints, `RunInfo`.
+The file formats are owned beside their sinks: the MCAP readers live in `record/mcap_read.py` (a file cut
+short: `record/mcap_recovery.py`) and the RRD reader in `record/rerun_sink.py` (each third-party library is
+imported only by its owners, docs/architecture.md). This module imports them lazily and turns what they
+find into one shape, `RecordedRun`, into the public `Trajectory` (`read_trajectory`, which is
+`rbcli.read_recording`), and into the summary `rbsim info` prints, `RunInfo`.
 """
 
 from __future__ import annotations
@@ -98,7 +98,8 @@ def refuse_newer_recording(path: str | Path) -> None:
     checks before handing the file to the viewer); a file whose parameters cannot be read passes here."""
     try:
         if recording_format(path) == "mcap":
-            from rbcli.record.mcap_sink import METADATA_RUN, read_mcap_contents
+            from rbcli.record.mcap_layout import METADATA_RUN
+            from rbcli.record.mcap_read import read_mcap_contents
 
             meta = read_mcap_contents(path).metadata.get(METADATA_RUN, {})
         else:
@@ -116,7 +117,8 @@ def _json_list(value: str | None) -> list:
 
 def read_mcap(path: str | Path) -> RecordedRun:
     """Everything an rbsim MCAP file holds, decoded with the schemas embedded in the file."""
-    from rbcli.record.mcap_sink import METADATA_RUN, METADATA_SUMMARY, iter_mcap_blocks, read_mcap_contents
+    from rbcli.record.mcap_layout import METADATA_RUN, METADATA_SUMMARY
+    from rbcli.record.mcap_read import iter_mcap_blocks, read_mcap_contents
 
     contents = read_mcap_contents(path)
     meta = contents.metadata.get(METADATA_RUN, {})
@@ -247,7 +249,7 @@ def read_trajectory(path: str | Path) -> Trajectory:
     `header.body_particle_offset`), nor, for an adaptive run, the accepted/rejected step counts. A file
     without the run's summary record reads as far as it goes, with `summary` None and `status` "unknown";
     an .mcap cut off before its summary section (a killed process) is not readable (ValueError):
-    `rbsim recover` rewrites what it holds as a complete file (`record.mcap_sink.recover_mcap`).
+    `rbsim recover` rewrites what it holds as a complete file (`record.mcap_recovery.recover_mcap`).
     Invariants appear only if the "invariants" stream was recorded.
 
     Raises FileNotFoundError for a missing file and ValueError (the file named) for another extension
@@ -407,7 +409,8 @@ def summarize(path: str | Path) -> RunInfo:
     end marker) is summarised from what it holds, with status "truncated" and how far it goes."""
     fmt = recording_format(path)
     if fmt == "mcap":
-        from rbcli.record.mcap_sink import METADATA_RUN, METADATA_SUMMARY, read_mcap_contents, read_mcap_invariants
+        from rbcli.record.mcap_layout import METADATA_RUN, METADATA_SUMMARY
+        from rbcli.record.mcap_read import read_mcap_contents, read_mcap_invariants
 
         try:
             contents = read_mcap_contents(path)
@@ -471,8 +474,9 @@ def _truncated_note(path: str | Path, frames: int, steps: int | None, t_end: flo
 
 
 def _summarize_mcap_prefix(path: str | Path, error: Exception) -> RunInfo:
-    """A .mcap without a readable summary, read front to back (record.mcap_sink.read_mcap_prefix)."""
-    from rbcli.record.mcap_sink import METADATA_RUN, METADATA_SUMMARY, read_mcap_prefix
+    """A .mcap without a readable summary, read front to back (record.mcap_recovery.read_mcap_prefix)."""
+    from rbcli.record.mcap_layout import METADATA_RUN, METADATA_SUMMARY
+    from rbcli.record.mcap_recovery import read_mcap_prefix
 
     try:
         prefix = read_mcap_prefix(path)

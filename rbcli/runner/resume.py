@@ -4,7 +4,7 @@ A run records a checkpoint (record.frame.Checkpoint: everything carried between 
 frame) with a block at most every CHECKPOINT_SECONDS of wall time and when it stops (a signal, the end).
 Resuming rebuilds the run from the log alone: the scene text attached to it and the run parameters of its
 `rbsim` metadata record (integrator, dt, duration, record_every, tolerance), restores the checkpoint into
-a fresh Simulation, and writes a new log that holds the old frames before the checkpoint, copied as
+a Simulation of it, and writes a new log that holds the old frames before the checkpoint, copied as
 recorded, then the continued run. Its states are bit for bit those of a run never stopped (tested), since
 a step depends only on what the checkpoint holds and the chunk boundaries do not matter.
 """
@@ -14,11 +14,15 @@ from __future__ import annotations
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from rbcli.record.frame import Checkpoint, FrameBlock, RunSummary, Sink
 from rbcli.scene.compile import CompiledScene, step_count
+
+if TYPE_CHECKING:
+    from rbcli.runner.simulation import Simulation
 
 
 class ResumeError(ValueError):
@@ -40,7 +44,8 @@ class ResumePlan:
 def plan_resume(log: str | Path, *, compression: str | None = None) -> ResumePlan:
     """Read `log` (an rbsim .mcap file, complete or cut short by a kill) and rebuild its run; ResumeError
     when it cannot be resumed (no checkpoint, completed or diverged, another format)."""
-    from rbcli.record.mcap_sink import METADATA_RUN, METADATA_SUMMARY, read_mcap_resume_point
+    from rbcli.record.mcap_layout import METADATA_RUN, METADATA_SUMMARY
+    from rbcli.record.mcap_recovery import read_mcap_resume_point
     from rbcli.record.read import RecordingTooNew, check_format_version, recording_format
     from rbcli.scene.compile import compile_scene
     from rbcli.scene.load import load_scene_text
@@ -93,7 +98,7 @@ def _copied_frames(plan: ResumePlan) -> Iterator[FrameBlock]:
     log does not hold in a form read back here, recomputed from each frame's state)."""
     from rbcli.physics.frames import internal_orientation
     from rbcli.physics.rotation import quat_to_matrix
-    from rbcli.record.mcap_sink import iter_mcap_frames_before
+    from rbcli.record.mcap_recovery import iter_mcap_frames_before
     from rbcli.runner.blocks import frame_contacts
 
     model = plan.compiled.model
@@ -116,12 +121,18 @@ def resume_run(
     *,
     progress=None,  # noqa: ANN001 - runner.loop.ProgressCallback
     threaded: bool = True,
+    sim: Simulation | None = None,
 ) -> RunSummary:
-    """Continue the planned run to its end, writing the old frames and then the new ones to `sinks`."""
+    """Continue the planned run to its end, writing the old frames and then the new ones to `sinks`.
+    sim: a Simulation of `plan.compiled` to continue in (one whose kernels are loaded already; default:
+    a new one); the checkpoint is restored into it."""
     from rbcli.runner.loop import run_simulation
     from rbcli.runner.simulation import Simulation
 
-    sim = Simulation(plan.compiled)
+    if sim is None:
+        sim = Simulation(plan.compiled)
+    elif sim.compiled is not plan.compiled:
+        raise ValueError("resume_run: the Simulation must be of the plan's compiled scene")
     sim.restore(plan.checkpoint)
     start = plan.checkpoint.step
     return run_simulation(

@@ -20,7 +20,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Unpack
 
 import numpy as np
 
@@ -29,7 +29,7 @@ from rbcli.physics.frames import body_angular_velocity, internal_orientation, us
 from rbcli.physics.integrators import get_integrator
 from rbcli.physics.rotation import quat_rotate, quat_rotate_inverse
 from rbcli.runner.threads import chunk_threads, contact_threads, resolve_threads
-from rbcli.scene.compile import CompiledScene
+from rbcli.scene.compile import CompiledScene, RunOptions, RunOverrides
 
 if TYPE_CHECKING:
     from rbcli.record.frame import Checkpoint, RunSummary, Sink
@@ -73,18 +73,16 @@ class Simulation:
     def __init__(
         self,
         scene: SceneSpec | CompiledScene | str | Path,
+        options: RunOptions | None = None,
         *,
-        dt: float | None = None,
-        duration: float | None = None,
-        integrator: str | None = None,
-        record_every: int | None = None,
-        tolerance: float | None = None,
-        compression: str | None = None,
         threads: int | str | None = None,
+        **overrides: Unpack[RunOverrides],
     ) -> None:
+        """scene: a path, a loaded scene or a CompiledScene; run options (RunOptions: dt, duration,
+        integrator, record_every, tolerance, compression) as one object, keywords or both (keywords win),
+        only with a scene (a CompiledScene has its settings). threads: runner/threads.py."""
         if isinstance(scene, CompiledScene):
-            given = (dt, duration, integrator, record_every, tolerance, compression)
-            if any(value is not None for value in given):
+            if (options is not None and options.given()) or any(v is not None for v in overrides.values()):
                 raise ValueError("overrides apply when compiling: pass a scene or a path, not a CompiledScene")
             compiled = scene
         else:
@@ -93,10 +91,7 @@ class Simulation:
             from rbcli.scene.spec import SceneSpec
 
             spec = scene if isinstance(scene, SceneSpec) else load_scene(scene)
-            compiled = compile_scene(
-                spec, dt=dt, duration=duration, integrator=integrator, record_every=record_every,
-                tolerance=tolerance, compression=compression,
-            )  # fmt: skip
+            compiled = compile_scene(spec, options, **overrides)
         self.compiled = compiled
         self.model = compiled.model
         self.forces = compiled.forces
@@ -205,6 +200,19 @@ class Simulation:
         if done:
             self.reactions_known = True
         return done, filled, status
+
+    def load_kernels(self) -> None:
+        """Load from numba's cache, or compile where it has none (a scene's first run), every kernel a
+        `run` calls: the chunk loop, by advancing zero steps, and the recording's (runner/blocks.py), by
+        making the block of the current state and dropping it. The state and the carried work are left
+        as they were, so a run afterwards is bit for bit a run without it; only the compile is moved
+        before the run (`rbsim run` shows it and can be stopped in it without a file opened)."""
+        from rbcli.runner.blocks import make_block
+
+        self.advance(0)
+        s = self.data.state
+        with np.errstate(all="ignore"):  # an out-of-bounds state is the run's to report, once (as diverged)
+            make_block(self.compiled, np.array([s.step]), s.x[None], s.q[None], s.P[None], s.L[None])
 
     # ---- state ------------------------------------------------------------------------------------
 
@@ -354,13 +362,9 @@ class Simulation:
 
 
 def warm_up(compiled: CompiledScene) -> None:
-    """Compile or load from cache the chunk kernel for this scene's integrator and force types."""
-    try:
-        Simulation(compiled).step(0)
-    except SimulationDiverged:
-        # step(0) checks the initial state: one out of bounds (a Simulation built in code) is the run's to
-        # report, as divergence at step 0 (exit 3); here it escaped `rbsim run` as a traceback
-        pass
+    """Load from cache, or compile, the kernels a run of this compiled scene calls (`Simulation.load_kernels`
+    in a Simulation made for it: where that Simulation is the one that runs, call its own load_kernels)."""
+    Simulation(compiled).load_kernels()
 
 
 def run(

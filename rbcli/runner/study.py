@@ -448,10 +448,10 @@ def study(
 
     version = mujoco_version() if mujoco is not False else None
     if mujoco is True and version is None:
-        raise ValueError("MuJoCo rows asked for, but mujoco is not installed (pip install 'rbcli[bench]')")
+        raise ValueError("MuJoCo rows asked for, but mujoco is not installed (pip install 'rbsim[bench]')")
     mujoco_reason = refusal(base) if version is not None else None
     if mujoco is None and version is None:
-        mujoco_reason = "mujoco is not installed (pip install 'rbcli[bench]' adds MuJoCo's Euler and RK4 rows)"
+        mujoco_reason = "mujoco is not installed (pip install 'rbsim[bench]' adds MuJoCo's Euler and RK4 rows)"
     elif mujoco is False:
         mujoco_reason = "left out (mujoco=False)"
     if mujoco_reason is not None and mujoco is not False:

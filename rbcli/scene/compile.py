@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import hashlib
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
+from typing import TypedDict, Unpack, cast
 
 import numpy as np
 
@@ -20,6 +21,47 @@ from rbcli.scene.compile_contact import ContactSummary, compile_contact, kinemat
 from rbcli.scene.compile_forces import compile_force_tables
 from rbcli.scene.contact_speed import impact_bound
 from rbcli.scene.spec import SceneError, SceneIssue, SceneSpec
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """What one run changes of its scene's `simulation:` settings; None keeps the scene's value. One object
+    from where the options are given (`rbsim run`'s --dt ... --compression, the keywords of `prepare`,
+    `simulate` and `Simulation`) to `run_settings`, the one place they meet the scene and are checked.
+
+    dt [s]: the step (with a tolerance: the spacing of the recorded times). duration [s]: simulated time.
+    integrator: a registry name (`rbsim integrators`). record_every: record every N-th grid step.
+    tolerance [dimensionless]: run adaptively with this error budget. compression: the MCAP chunk
+    compression of `run_to_file` ("zstd", "lz4" or "none").
+    """
+
+    dt: float | None = None
+    duration: float | None = None
+    integrator: str | None = None
+    record_every: int | None = None
+    tolerance: float | None = None
+    compression: str | None = None
+
+    def given(self) -> dict[str, object]:
+        """The options set (not None), by name: what a refusal names as the override that caused it."""
+        return {f.name: getattr(self, f.name) for f in fields(self) if getattr(self, f.name) is not None}
+
+    def merged(self, overrides: RunOverrides) -> RunOptions:
+        """These options with the keyword overrides of a public function (`prepare(scene, dt=1e-3)`) set;
+        a keyword given as None is not given, as everywhere else (it keeps the value here)."""
+        given = cast(RunOverrides, {key: value for key, value in overrides.items() if value is not None})
+        return replace(self, **given) if given else self
+
+
+class RunOverrides(TypedDict, total=False):
+    """RunOptions as keyword arguments (`rbcli.simulate(scene, dt=1e-3)`): the same names and types."""
+
+    dt: float | None
+    duration: float | None
+    integrator: str | None
+    record_every: int | None
+    tolerance: float | None
+    compression: str | None
 
 
 @dataclass(frozen=True)
@@ -89,22 +131,12 @@ def step_count(duration: float, dt: float) -> int:
 
 
 def compile_scene(
-    spec: SceneSpec,
-    *,
-    dt: float | None = None,
-    duration: float | None = None,
-    integrator: str | None = None,
-    record_every: int | None = None,
-    tolerance: float | None = None,
-    compression: str | None = None,
+    spec: SceneSpec, options: RunOptions | None = None, **overrides: Unpack[RunOverrides]
 ) -> CompiledScene:
     """Model, forces and initial state (compiled once per spec: reused from loading when there) with the
-    run settings; keyword arguments override the scene's settings."""
+    run settings: the scene's, changed by `options` and then by keyword overrides (RunOptions' fields)."""
     base = spec.compiled_model if isinstance(spec.compiled_model, CompiledModel) else compile_model(spec)
-    settings = run_settings(
-        spec, dt=dt, duration=duration, integrator=integrator, record_every=record_every, tolerance=tolerance,
-        compression=compression, contact=base.contact,
-    )  # fmt: skip
+    settings = run_settings(spec, (options or RunOptions()).merged(overrides), contact=base.contact)
     return CompiledScene(spec, base.model, base.forces, base.initial_state.copy(), settings, base.contact)
 
 
@@ -196,17 +228,9 @@ def _check_initial_state(spec: SceneSpec, state: State) -> None:
 
 
 def run_settings(
-    spec: SceneSpec,
-    *,
-    dt: float | None = None,
-    duration: float | None = None,
-    integrator: str | None = None,
-    record_every: int | None = None,
-    tolerance: float | None = None,
-    compression: str | None = None,
-    contact: ContactSummary | None = None,
+    spec: SceneSpec, options: RunOptions | None = None, *, contact: ContactSummary | None = None
 ) -> RunSettings:
-    """The scene's run settings with the given overrides applied: the one place overrides meet the scene.
+    """The scene's run settings with `options` applied: the one place run options meet the scene.
     contact: the compiled contacts' summary, whose stable step sets `contact.substeps: auto`.
 
     Every value, given or the scene's, passes the checks the scene loader makes (load.py `_simulation`):
@@ -216,10 +240,13 @@ def run_settings(
     its option instead; a failing scene value (a SceneSpec built in code) starts with `simulation.<key>=`.
     """
     sim = spec.simulation
+    options = options or RunOptions()
+    given = options.given()
+    dt, duration, integrator = options.dt, options.duration, options.integrator
+    record_every, tolerance, compression = options.record_every, options.tolerance, options.compression
 
     def refuse(key: str, value: object, reason: str) -> ValueError:
-        given = dict(dt=dt, duration=duration, integrator=integrator, record_every=record_every, tolerance=tolerance)
-        name = key if given.get(key) is not None else f"simulation.{key}"
+        name = key if key in given else f"simulation.{key}"
         return ValueError(f"{name}={value!r}: {reason}")
 
     def number(key: str, value: object) -> float:

@@ -22,6 +22,12 @@ Nothing is lost when workers die:
   down on each of those allowed-failures + 1 tries is a row with status "crashed" (out of memory, a crash
   in compiled code) while the others complete. A variant is tried at most 3 x (allowed-failures + 1)
   times (12 by default), the last of them alone.
+- A worker lost while the sweep starts, or as it joins, is a lost worker too, never the sweep's end: killed
+  while the local cluster starts (its nanny fails to start), the cluster is started again (up to
+  LOCAL_START_TRIES times); killed before its version check or its warm-up at the start ended (tasks
+  pinned to it, which would wait for it for good), or as it is asked its versions after joining (a broken
+  comm for an answer), it is left out. The sweep goes on with the workers that live (and those that
+  replace them: a local worker's nanny starts a new one) and notes each loss in ClusterInfo.incidents.
 Rows come back to the client, which writes each batch's part as it arrives (table.write_part): a part is
 never written by a worker.
 """
@@ -40,7 +46,8 @@ import time
 import uuid
 from collections import deque
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from concurrent.futures import CancelledError
+from dataclasses import dataclass, field
 from typing import Any, cast
 
 from rbcli.sweeps.batches import Batcher
@@ -91,8 +98,13 @@ IN_FLIGHT_PER_SLOT = 2
 # cluster can lose the same task more than once, but bounded, so a cluster that loses everything ends.
 LOST_TRIES = 5
 # How often the client asks the scheduler for its workers (those that joined resize the batches and are
-# version-checked): a round trip of a few milliseconds, small beside tasks of up to a second.
+# version-checked; a warm-up whose worker left is dropped): a round trip of a few milliseconds, small
+# beside tasks of up to a second.
 WORKERS_POLL_SECONDS = 0.5
+# Times the local cluster is started before its failure ends the sweep: a worker process killed while it
+# starts fails the whole LocalCluster ("Nanny failed to start"), and a second start rarely meets a second
+# kill; a cluster that cannot start (a host it cannot bind) fails every time, so the count stays small.
+LOCAL_START_TRIES = 3
 Rows = list[dict[str, Any]]
 
 
@@ -100,12 +112,17 @@ class ClusterRefused(RuntimeError):
     """A worker that cannot give this process's rows (another rbsim or numba, or no rbcli at all)."""
 
 
+class ClusterStartFailed(RuntimeError):
+    """The local cluster failed to start LOCAL_START_TRIES times."""
+
+
 @dataclass
 class ClusterInfo:
     """What the sweep ran on: workers (processes), slots (threads in all), the dashboard (None without
     bokeh), the seconds to start or reach the cluster, to warm every worker's kernels and to close the
     client and cluster at the end, the largest task's variants, the number of tasks, how many were
-    submitted again after the cluster lost them, and the workers that joined after the start."""
+    submitted again after the cluster lost them, the workers that joined after the start, and a line for
+    each worker lost while the sweep started or as it joined (`incidents`: the sweep went on without it)."""
 
     workers: int
     slots: int
@@ -117,6 +134,7 @@ class ClusterInfo:
     shutdown_s: float = 0.0
     resubmitted: int = 0
     joined: int = 0
+    incidents: list[str] = field(default_factory=list)
 
 
 def default_workers() -> int:
@@ -143,8 +161,38 @@ def run_on_dask(
     127.0.0.1), an address, or a distributed.Client. Raises ClusterRefused for a mismatched worker.
     A stop signal (Ctrl-C, SIGTERM, SIGHUP) raises in the caller's thread as its handler says, and is
     never lost (_StopSignals)."""
-    with _StopSignals() as stops:
+    from distributed import Client
+
+    quiet = contextlib.nullcontext() if isinstance(scheduler, Client) else _dask_logs_quiet()  # a Client: theirs
+    with _StopSignals() as stops, quiet:
         return _run(job, pending, on_rows, stops, scheduler, workers, batch, on_ready, host)
+
+
+# The loggers through which Dask prints in this process: those with handlers of their own (distributed's
+# configuration gives distributed.client and tornado.application theirs), and asyncio's, which reaches
+# stderr through logging's last resort.
+DASK_LOGGERS = ("distributed", "distributed.client", "tornado", "tornado.application", "bokeh", "asyncio")
+
+
+@contextlib.contextmanager
+def _dask_logs_quiet() -> Iterator[None]:
+    """Hold back Dask's log lines in this process (all but CRITICAL) while the sweep runs and closes its
+    cluster or client, and put the levels back after.
+
+    Every failure they tell of (a worker lost, a task's data gone with it) the sweep handles and tells in
+    a line of its own. LocalCluster's `silence_logs` only sets its handlers' levels, and puts them back
+    inside its close, while coroutines still end on its loop: SIGTERM mid-sweep (to the sweep's process
+    group) then printed an INFO line with the traceback of a closed comm, or an ERROR line, beside the
+    clean exit 143 in 3 of 25 runs here. A logger's own level holds until the close has returned."""
+    loggers = [logging.getLogger(name) for name in DASK_LOGGERS]
+    levels = [logger.level for logger in loggers]
+    for logger in loggers:
+        logger.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        for logger, level in zip(loggers, levels, strict=True):
+            logger.setLevel(level)
 
 
 def _run(
@@ -167,6 +215,7 @@ def _run(
     futures: list[Any] = []
     info: ClusterInfo | None = None
     interrupts = contextlib.ExitStack()
+    incidents: list[str] = []
     try:
         if not own_client:
             client = scheduler
@@ -174,24 +223,30 @@ def _run(
             client = Client(scheduler, timeout="30s")
         else:
             interrupts.enter_context(_workers_ignore_interrupts())  # until the cluster is closed
-            cluster, client = _start_local_cluster(workers or default_workers(), host or LOCAL_HOST)
+            cluster, client = _start_local_cluster(workers or default_workers(), host or LOCAL_HOST, incidents)
         stops.check()
         if cluster is None:
             client.wait_for_workers(1, timeout=60)
         slots_by_worker = client.nthreads()
-        _check_versions(client, list(slots_by_worker))
+        for address in _check_versions(client, list(slots_by_worker)):  # workers that left as they were asked
+            incidents.append(f"worker {address} was lost as its versions were checked; the sweep goes on without it")
+            del slots_by_worker[address]
         info = ClusterInfo(
             workers=len(slots_by_worker),
             slots=sum(slots_by_worker.values()),
             dashboard=_dashboard(client),
             startup_s=time.perf_counter() - started,
             warmup_s=0.0,
+            incidents=incidents,
         )
         shared = None
         if pending:
             warming = time.perf_counter()
             shared = _ClusterJob(client, job)
-            _warm_workers(client, shared.future, pending[0][1], list(slots_by_worker))
+            for address in _warm_workers(client, shared.future, pending[0][1], list(slots_by_worker)):
+                incidents.append(f"worker {address} was lost while its kernels warmed up; the sweep goes on without it")
+                del slots_by_worker[address]
+            info.workers, info.slots = len(slots_by_worker), sum(slots_by_worker.values())
             info.warmup_s = time.perf_counter() - warming
         stops.check()
         if on_ready is not None:
@@ -215,23 +270,40 @@ def _run(
             info.shutdown_s = time.perf_counter() - closing
 
 
-def _start_local_cluster(workers: int, host: str) -> tuple[Any, Any]:
+def _start_local_cluster(workers: int, host: str, incidents: list[str]) -> tuple[Any, Any]:
     """A LocalCluster and its client. A stop signal that arrives while it starts is held until both
     exist and then raised (KeyboardInterrupt), so the caller always has a cluster to close: a signal
-    landing inside Dask's start-up would leave its processes and coroutines to die with tracebacks."""
+    landing inside Dask's start-up would leave its processes and coroutines to die with tracebacks.
+    A start that fails (a worker process killed before it joined fails the whole LocalCluster, which
+    closes itself) is tried again, up to LOCAL_START_TRIES times, each failure a line in `incidents`."""
     import dask
     from distributed import Client, LocalCluster
 
     with _signals_deferred(), dask.config.set(LOCAL_CLUSTER_CONFIG):  # the nannies hand it on to the workers
-        cluster = LocalCluster(
-            n_workers=workers,
-            threads_per_worker=1,
-            processes=True,
-            env=_worker_env(),  # one kernel thread per worker: a worker per core already fills the cores
-            host=host,
-            dashboard_address=f"{host}:0",  # any free port: 8787 may be another cluster's (the dashboard needs bokeh)
-            silence_logs=logging.ERROR,
-        )
+        for attempt in range(1, LOCAL_START_TRIES + 1):
+            try:
+                cluster = LocalCluster(
+                    n_workers=workers,
+                    threads_per_worker=1,
+                    processes=True,
+                    env=_worker_env(),  # one kernel thread per worker: a worker per core already fills the cores
+                    host=host,
+                    dashboard_address=f"{host}:0",  # any free port: 8787 may be another cluster's (needs bokeh)
+                    # the sweep tells each failure Dask meets in its own line (a lost worker is run around);
+                    # Dask's ERROR lines (a worker's broken comm, with its traceback) would come beside it
+                    silence_logs=logging.CRITICAL,
+                )
+                break
+            except Exception as exc:  # noqa: BLE001 - tried again, then told as the failure it is
+                failure = f"{type(exc).__name__}: {exc}"
+                if attempt == LOCAL_START_TRIES:
+                    raise ClusterStartFailed(
+                        f"the local Dask cluster failed to start {attempt} times; the last time: {failure}"
+                    ) from None
+                incidents.append(
+                    f"the local cluster failed to start ({failure}: a worker lost as it started); "
+                    f"starting it again (try {attempt + 1} of {LOCAL_START_TRIES})"
+                )
         try:
             client = Client(cluster)
         except BaseException:
@@ -417,17 +489,42 @@ def _workers_ignore_interrupts() -> Iterator[None]:
         shutil.rmtree(folder, ignore_errors=True)
 
 
-def _check_versions(client: Any, addresses: list[str]) -> None:
-    """Refuse workers whose rbsim or numba differ from this process's (one line naming both)."""
+def _check_versions(client: Any, addresses: list[str]) -> list[str]:
+    """Refuse workers at the start whose rbsim or numba differ from this process's (one line naming both);
+    return those lost before they answered, which the sweep goes on without. Asked with a task pinned to
+    each (_run_on_each): nothing runs on them yet, and a task asks nothing of a worker that died."""
     if not addresses:
-        return
-    mine = runtime_versions()
+        return []
+    answers, lost = _run_on_each(client, addresses, runtime_versions)
+    _refuse_mismatched({a: f.exception() if f.status == "error" else f.result() for a, f in answers.items()})
+    return lost
+
+
+def _check_joined_versions(client: Any, addresses: list[str]) -> list[str]:
+    """Refuse workers that joined while the sweep runs whose rbsim or numba differ from this process's;
+    return those lost as they were asked. Asked with client.run, which runs in each worker's event loop at
+    once, beside the batch the scheduler may already have given it (a task would wait for that batch,
+    and the client's loop with it). An answer that is a comm error (CommClosedError, a connection timeout:
+    OSErrors) is not the worker's answer but the worker lost; before, it was refused as one that "cannot
+    run rbsim". (A worker that died before the scheduler's connection reached it costs that connection's
+    retries, distributed.comm.timeouts.connect, 30 s by default.)"""
+    if not addresses:
+        return []
     try:
         theirs = client.run(runtime_versions, workers=addresses, on_error="return")
     except Exception as exc:  # noqa: BLE001 - told as the refusal it is
         raise ClusterRefused(f"cannot ask the workers for their versions: {type(exc).__name__}: {exc}") from None
-    for address in sorted(theirs):
-        got = theirs[address]
+    lost = [address for address in addresses if isinstance(theirs.get(address), OSError)]
+    _refuse_mismatched({address: got for address, got in theirs.items() if address not in lost})
+    return lost
+
+
+def _refuse_mismatched(answers: dict[str, Any]) -> None:
+    """Raise ClusterRefused (one line naming both versions) for the first worker, by address, whose answer
+    to runtime_versions is an exception (no rbcli there, say) or versions other than this process's."""
+    mine = runtime_versions()
+    for address in sorted(answers):
+        got = answers[address]
         if isinstance(got, BaseException):
             raise ClusterRefused(f"worker {address} cannot run rbsim {mine[0]}'s variants: {type(got).__name__}: {got}")
         if tuple(got) != mine:
@@ -435,6 +532,36 @@ def _check_versions(client: Any, addresses: list[str]) -> None:
                 f"worker {address} runs rbsim {got[0]} with numba {got[1]}, this rbsim is {mine[0]} with numba "
                 f"{mine[1]}: install the same versions on every worker"
             )
+
+
+def _run_on_each(client: Any, addresses: list[str], function: Callable, *args: Any) -> tuple[dict[str, Any], list[str]]:
+    """Run function(*args) once on each worker, as a task pinned to it and ahead of the batches queued there;
+    returns (address -> its finished future, the workers lost before theirs ended).
+
+    A task pinned to a worker that died waits for that address for good (a replacement has another: the
+    warm-up hung so), so every WORKERS_POLL_SECONDS the tasks of workers the scheduler no longer has are
+    cancelled. Not client.run: the scheduler it asks through retries connecting to a worker that died as
+    it was asked for distributed.comm.timeouts.connect (30 s), and a task asks nothing of a dead worker."""
+    from distributed import wait
+
+    running = {
+        client.submit(function, *args, workers=[address], allow_other_workers=False, pure=False, priority=1): address
+        for address in addresses
+    }
+    answers: dict[str, Any] = {}
+    lost: list[str] = []
+    while running:
+        # a timeout, or a task cancelled meanwhile (the scheduler's doing): the statuses below tell which
+        with contextlib.suppress(TimeoutError, CancelledError):
+            wait(list(running), timeout=WORKERS_POLL_SECONDS, return_when="FIRST_COMPLETED")
+        present = client.nthreads()
+        for future, address in list(running.items()):
+            if future.status in ("finished", "error"):
+                answers[running.pop(future)] = future
+            elif future.status == "cancelled" or address not in present:
+                future.cancel()
+                lost.append(running.pop(future))
+    return answers, lost
 
 
 def _dashboard(client: Any) -> str | None:
@@ -470,14 +597,11 @@ class _ClusterJob:
         return self.future
 
 
-def _warm_workers(client: Any, shared: Any, values: tuple[Any, ...], addresses: list[str]) -> None:
+def _warm_workers(client: Any, shared: Any, values: tuple[Any, ...], addresses: list[str]) -> list[str]:
     """Load the first variant's kernels on every worker (in parallel), so no timed batch pays for it; the
-    job is fetched and unpickled there on the way, once per worker."""
-    warm = [
-        client.submit(warm_up, shared, values, workers=[address], allow_other_workers=False, pure=False)
-        for address in addresses
-    ]
-    client.gather(warm, errors="skip")
+    job is fetched and unpickled there on the way, once per worker. Returns the workers lost before their
+    warm-up ended. A warm-up that failed is no loss: that worker's first batch compiles the kernels."""
+    return _run_on_each(client, addresses, warm_up, shared, values)[1]
 
 
 @dataclass
@@ -584,7 +708,10 @@ class _Batches:
         self.polled = now
         slots_by_worker = self.client.nthreads()
         joined = [address for address in slots_by_worker if address not in self.known]
-        _check_versions(self.client, joined)
+        for address in _check_joined_versions(self.client, joined):  # lost as it was asked: gone from the cluster
+            self.info.incidents.append(f"worker {address} was lost as it joined; the sweep goes on without it")
+            del slots_by_worker[address]
+            joined.remove(address)
         self.info.joined += len(joined)
         self.known = set(slots_by_worker)
         self.info.slots = max(1, sum(slots_by_worker.values()))

@@ -20,7 +20,7 @@ from typer.testing import CliRunner
 
 import rbcli
 from rbcli.cli.app import app
-from rbcli.record.mcap_sink import TOPIC_STATE
+from rbcli.record.mcap_layout import TOPIC_STATE
 from rbcli.record.output_file import partial_path
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -13,7 +13,9 @@ from record_synthetic import make_blocks, make_header, write_run
 import rbcli
 from rbcli.record import frame
 from rbcli.record.convert import mcap_to_rrd
-from rbcli.record.mcap_sink import METADATA_RUN, SinkMcap, read_mcap_contents
+from rbcli.record.mcap_layout import METADATA_RUN
+from rbcli.record.mcap_read import read_mcap_contents
+from rbcli.record.mcap_sink import SinkMcap
 from rbcli.record.read import RecordingTooNew, read_rrd, refuse_newer_recording, summarize
 from rbcli.record.rerun_sink import SinkRerun
 

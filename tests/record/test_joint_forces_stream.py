@@ -19,7 +19,8 @@ import pytest
 
 import rbcli
 import rbcli.runner.loop as loop
-from rbcli.record.mcap_sink import TOPIC_JOINT_FORCES, SinkMcap
+from rbcli.record.mcap_layout import TOPIC_JOINT_FORCES
+from rbcli.record.mcap_sink import SinkMcap
 from rbcli.record.read import read_mcap, read_trajectory
 from rbcli.runner.resume import plan_resume, resume_run
 from rbcli.runner.simulation import Simulation
@@ -135,12 +136,12 @@ def test_a_stream_without_its_section_warns(tmp_path):
 
 
 def test_joint_forces_proto_text_matches_the_runtime_descriptor():
-    from rbcli.record import mcap_sink
+    from rbcli.record import mcap_messages
 
     text = (SCHEMAS / "rbsim_joint_forces.proto").read_text()
     assert "package rbsim;" in text and 'syntax = "proto3";' in text
     assert "repeated double reaction = 3;" in text and "uint64 step = 1;" in text and "double time = 2;" in text
-    fields = [(f.name, f.number, f.label == 3) for f in mcap_sink.joint_forces_file_proto().message_type[0].field]
+    fields = [(f.name, f.number, f.label == 3) for f in mcap_messages.joint_forces_file_proto().message_type[0].field]
     assert fields == [("step", 1, False), ("time", 2, False), ("reaction", 3, True)]
 
 

@@ -20,13 +20,13 @@ from conftest import make_body, make_scene
 from mcap.reader import make_reader
 
 from rbcli.record.frame import Checkpoint, FrameBlock, RunHeader, RunSummary
-from rbcli.record.mcap_sink import (
+from rbcli.record.mcap_layout import (
     BODY_CHANNELS_MAX,
     TOPIC_BODY_PARTICLES,
-    SinkMcap,
     particle_channels_shared,
     particle_topic,
 )
+from rbcli.record.mcap_sink import SinkMcap
 from rbcli.record.mcap_writer import MAX_ID, McapChunkWriter
 from rbcli.record.read import read_mcap, read_rrd
 from rbcli.record.rerun_sink import BODY_ENTITIES_MAX, SinkRerun, bodies_in_one_entity, body_entity, read_rrd_file

@@ -23,7 +23,7 @@ from record_synthetic import (  # noqa: F401 - pytest fixtures
     write_run,
 )
 
-from rbcli.record import mcap_sink
+from rbcli.record import mcap_encoders, mcap_layout, mcap_messages
 from rbcli.record.frame import FrameBlock
 from rbcli.record.mcap_sink import SinkMcap
 from rbcli.record.read import read_mcap
@@ -104,10 +104,10 @@ def test_identical_runs_give_identical_bytes(tmp_path, synthetic):
 def test_state_encoder_matches_the_protobuf_serializer(synthetic):
     """The numpy wire encoder gives exactly SerializeToString of the runtime class (canonical form)."""
     _, blocks = synthetic
-    state_class = mcap_sink.message_class(mcap_sink.state_file_proto())
-    encoded = mcap_sink.StateEncoder(len(BODY_NAMES)).encode(blocks[0])
+    state_class = mcap_messages.message_class(mcap_messages.state_file_proto())
+    encoded = mcap_encoders.StateEncoder(len(BODY_NAMES)).encode(blocks[0])
     for k, data in enumerate(encoded):
-        arrays = {name: getattr(blocks[0], attr)[k].ravel() for attr, name, _, _ in mcap_sink.STATE_FIELDS}
+        arrays = {name: getattr(blocks[0], attr)[k].ravel() for attr, name, _, _ in mcap_layout.STATE_FIELDS}
         msg = state_class(step=int(blocks[0].step[k]), time=float(blocks[0].t[k]), **arrays)
         assert data == msg.SerializeToString(), k
 
@@ -176,29 +176,29 @@ def _descriptor_fields(fdp) -> list[tuple[str, str, int, bool]]:
 def test_state_proto_text_matches_the_runtime_descriptor():
     text = (SCHEMAS / "rbsim_state.proto").read_text()
     assert "package rbsim;" in text and 'syntax = "proto3";' in text
-    assert _proto_fields(text) == {"State": _descriptor_fields(mcap_sink.state_file_proto())}
+    assert _proto_fields(text) == {"State": _descriptor_fields(mcap_messages.state_file_proto())}
 
 
 def test_checkpoint_proto_text_matches_the_runtime_descriptor():
     text = (SCHEMAS / "rbsim_checkpoint.proto").read_text()
-    assert _proto_fields(text) == {"Checkpoint": _descriptor_fields(mcap_sink.checkpoint_file_proto())}
+    assert _proto_fields(text) == {"Checkpoint": _descriptor_fields(mcap_messages.checkpoint_file_proto())}
 
 
 def test_invariants_proto_text_matches_the_runtime_descriptor():
     """Fields 1-2 as in the text; then one double per invariant, numbered from 3 in header order."""
     text = (SCHEMAS / "rbsim_invariants.proto").read_text()
     fixed = _proto_fields(text)["Invariants"]
-    generated = _descriptor_fields(mcap_sink.invariants_file_proto(INVARIANT_NAMES))
+    generated = _descriptor_fields(mcap_messages.invariants_file_proto(INVARIANT_NAMES))
     assert generated[:2] == fixed
     assert generated[2:] == [("double", n, 3 + i, False) for i, n in enumerate(INVARIANT_NAMES)]
 
 
 def test_invariant_field_names_are_valid_and_distinct():
-    assert mcap_sink.invariant_field_names(["|L|", "2nd", "energy"]) == ("_L_", "f_2nd", "energy")
+    assert mcap_messages.invariant_field_names(["|L|", "2nd", "energy"]) == ("_L_", "f_2nd", "energy")
     with pytest.raises(ValueError, match="twice"):
-        mcap_sink.invariant_field_names(["a-b", "a_b"])
+        mcap_messages.invariant_field_names(["a-b", "a_b"])
     with pytest.raises(ValueError):
-        mcap_sink.invariant_field_names(["time"])
+        mcap_messages.invariant_field_names(["time"])
 
 
 def test_interrupted_before_any_frame_still_gives_a_readable_file(tmp_path):
@@ -241,7 +241,7 @@ def test_particles_stream_is_a_world_point_cloud_per_frame(tmp_path):
     write_run(SinkMcap(path), header, blocks, status="completed")
     clouds = [PointCloud.FromString(m.data) for topic, m in _raw_messages(path) if topic == "/particles"]
     assert len(clouds) == 5 and {c.frame_id for c in clouds} == {"world"}
-    got = np.stack([mcap_sink._cloud_points(c) for c in clouds])
+    got = np.stack([mcap_messages.cloud_points(c) for c in clouds])
     np.testing.assert_array_equal(got, concat(blocks, "particle_position"))
 
 
@@ -251,24 +251,24 @@ EDGE_TIMES = [0.0, -0.0, 5e-324, 1e-9, 0.3, 2.5, -7.0, 1e300, math.inf, math.nan
 
 
 def test_vectorised_varints_equal_the_scalar_encoder():
-    digits, lengths = mcap_sink._varints(np.array(EDGE_STEPS, dtype=np.uint64))
+    digits, lengths = mcap_encoders._varints(np.array(EDGE_STEPS, dtype=np.uint64))
     for value, row, length in zip(EDGE_STEPS, digits, lengths, strict=True):
-        assert row[:length].tobytes() == mcap_sink._varint(value), value
+        assert row[:length].tobytes() == mcap_encoders._varint(value), value
 
 
 def test_invariants_encoder_decodes_to_the_values_including_zeros_and_non_finite():
     names = ("energy_total", "momentum_x", "quaternion_norm_defect")
-    cls = mcap_sink.message_class(mcap_sink.invariants_file_proto(names))
+    cls = mcap_messages.message_class(mcap_messages.invariants_file_proto(names))
     k = len(EDGE_TIMES)
     steps = np.array(EDGE_STEPS[:k], dtype=np.int64)
     values = {n: np.roll(np.array(EDGE_TIMES), i) for i, n in enumerate(names)}
     block = FrameBlock(step=steps, t=np.array(EDGE_TIMES), x=np.zeros((k, 0, 3)), q=np.zeros((k, 0, 4)),
                        v=np.zeros((k, 0, 3)), omega=np.zeros((k, 0, 3)), P=np.zeros((k, 0, 3)),
                        L=np.zeros((k, 0, 3)), invariants=values)  # fmt: skip
-    for i, data in enumerate(mcap_sink.InvariantsEncoder(names).encode(block)):
+    for i, data in enumerate(mcap_encoders.InvariantsEncoder(names).encode(block)):
         msg = cls.FromString(data)
         assert msg.step == steps[i]
-        got = [msg.time] + [getattr(msg, f) for f in mcap_sink.invariant_field_names(names)]
+        got = [msg.time] + [getattr(msg, f) for f in mcap_messages.invariant_field_names(names)]
         want = [EDGE_TIMES[i]] + [values[n][i] for n in names]
         assert np.array_equal(np.array(got), np.array(want), equal_nan=True), i
         assert [math.copysign(1, g) for g in got] == [math.copysign(1, w) for w in want], i  # -0.0 kept
@@ -281,7 +281,7 @@ def test_timestamp_payloads_equal_protobuf_timestamps():
     from google.protobuf.timestamp_pb2 import Timestamp
 
     ns = np.array([0, 1, 999_999_999, 1_000_000_000, 1_000_000_001, 59 * 10**9 + 7, 2**40, 10**18 + 3])
-    for value, data in zip(ns.tolist(), mcap_sink._timestamp_payloads(ns), strict=True):
+    for value, data in zip(ns.tolist(), mcap_encoders._timestamp_payloads(ns), strict=True):
         seconds, nanos = divmod(value, 10**9)
         assert data == Timestamp(seconds=seconds, nanos=nanos).SerializeToString(), value
 

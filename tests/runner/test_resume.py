@@ -20,7 +20,8 @@ import numpy as np
 import pytest
 
 import rbcli.runner.loop as loop
-from rbcli.record.mcap_sink import SinkMcap, read_mcap_resume_point
+from rbcli.record.mcap_recovery import read_mcap_resume_point
+from rbcli.record.mcap_sink import SinkMcap
 from rbcli.record.output_file import partial_path
 from rbcli.record.read import read_mcap, read_trajectory
 from rbcli.runner.resume import ResumeError, plan_resume, resume_run

@@ -5,9 +5,12 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from collections import Counter
 from pathlib import Path
 
+import pytest
 import typer
+import yaml
 from typer.testing import CliRunner
 
 from rbcli.cli.schema import schema
@@ -100,15 +103,95 @@ def test_schema_command_prints_the_schema():
     assert json.loads(result.output)["title"] == "rbsim scene"
 
 
-def test_validate_imports_no_heavy_libraries(tmp_path):
-    path = write(tmp_path, "good.yaml", GOOD)
+@pytest.mark.parametrize("verbose", [[], ["-v"]], ids=["plain", "verbose"])
+def test_validate_imports_no_heavy_libraries(tmp_path, verbose):
+    """-v plans the run (steps, kernel families) from the compiled tables without numba: on a free body and
+    on a scene with joints and contact."""
+    paths = [str(write(tmp_path, "good.yaml", GOOD)), str(REPO / "scenes" / "joints" / "door.yaml")]
     code = (
         "import sys, typer\n"
         "from rbcli.cli.validate import validate\n"
         "app = typer.Typer(); app.command()(validate); app.command('x')(lambda: None)\n"
-        f"sys.argv = ['v', 'validate', {str(path)!r}]\n"
+        f"sys.argv = ['v', 'validate', *{verbose!r}, *{paths!r}]\n"
         "try:\n    app()\nexcept SystemExit:\n    pass\n"
         "print(sorted(m for m in ('numba', 'rerun', 'mcap', 'trimesh', 'scipy') if m in sys.modules))\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, check=True)
     assert out.stdout.strip().splitlines()[-1] == "[]"
+    assert (out.stdout.count("  cost: ") == 2 and "  joints: " in out.stdout) == bool(verbose), out.stdout
+
+
+# rows per joint type (docs/joints.md, "Rows")
+JOINT_ROWS = {"ball": 3, "hinge": 5, "fixed": 6, "slider": 5, "distance": 1}
+
+
+def verbose_lines(path: Path) -> list[str]:
+    result = runner.invoke(app, ["validate", "-v", str(path)])
+    assert result.exit_code == 0, result.output
+    return result.output.splitlines()
+
+
+def test_verbose_tells_the_joints_rows_loops_and_cost_of_the_four_bar():
+    """Every number against the scene file itself: joints by type and their rows, and the loop. The joints
+    and bodies form one connected graph with the world as a vertex, so it has joints - (bodies + 1) + 1
+    independent cycles; the solver closes each with the first joint (in file order) whose ends the earlier
+    joints already connect: here the last joint, whose rows become the auxiliary rows."""
+    path = REPO / "scenes" / "joints" / "four_bar.yaml"
+    scene = yaml.safe_load(path.read_text())
+    joints, bodies = scene["joints"], scene["bodies"]
+    kinds = Counter(joint["type"] for joint in joints)
+    rows = sum(JOINT_ROWS[joint["type"]] for joint in joints)
+    loops = len(joints) - len(bodies)
+    assert loops == 1  # the file's own claim: a four-bar is one loop
+    last = joints[-1]
+    expected = (
+        "  joints: " + ", ".join(f"{n} {kind}" for kind, n in kinds.items()) + f"; {rows} constraint rows; "
+        f"1 loop, closed by {last['name']!r} ({JOINT_ROWS[last['type']]} auxiliary rows)"
+    )
+    lines = verbose_lines(path)
+    assert expected in lines, lines
+    sim = scene["simulation"]
+    steps = round(sim["duration"] / sim["dt"])
+    particles = sum(len(body["particles"]["positions"]) for body in bodies)
+    assert (
+        f"  cost: {len(bodies)} bodies, {particles} particles, {steps:,} steps of {sim['dt']:g} s "
+        f"({sim['integrator']}): {steps * len(bodies):,} body-steps"
+    ) in lines, lines
+    (kernels,) = [line for line in lines if line.startswith("  kernels: ")]
+    assert f"the {sim['integrator']} loop for free bodies + forces (gravity) + joints (" in kernels
+
+
+def test_verbose_tells_the_cost_of_a_free_body_scene_and_no_joints():
+    path = REPO / "scenes" / "tutorial.yaml"
+    scene = yaml.safe_load(path.read_text())
+    (body,) = scene["bodies"]
+    sim = scene["simulation"]
+    steps = round(sim["duration"] / sim["dt"])
+    lines = verbose_lines(path)
+    assert not any(line.startswith("  joints:") for line in lines), lines
+    particles = len(body["particles"]["positions"])
+    assert (
+        f"  cost: 1 body, {particles} particles, {steps:,} steps of {sim['dt']:g} s ({sim['integrator']}): "
+        f"{steps:,} body-steps"
+    ) in lines, lines
+    (kernels,) = [line for line in lines if line.startswith("  kernels: ")]
+    assert f"the {sim['integrator']} loop for free bodies + forces (gravity) (" in kernels
+
+
+def test_verbose_counts_contact_spheres_and_sub_steps_in_the_cost(tmp_path):
+    """box_drop with 4 sub-steps: body-steps = steps x sub-steps x bodies, as `rbsim run` counts them."""
+    text = (REPO / "scenes" / "contact" / "box_drop.yaml").read_text()
+    text = text.replace("\ncontact:\n", "\ncontact:\n  substeps: 4\n")
+    assert "substeps: 4" in text
+    sim = yaml.safe_load(text)["simulation"]
+    assert "integrator" not in sim  # split2, the default with contact
+    steps = round(sim["duration"] / sim["dt"])
+    lines = verbose_lines(write(tmp_path, "box.yaml", text))
+    (contact,) = [line for line in lines if line.startswith("  contact: ")]
+    spheres = contact.split()[1]  # the contact line's own count: the compiled contact spheres
+    assert (
+        f"{spheres} contact spheres, {steps:,} steps of {sim['dt']:g} s x 4 sub-steps (split2): "
+        f"{steps * 4:,} body-steps"
+    ) in "\n".join(lines)
+    (kernels,) = [line for line in lines if line.startswith("  kernels: ")]
+    assert "+ contact (" in kernels and "joints" not in kernels
