@@ -97,7 +97,7 @@ def _joints_line(spec) -> str:  # noqa: ANN001 - a SceneSpec with joints
     auxiliary rows (docs/joint_solver.md, "Loops")."""
     kinds = Counter(joint.kind for joint in spec.joints)
     text = "joints: " + ", ".join(f"{count} {kind}" for kind, count in kinds.items())
-    table = spec.compiled_model.forces.joint
+    table = spec.compiled_model.model.joint
     text += f"; {int(table.row_count.sum()):,} constraint rows"
     closing = [int(j) for j in (table.graph.joint_node < 0).nonzero()[0]]  # the solver's loop joints
     if not closing:
@@ -121,10 +121,10 @@ def _run_lines(spec) -> list[str]:  # noqa: ANN001 - a SceneSpec
         return [f"cost: the run cannot be planned: {exc}"]
     settings, bodies = compiled.settings, compiled.model.body_count
     particles = sum(len(body.particle_mass) for body in spec.bodies)
-    kernel_tables = compiled.forces.kernel()  # None for each table the loop compiles without
+    kernel_tables = compiled.model.kernel()  # None for each table the loop compiles without
     size = [f"{bodies:,} bod{'y' if bodies == 1 else 'ies'}", f"{particles:,} particles"]
     if kernel_tables.contact is not None:
-        size.append(f"{compiled.forces.contact.sphere_radius.shape[0]:,} contact spheres")
+        size.append(f"{compiled.model.contact.sphere_radius.shape[0]:,} contact spheres")
     steps = f"{settings.steps:,} steps of {settings.dt:g} s"
     if settings.substeps > 1:
         steps += f" x {settings.substeps} sub-steps"
