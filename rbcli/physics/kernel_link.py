@@ -129,8 +129,15 @@ def install() -> None:
         return
 
     def add_overload_tagged(self: Any, cres: Any) -> Any:  # noqa: ANN401
-        """Tag a separate kernel's library (compiled or loaded from the cache) with what loads it."""
+        """Tag a separate kernel's library (compiled or loaded from the cache) with what loads it, and give
+        a library loaded from the cache back its loaders (see restore below)."""
         library = getattr(cres, "library", None)
+        if library is not None and getattr(cres, "reload_init", None):
+            # numba runs a cached function's reload_init when loading it but does not keep it on the
+            # library; a caller compiled later links this library and inherits the library's set
+            # (`finalize`), so without this its cache entry would lack the loaders of the separate kernels
+            # this code calls, and a new process loading that caller alone would call unresolved symbols
+            library._reload_init.update(cres.reload_init)
         if library is not None and is_separate_kernel(self) and not _prunes_to_nothing(cres.signature.args):
             function = self.py_func
             library._rbcli_loader = KernelLoader(function.__module__, function.__qualname__,

@@ -147,3 +147,72 @@ def test_stage_kernels_are_called_by_symbol_and_small_kernels_stay_linked():
     inlined = [kernel for kernel in vars(solver).values()
                if getattr(kernel, "targetoptions", {}).get("inline") == "always"]  # fmt: skip
     assert inlined and not any(kernel_link.is_separate_kernel(kernel) for kernel in inlined)
+
+
+CONTACT_SCENE = """\
+name: two-balls
+simulation: {dt: 0.001, duration: 0.01}
+gravity: [0, 0, -9.81]
+contact:
+  planes: [{point: [0, 0, 0], normal: [0, 0, 1]}]
+bodies:
+  - {name: a, particles: {positions: [[0, 0, 0]], masses: 1.0, radius: 0.1}, position: [0, 0, 0.09]}
+  - {name: b, particles: {positions: [[0, 0, 0]], masses: 1.0, radius: 0.1}, position: [0.19, 0, 0.09]}
+"""
+
+# A function of another module, cached, calling contact.points.contact_points: a kernel that is not
+# separate but calls one (find_contacts); numba links contact_points' module into it.
+PROBE = """
+import numba
+from rbcli.physics.contact.points import contact_points
+
+@numba.njit(cache=True)
+def probe(model, table, work, x, q, P, L, point, force):
+    return contact_points(model, table, work, x, q, P, L, point, force)
+"""
+
+PROBE_SCRIPT = """
+import sys
+import numpy as np
+from rbcli.api import prepare
+from rbcli.physics.contact.tables import make_contact_work
+
+compiled = prepare(sys.argv[2])
+table = compiled.forces.contact
+work = make_contact_work(table, compiled.model.body_count, history=False)
+s = compiled.initial_state
+point, force = np.zeros((16, 3)), np.zeros(16)
+args = (compiled.model.kernel(), table, work, s.x, s.q, s.P, s.L, point, force)
+if sys.argv[1] == "direct":
+    from rbcli.physics.contact.points import contact_points
+    print(contact_points(*args))
+else:
+    sys.path.insert(0, sys.argv[3])
+    from probe import probe
+    print(probe(*args))
+"""
+
+
+@pytest.mark.skipif(not _verified(), reason="kernel_link is installed only on the numba versions it was verified on")
+def test_a_caller_compiled_over_a_cached_kernel_loads_the_separate_kernels_that_kernel_calls(tmp_path):
+    """Process 1 compiles contact_points (which calls find_contacts by symbol) and caches it; process 2
+    compiles a new function calling it, contact_points loaded from the cache; process 3 calls only that
+    new function. numba does not keep a cached function's loaders on its library, so without kernel_link
+    giving them back, the new function's cache entry lacked find_contacts' loader and process 3 called an
+    unresolved symbol (a segmentation fault, seen in the suite's workers)."""
+    scene = tmp_path / "two_balls.yaml"
+    scene.write_text(CONTACT_SCENE)
+    (tmp_path / "probe.py").write_text(PROBE)
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba_cache")}
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), env.get("PYTHONPATH")]))
+
+    def run(mode: str) -> int:
+        done = subprocess.run([sys.executable, "-c", PROBE_SCRIPT, mode, str(scene), str(tmp_path)], env=env,
+                              cwd=ROOT, capture_output=True, text=True, timeout=600)  # fmt: skip
+        assert done.returncode == 0, (mode, done.returncode, done.stderr[-2000:])
+        return int(done.stdout.strip().splitlines()[-1])
+
+    # two balls touching each other and the plane: 3 contacts
+    assert run("direct") == 3
+    assert run("probe") == 3  # compiles probe over the cached contact_points
+    assert run("probe") == 3  # loads probe alone: its callees' separate kernels must come with it
