@@ -178,11 +178,11 @@ from rbcli.api import prepare
 from rbcli.physics.contact.tables import make_contact_work
 
 compiled = prepare(sys.argv[2])
-table = compiled.forces.contact
+table = compiled.model.contact
 work = make_contact_work(table, compiled.model.body_count, history=False)
 s = compiled.initial_state
 point, force = np.zeros((16, 3)), np.zeros(16)
-args = (compiled.model.kernel(), table, work, s.x, s.q, s.P, s.L, point, force)
+args = (compiled.model.kernel_bodies(), table, work, s.x, s.q, s.P, s.L, point, force)
 if sys.argv[1] == "direct":
     from rbcli.physics.contact.points import contact_points
     print(contact_points(*args))
