@@ -130,7 +130,7 @@ def install() -> None:
 
     def add_overload_tagged(self: Any, cres: Any) -> Any:  # noqa: ANN401
         """Tag a separate kernel's library (compiled or loaded from the cache) with what loads it, and give
-        a library loaded from the cache back its loaders (see restore below)."""
+        a library loaded from the cache back its loaders (why: the comment below)."""
         library = getattr(cres, "library", None)
         if library is not None and getattr(cres, "reload_init", None):
             # numba runs a cached function's reload_init when loading it but does not keep it on the
