@@ -12,6 +12,7 @@ Contact: the compiled ContactTable skips the pairs of jointed bodies (scene/comp
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 
@@ -28,6 +29,14 @@ from rbcli.scene.spec import BodySpec, SceneError, SceneIssue
 ANCHOR_TOLERANCE = 1e-9
 # axes given per body that differ by more than this [rad] at the initial poses were not meant as one
 AXIS_TOLERANCE = 1e-9
+
+
+class _Frames(NamedTuple):
+    """Every body's rotations at t = 0, shape (body_count, 3, 3): world-from-principal R and
+    user-from-principal E."""
+
+    R: np.ndarray
+    E: np.ndarray
 
 
 class _Invalid(Exception):
@@ -56,9 +65,10 @@ def compile_joints(
                   "damping", "motor_speed", "motor_cap", "limit_lower", "limit_upper", "reference_a", "travel0")
     }  # fmt: skip
     issues = []
+    frames = _Frames(quat_to_matrix(state.q), quat_to_matrix(model.body_frame_q))  # once: not per joint
     for joint in joints:
         try:
-            for key, value in _joint_row(joint, index, ground, model, centres_user, state, has_contact).items():
+            for key, value in _joint_row(joint, index, ground, model, centres_user, state, frames).items():
                 rows[key].append(value)
         except _Invalid as exc:
             where = joint.locations.get(exc.key, joint.location)
@@ -82,7 +92,7 @@ def _joint_row(
     model: Model,
     centres: np.ndarray,
     state: State,
-    has_contact: bool,
+    frames: _Frames,
 ) -> dict[str, object]:
     _unsupported(joint)
     ends = [WORLD if name == WORLD_NAME else index[name] for name in joint.bodies]
@@ -100,8 +110,7 @@ def _joint_row(
             f"both ends are fixed (a static or kinematic body and {what}): the joint holds nothing",
             "at least one end a moving (dynamic) body",
         )
-    R = quat_to_matrix(state.q)  # world-from-principal at t = 0
-    E = quat_to_matrix(model.body_frame_q)  # user-from-principal
+    R, E = frames
 
     def to_body(end: int, world_vector: np.ndarray, point: bool) -> np.ndarray:
         if end == WORLD:
@@ -134,7 +143,7 @@ def _joint_row(
             assert axes is not None  # the schema requires axis or axes
             axis_a, axis_b = from_user(a, axes[0], False), from_user(b, axes[1], False)
             u_a, u_b = world_vector(a, axis_a), world_vector(b, axis_b)
-            angle = float(np.arctan2(np.linalg.norm(np.cross(u_a, u_b)), np.dot(u_a, u_b)))
+            angle = float(np.arctan2(np.linalg.norm(_cross(u_a, u_b)), np.dot(u_a, u_b)))
             if angle > AXIS_TOLERANCE:
                 raise _Invalid(
                     "axes",
@@ -179,7 +188,7 @@ def _joint_row(
     if joint.kind == "hinge":  # n_b1 at the initial poses, in a's frame: the angle's zero
         reference = R[a].T @ world_vector(b, normals[0])
     if joint.kind == "slider":
-        travel0 = float((p_a - p_b) @ world_vector(b, np.cross(normals[0], normals[1])))
+        travel0 = float((p_a - p_b) @ world_vector(b, _cross(normals[0], normals[1])))
     lower, upper = joint.limits if joint.limits is not None else (-np.inf, np.inf)
     return dict(
         limit_lower=lower,
@@ -205,9 +214,15 @@ def _normals(axis: np.ndarray) -> np.ndarray:
     """Two unit vectors perpendicular to `axis` and to each other (2, 3)."""
     u = axis / np.linalg.norm(axis)
     helper = np.eye(3)[int(np.argmin(np.abs(u)))]  # the basis vector least parallel to u
-    n1 = np.cross(u, helper)
+    n1 = _cross(u, helper)
     n1 /= np.linalg.norm(n1)
-    return np.array([n1, np.cross(u, n1)])
+    return np.array([n1, _cross(u, n1)])
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b of two 3-vectors, in np.cross's operations (the same bits) without its ~40 us of axis
+    handling per call: a scene compiles a few per joint, and a generated chain has thousands of joints."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
 def _body_size(model: Model, body: int) -> float:
