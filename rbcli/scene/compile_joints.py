@@ -33,10 +33,11 @@ AXIS_TOLERANCE = 1e-9
 
 class _Frames(NamedTuple):
     """Every body's rotations at t = 0, shape (body_count, 3, 3): world-from-principal R and
-    user-from-principal E."""
+    user-from-principal E; and its size [m], shape (body_count,) (_body_sizes)."""
 
     R: np.ndarray
     E: np.ndarray
+    size: np.ndarray
 
 
 class _Invalid(Exception):
@@ -61,20 +62,29 @@ def compile_joints(
     index = {b.name: i for i, b in enumerate(bodies)}
     rows: dict[str, list] = {
         k: []
-        for k in ("kind", "body_a", "body_b", "anchor_a", "anchor_b", "axis_a", "normal_b", "relative_q", "length",
+        for k in ("kind", "body_a", "body_b", "anchor_a", "anchor_b", "axis_a", "normal_b", "end_q", "length",
                   "damping", "motor_speed", "motor_cap", "limit_lower", "limit_upper", "reference_a", "travel0")
     }  # fmt: skip
-    issues = []
-    frames = _Frames(quat_to_matrix(state.q), quat_to_matrix(model.body_frame_q))  # once: not per joint
+    # the joints refused, by (place, reason): a generated chain's joints share their place in the file, and
+    # one reason refusing all 5,000 of them is one issue that says how many
+    refused: dict[tuple[object, str, str], list[str]] = {}
+    frames = _Frames(quat_to_matrix(state.q), quat_to_matrix(model.body_frame_q), _body_sizes(model))  # once
     for joint in joints:
         try:
             for key, value in _joint_row(joint, index, ground, model, centres_user, state, frames).items():
                 rows[key].append(value)
         except _Invalid as exc:
-            where = joint.locations.get(exc.key, joint.location)
-            issues.append(SceneIssue(where, f"joint '{joint.name}': {exc}", exc.expected))
-    if issues:
-        raise SceneError(issues)
+            refused.setdefault((joint.locations.get(exc.key, joint.location), str(exc), exc.expected), []).append(
+                joint.name
+            )
+    end_q = np.array(rows.pop("end_q")).reshape(-1, 2, 4)  # (q_b, q_a) per joint: one product for them all
+    rows["relative_q"] = list(quat_multiply(quat_conjugate(end_q[:, 0]), end_q[:, 1]))
+    if refused:
+        raise SceneError([
+            SceneIssue(where, f"joint '{names[0]}': {reason}" + (f" (and {len(names) - 1:,} more joints given "
+                       "here)" if len(names) > 1 else ""), expected)
+            for (where, reason, expected), names in refused.items()
+        ])  # fmt: skip
     return joint_table(**rows, body_ground=ground)
 
 
@@ -110,7 +120,7 @@ def _joint_row(
             f"both ends are fixed (a static or kinematic body and {what}): the joint holds nothing",
             "at least one end a moving (dynamic) body",
         )
-    R, E = frames
+    R, E, sizes = frames
 
     def to_body(end: int, world_vector: np.ndarray, point: bool) -> np.ndarray:
         if end == WORLD:
@@ -155,7 +165,7 @@ def _joint_row(
     if joint.kind == "slider":  # only the offset across the axis must vanish: along it is the slider's travel
         u = world_vector(b, normals[0]), world_vector(b, normals[1])
         offset = np.array([offset @ u[0], offset @ u[1], 0.0])
-    size = max(1.0, *(_body_size(model, end) for end in (a, b) if end != WORLD))
+    size = max(1.0, *(float(sizes[end]) for end in (a, b) if end != WORLD))
     length = 0.0
     if joint.kind == "distance":
         length = float(np.linalg.norm(p_a - p_b))
@@ -181,7 +191,6 @@ def _joint_row(
                 "anchors that are the same world point at the initial poses (or one `anchor`)",
             )
     q_b = np.array([1.0, 0.0, 0.0, 0.0]) if b == WORLD else state.q[b]
-    relative = quat_multiply(quat_conjugate(q_b), state.q[a])
     motor = joint.motor
     reference = np.zeros(3)
     travel0 = 0.0
@@ -205,7 +214,7 @@ def _joint_row(
         anchor_b=anchor_b,
         axis_a=axis_a / np.linalg.norm(axis_a),
         normal_b=normals,
-        relative_q=relative,
+        end_q=(q_b, state.q[a]),  # relative_q = q_b^* q_a, computed for every joint at once
         length=length,
     )
 
@@ -225,11 +234,15 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
-def _body_size(model: Model, body: int) -> float:
-    """The largest particle distance from the body's centre of mass [m] (its size for tolerances)."""
-    start, count = int(model.body_particle_start[body]), int(model.body_particle_count[body])
-    offsets = model.particle_offset[start : start + count]
-    return float(np.max(np.linalg.norm(offsets, axis=1))) if count else 0.0
+def _body_sizes(model: Model) -> np.ndarray:
+    """Each body's largest particle distance from its centre of mass [m] (its size for tolerances), shape
+    (body_count,); 0 for a body without particles."""
+    sizes = np.zeros(model.body_particle_count.shape[0])
+    filled = model.body_particle_count > 0
+    if np.any(filled):
+        distance = np.linalg.norm(model.particle_offset, axis=1)
+        sizes[filled] = np.maximum.reduceat(distance, model.body_particle_start[filled])
+    return sizes
 
 
 # the dense check of loops builds A = G W G^T densely (R^2 floats, R^3 flops): 3,000 rows is 72 MB, ~1 s
