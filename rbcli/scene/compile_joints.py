@@ -21,7 +21,7 @@ from rbcli.physics.model import Model
 from rbcli.physics.rotation import quat_conjugate, quat_multiply, quat_to_matrix
 from rbcli.physics.state import State
 from rbcli.scene.joint_spec import WORLD_NAME, JointSpec
-from rbcli.scene.spec import BodySpec, SceneError, SceneIssue
+from rbcli.scene.spec import BodySpec, SceneError, SceneIssue, SourceLocation
 
 # anchors that miss each other by more than this fraction of the bodies' size (at least 1 m: a tiny
 # body's anchors are still read to ~1e-16 m) were not meant to coincide; 1e-9 leaves room for anchors
@@ -67,7 +67,7 @@ def compile_joints(
     }  # fmt: skip
     # the joints refused, by (place, reason): a generated chain's joints share their place in the file, and
     # one reason refusing all 5,000 of them is one issue that says how many
-    refused: dict[tuple[object, str, str], list[str]] = {}
+    refused: dict[tuple[SourceLocation | None, str, str], list[str]] = {}
     frames = _Frames(quat_to_matrix(state.q), quat_to_matrix(model.body_frame_q), _body_sizes(model))  # once
     for joint in joints:
         try:
