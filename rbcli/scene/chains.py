@@ -117,6 +117,8 @@ def chain_joints(
 
 
 def _joints_of(plan: ChainPlan, by_name: dict[str, BodySpec], issues: IssueCollector) -> list[JointSpec] | None:
+    """One chain's JointSpecs (joint k holds link k to link k - 1, joint 0 link 0 to `attach`); None with
+    located errors for its joint options or an `attach` that is no body, is ambiguous or is link 0."""
     chain, cpath = plan.chain, plan.path
     joint, jpath = chain["joint"], (*plan.path, "joint")
     before = issues.error_count
