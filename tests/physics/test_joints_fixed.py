@@ -71,11 +71,15 @@ class Welded:
         union_joints = f"joints:\n{joints}" if joints else ""
         self.union = head + body("u", points, masses, self.union_centre, shared) + union_joints
         self.steps = steps
+        self.frames: dict[str, np.ndarray] = {}  # a part written in its own frame: world-from-that-frame at t = 0
 
     def poses(self, sim: Simulation) -> tuple[np.ndarray, np.ndarray]:
         """Every particle's world position and each part's orientation (world-from-world-at-t=0), from the
         parts' recorded poses (a scene of parts) or the union's (the hand-written body)."""
-        s = sim.state  # q: world-from-user frame; the user frames here are the world frame at t = 0
+        s = sim.state  # q: world-from-user frame; the user frames here are the world frame at t = 0 ...
+        if len(s.x) == len(self.parts):  # ... but for a part written in a turned frame (`frames`)
+            turn = np.array([self.frames.get(n, [1.0, 0.0, 0.0, 0.0]) for n in self.parts])
+            s = replace(s, q=quat_multiply(s.q, quat_conjugate(turn)))
         R = quat_to_matrix(s.q)
         if len(s.x) == len(self.parts):
             points = [s.x[i] + (p - self.centres[n]) @ R[i].T for i, (n, (p, _)) in enumerate(self.parts.items())]
@@ -255,3 +259,112 @@ def test_the_constraint_form_of_a_weld_is_still_compiled_on_request():
     assert spec.compiled_model.model.joint is None and spec.compiled_model.model.body_count == 1
     rows = compile_model(replace(spec, compiled_model=None), merge_welds=False)
     assert rows.model.joint.row_count.tolist() == [6] and rows.model.body_count == 2
+
+
+def test_force_terms_on_welded_parts_act_on_the_union_as_written_there():
+    """Points, particles and body-frame vectors given in a part's own frame (here a part turned 30 degrees
+    in its frame) act on the welded body exactly as the same terms written on the union at the same world
+    points: a body-frame force at b's point, a spring from a's particle to the world, a body-frame torque
+    on b, a uniform field on a alone (a force at a's centre of mass); rk4, 1 s, to 1e-12."""
+    angle = 0.5235987755982988
+    R = np.array([[np.cos(angle), -np.sin(angle), 0.0], [np.sin(angle), np.cos(angle), 0.0], [0.0, 0.0, 1.0]])
+    local = np.array([[0.0, 0.0, 0.0], [0.4, 0.0, 0.0], [0.2, 0.1, 0.05]])  # b's particles in its own frame
+    b_mass = np.array([0.4, 0.3, 0.2])
+    b_centre_local = _centre(local, b_mass)
+    b_world_centre = np.array([0.5, 0.2, 0.0])
+    b_world = b_world_centre + (local - b_centre_local) @ R.T
+    pair = Welded({"a": (BOX, BOX_MASSES), "b": (b_world, b_mass)}, [("a", "b")], v0=[0.1, 0, 0.2], w=[0.5, -1, 2],
+                  dt=1e-3, steps=1000, integrator="rk4")  # fmt: skip
+    # b written in its own frame, turned by R
+    b_line = next(line for line in pair.scene.splitlines() if line.startswith("  - {name: b,"))
+    mine = b_line.replace(_points(b_world), _points(local)).replace(
+        "position:", f"orientation: {{axis_angle: {{axis: [0, 0, 1], angle: {angle!r}}}}}, position:"
+    )
+    text = pair.scene.replace(b_line, mine)
+    pair.frames["b"] = np.array([np.cos(angle / 2), 0.0, 0.0, np.sin(angle / 2)])
+    point_b, vector_b, torque_b = np.array([0.3, 0.05, 0.0]), np.array([0.0, 2.0, 1.0]), np.array([0.2, 0.0, 0.1])
+    a_particle = 5
+    forces = ("forces:\n"
+              f"  - {{type: force, body: b, point: {_vector(point_b)}, vector: {_vector(vector_b)}, frame: body}}\n"
+              f"  - {{type: spring, body: a, particle: {a_particle}, anchor: [0, 0, 2], stiffness: 30}}\n"
+              f"  - {{type: torque, body: b, vector: {_vector(torque_b)}, frame: body}}\n"
+              "  - {type: field, bodies: [a], value: [0.5, 0, 0]}\n")  # fmt: skip
+    world_point = b_world_centre + R @ (point_b - b_centre_local)
+    union_forces = ("forces:\n"
+                    f"  - {{type: force, body: u, point: {_vector(world_point)}, vector: {_vector(R @ vector_b)}, "
+                    "frame: body}\n"
+                    f"  - {{type: spring, body: u, particle: {a_particle}, anchor: [0, 0, 2], stiffness: 30}}\n"
+                    f"  - {{type: torque, body: u, vector: {_vector(R @ torque_b)}, frame: body}}\n"
+                    f"  - {{type: force, body: u, point: {_vector(_centre(BOX, np.array(BOX_MASSES)))}, "
+                    f"vector: [{float(0.5 * np.sum(BOX_MASSES))!r}, 0, 0]}}\n")  # fmt: skip
+    pair.scene = text.replace("joints:\n", forces + "joints:\n")
+    pair.union = pair.union + union_forces
+    assert max(pair.differences()) <= 1e-12
+
+
+def test_welded_clouds_collide_on_their_own_particles_as_their_union():
+    """With contact, the welded body's contact spheres are its parts' (their particles, in part order): it
+    lands on the ground as the union does, to 1e-12 after 0.4 s; its weld's reaction is NaN (the contact
+    force on each part is not known from the states) and says so nowhere else."""
+    radius = "radius: 0.02"
+    pair = Welded({"a": (BOX, BOX_MASSES), "b": (ROD, ROD_MASSES)}, [("a", "b")], v0=[0.2, 0, -1.0], w=[0, 1, 2],
+                  dt=5e-4, steps=800, integrator="split2", streams="[bodies, joint_forces]")  # fmt: skip
+    contact = "contact: {planes: [{point: [0, 0, -0.3], normal: [0, 0, 1]}]}\n"
+    pair.scene = contact + pair.scene.replace("masses: [", f"{radius}, masses: [")
+    pair.union = contact + pair.union.replace("masses: [", f"{radius}, masses: [")
+    assert max(pair.differences()) <= 1e-12
+    trajectory = rbcli.simulate(load_scene_text(pair.scene))
+    assert trajectory.x[:, :, 2].min() < trajectory.x[0, :, 2].min() - 0.1  # it fell and hit the ground
+    assert np.isnan(trajectory.joint_reactions["a_b"]).all()
+
+
+def test_a_resumed_welded_run_records_what_the_run_never_stopped_records(tmp_path, monkeypatch):
+    """The checkpoint carries the state before its step, so the first resumed frame's weld reaction is the
+    uninterrupted run's, bit for bit, as are the parts' poses."""
+    import os
+    import signal
+
+    import rbcli.runner.loop as loop
+    from rbcli.record.mcap_sink import SinkMcap
+    from rbcli.record.read import read_mcap
+    from rbcli.runner.resume import plan_resume, resume_run
+
+    monkeypatch.setattr(loop, "CHUNK_SECONDS", 0.002)  # many chunks, so the stop falls mid-run
+    path = tmp_path / "pair.yaml"
+    path.write_text(tumbling_pair(steps=600, streams="[bodies, joint_forces]").scene.replace("every: 1", "every: 7"))
+    Simulation(path).run(sinks=[SinkMcap(tmp_path / "whole.mcap")])
+    calls = []
+
+    def progress(done: int, total: int) -> None:
+        calls.append(done)
+        if len(calls) == 2:
+            os.kill(os.getpid(), signal.SIGINT)
+
+    assert Simulation(path).run(sinks=[SinkMcap(tmp_path / "cut.mcap")], progress=progress).status == "interrupted"
+    plan = plan_resume(tmp_path / "cut.mcap")
+    assert 0 < plan.checkpoint.step < plan.total_steps and plan.checkpoint.step % 7
+    resume_run(plan, [SinkMcap(tmp_path / "resumed.mcap")])
+    a, b = read_mcap(tmp_path / "resumed.mcap"), read_mcap(tmp_path / "whole.mcap")
+    assert a.body_names == ("a", "b") and a.step.tolist() == b.step.tolist()
+    assert a.x.tobytes() == b.x.tobytes() and a.joint_force.tobytes() == b.joint_force.tobytes()
+
+
+def test_what_a_merge_cannot_keep_exactly_is_warned_or_refused():
+    """Drag on a welded part becomes drag on its body (a warning: exact only while it translates); a spring
+    or a joint between two welded parts holds nothing and is left out (a warning each); a field with a
+    gradient on some parts of a welded body cannot be one, and is refused at its line."""
+    from rbcli.scene.spec import SceneError
+
+    base = tumbling_pair(steps=1).scene
+    extra = ("  - {name: inside, type: ball, bodies: [a, b], anchor: [0, 0, 0]}\n"
+             "forces:\n  - {type: drag, bodies: [a], linear: 0.1}\n"
+             "  - {type: spring, bodies: [a, b], particles: [0, 1], stiffness: 10}\n")  # fmt: skip
+    warnings = rbcli.prepare(load_scene_text(base + extra)).warnings
+    messages = [w.message for w in warnings if w.severity == "warning"]
+    assert any("drag acts at each simulated body's centre of mass" in m for m in messages), messages
+    assert any("joint 'inside': both its bodies are welded" in m for m in messages), messages
+    assert any("force 'spring': bodies 'a' and 'b' are welded" in m for m in messages), messages
+    field = "forces:\n  - {type: field, bodies: [a], value: [0, 0, 1], gradient: [[1, 0, 0], [0, 0, 0], [0, 0, 0]]}\n"
+    with pytest.raises(SceneError, match="a field with a gradient on 'a'") as error:
+        load_scene_text(base + field)
+    assert error.value.issues[0].location.line == base.count("\n") + 2
