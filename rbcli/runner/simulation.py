@@ -206,7 +206,9 @@ class Simulation:
             import numba  # on the first call
 
             numba.set_num_threads(max(self.threads, self.contact_threads))
-        if self.parts is not None and n_steps:
+        # adaptive runs land their steps on the chunk's ends: a stop one step early would change them (runs
+        # must not depend on chunking), so their welds' reactions stay unknown (NaN)
+        if self.parts is not None and n_steps and not self.adaptive:
             done, filled, status = self._advance_welded(n_steps, record_every, frames, filled, previous)
         else:
             done, filled, status = self._run_chunk(self.data.state.step, n_steps, record_every, frames, filled)
