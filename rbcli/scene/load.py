@@ -196,7 +196,8 @@ def _analyse(
     if joints and simulation is not None:
         if "integrator" not in data["simulation"]:  # the one method that holds joints (docs/joints.md)
             simulation = replace(simulation, integrator=JOINTS_DEFAULT_INTEGRATOR)
-        _check_joint_integrator(data["simulation"], simulation, issues)
+        if any(joint.kind != "fixed" for joint in joints):  # welds are merged bodies (scene/welds.py)
+            _check_joint_integrator(data["simulation"], simulation, issues)
     if issues.error_count or simulation is None:
         return None, issues.sorted()
     gravity = data.get("gravity")
