@@ -52,6 +52,18 @@ def _dot6(a, v0, v1, v2, v3, v4, v5):  # noqa: ANN001, ANN202
 
 
 @numba.njit(cache=True, inline="always")
+def _store6(a, v0, v1, v2, v3, v4, v5) -> None:  # noqa: ANN001
+    """a[0:6] = v (a an array row)."""
+    a[0], a[1], a[2], a[3], a[4], a[5] = v0, v1, v2, v3, v4, v5
+
+
+@numba.njit(cache=True, inline="always")
+def _sym3_times(k00, k01, k02, k11, k12, k22, x, y, z):  # noqa: ANN001, ANN202
+    """K v for a symmetric 3 x 3 K in scalars."""
+    return k00 * x + k01 * y + k02 * z, k01 * x + k11 * y + k12 * z, k02 * x + k12 * y + k22 * z
+
+
+@numba.njit(cache=True, inline="always")
 def _sym6_times(A, i, v0, v1, v2, v3, v4, v5):  # noqa: ANN001, ANN202
     """A[i] v for a packed symmetric 6 x 6 A[i] (table.py SYM6: upper triangle row by row)."""
     a = A[i]
@@ -158,11 +170,19 @@ def forward_kinematics(tree, coord, rate, work, x, q, P, L) -> None:  # noqa: AN
         elif kind == JOINT_SLIDER:
             motion[d0, 0], motion[d0, 1], motion[d0, 2] = 0.0, 0.0, 0.0
             motion[d0, 3], motion[d0, 4], motion[d0, 5] = awx, awy, awz
-        elif kind == JOINT_BALL:
-            for k in range(3):
-                ex, ey, ez = R[i, 0, k], R[i, 1, k], R[i, 2, k]
-                motion[d0 + k, 0], motion[d0 + k, 1], motion[d0 + k, 2] = ex, ey, ez
-                motion[d0 + k, 3], motion[d0 + k, 4], motion[d0 + k, 5] = _cross(cwx, cwy, cwz, ex, ey, ez)
+        elif kind == JOINT_BALL:  # S' (the rates' world-aligned basis, below): columns (e_k, c_w x e_k)
+            motion[d0, 0], motion[d0, 1], motion[d0, 2], motion[d0, 3], motion[d0, 4], motion[d0, 5] = (
+                1.0,
+                0.0,
+                0.0,
+                0.0,
+                cwz,
+                -cwy,
+            )
+            motion[d0 + 1, 0], motion[d0 + 1, 1], motion[d0 + 1, 2] = 0.0, 1.0, 0.0
+            motion[d0 + 1, 3], motion[d0 + 1, 4], motion[d0 + 1, 5] = -cwz, 0.0, cwx
+            motion[d0 + 2, 0], motion[d0 + 2, 1], motion[d0 + 2, 2] = 0.0, 0.0, 1.0
+            motion[d0 + 2, 3], motion[d0 + 2, 4], motion[d0 + 2, 5] = cwy, -cwx, 0.0
         elif kind == TREE_FREE:
             for k in range(3):
                 for j in range(3):
@@ -175,15 +195,24 @@ def forward_kinematics(tree, coord, rate, work, x, q, P, L) -> None:  # noqa: AN
             vx, vy, vz = velocity[p, 3] - tx, velocity[p, 4] - ty, velocity[p, 5] - tz
         else:
             wx = wy = wz = vx = vy = vz = 0.0
-        jw0 = jw1 = jw2 = jv0 = jv1 = jv2 = 0.0
-        for k in range(d0, tree.dof_start[i + 1]):
-            s = rate[k]
-            jw0 += motion[k, 0] * s
-            jw1 += motion[k, 1] * s
-            jw2 += motion[k, 2] * s
-            jv0 += motion[k, 3] * s
-            jv1 += motion[k, 4] * s
-            jv2 += motion[k, 5] * s
+        if kind == JOINT_BALL:  # the joint's velocity (R omega, c_w x R omega)
+            o0, o1, o2 = rate[d0], rate[d0 + 1], rate[d0 + 2]
+            jw0, jw1, jw2 = (
+                r00 * o0 + r01 * o1 + r02 * o2,
+                r10 * o0 + r11 * o1 + r12 * o2,
+                r20 * o0 + r21 * o1 + r22 * o2,
+            )
+            jv0, jv1, jv2 = _cross(cwx, cwy, cwz, jw0, jw1, jw2)
+        else:
+            jw0 = jw1 = jw2 = jv0 = jv1 = jv2 = 0.0
+            for k in range(d0, tree.dof_start[i + 1]):
+                s = rate[k]
+                jw0 += motion[k, 0] * s
+                jw1 += motion[k, 1] * s
+                jw2 += motion[k, 2] * s
+                jv0 += motion[k, 3] * s
+                jv1 += motion[k, 4] * s
+                jv2 += motion[k, 5] * s
         wx, wy, wz, vx, vy, vz = wx + jw0, wy + jw1, wz + jw2, vx + jv0, vy + jv1, vz + jv2
         velocity[i, 0], velocity[i, 1], velocity[i, 2] = wx, wy, wz
         velocity[i, 3], velocity[i, 4], velocity[i, 5] = vx, vy, vz
@@ -348,7 +377,64 @@ def tree_accelerations(tree, work, force, torque, joint_force, qdd) -> None:  # 
             a[18] -= V4 * U4
             a[19] -= V4 * U5
             a[20] -= V5 * U5
-        else:  # fixed (k = 0), ball (3), free (6): D k x k, inverted in place (Gauss-Jordan: D is SPD)
+        elif d1 - d0 == 3:  # ball, its rates in the world-aligned basis S' = [1; [c_w]] (see the docstring)
+            cx, cy, cz = motion[d0 + 1, 5], -motion[d0, 5], motion[d0, 4]
+            a = IA[i]
+            h00, h01, h02, h10, h11, h12, h20, h21, h22 = a[3], a[4], a[5], a[8], a[9], a[10], a[12], a[13], a[14]
+            m00, m01, m02, m11, m12, m22 = a[15], a[16], a[17], a[18], a[19], a[20]
+            # U' = I^A S' = [[B + H [c]], [H^T + M [c]]] (row a of X [c] is X_a x c): T on top, W below
+            t00, t01, t02 = _cross(h00, h01, h02, cx, cy, cz)
+            t10, t11, t12 = _cross(h10, h11, h12, cx, cy, cz)
+            t20, t21, t22 = _cross(h20, h21, h22, cx, cy, cz)
+            t00, t01, t02, t10, t11, t12 = t00 + a[0], t01 + a[1], t02 + a[2], t10 + a[1], t11 + a[6], t12 + a[7]
+            t20, t21, t22 = t20 + a[2], t21 + a[7], t22 + a[11]
+            w00, w01, w02 = _cross(m00, m01, m02, cx, cy, cz)
+            w10, w11, w12 = _cross(m01, m11, m12, cx, cy, cz)
+            w20, w21, w22 = _cross(m02, m12, m22, cx, cy, cz)
+            w00, w01, w02, w10, w11, w12 = w00 + h00, w01 + h10, w02 + h20, w10 + h01, w11 + h11, w12 + h21
+            w20, w21, w22 = w20 + h02, w21 + h12, w22 + h22
+            # D' = S'^T U' = T - [c] W (column j: T_j - c x W_j), symmetric; its inverse by cofactors
+            z00, z10, z20 = _cross(cx, cy, cz, w00, w10, w20)
+            z01, z11, z21 = _cross(cx, cy, cz, w01, w11, w21)
+            z02, z12, z22 = _cross(cx, cy, cz, w02, w12, w22)
+            d00, d01, d02, d11, d12, d22 = t00 - z00, t01 - z01, t02 - z02, t11 - z11, t12 - z12, t22 - z22
+            k00, k01, k02 = d11 * d22 - d12 * d12, d02 * d12 - d01 * d22, d01 * d12 - d02 * d11
+            k11, k12, k22 = d00 * d22 - d02 * d02, d01 * d02 - d00 * d12, d00 * d11 - d01 * d01
+            det = 1.0 / (d00 * k00 + d01 * k01 + d02 * k02)
+            k00, k01, k02, k11, k12, k22 = k00 * det, k01 * det, k02 * det, k11 * det, k12 * det, k22 * det
+            dinv[e0], dinv[e0 + 1], dinv[e0 + 2] = k00, k01, k02
+            dinv[e0 + 3], dinv[e0 + 4], dinv[e0 + 5] = k01, k11, k12
+            dinv[e0 + 6], dinv[e0 + 7], dinv[e0 + 8] = k02, k12, k22
+            _store6(U[d0], t00, t10, t20, w00, w10, w20)
+            _store6(U[d0 + 1], t01, t11, t21, w01, w11, w21)
+            _store6(U[d0 + 2], t02, t12, t22, w02, w12, w22)
+            # u' = R tau - S'^T p^A, S'^T p = p_top - c x p_bottom
+            f, Rm = pA[i], work.rotation[i]
+            o0, o1, o2 = joint_force[d0], joint_force[d0 + 1], joint_force[d0 + 2]
+            g0, g1, g2 = _cross(cx, cy, cz, f[3], f[4], f[5])
+            u[d0] = Rm[0, 0] * o0 + Rm[0, 1] * o1 + Rm[0, 2] * o2 - f[0] + g0
+            u[d0 + 1] = Rm[1, 0] * o0 + Rm[1, 1] * o1 + Rm[1, 2] * o2 - f[1] + g1
+            u[d0 + 2] = Rm[2, 0] * o0 + Rm[2, 1] * o1 + Rm[2, 2] * o2 - f[2] + g2
+            if p < 0:
+                continue
+            # p^a = p^A + I^A c + U' D'^-1 (u' - U'^T c), then I^a = I^A - (U' D'^-1) U'^T
+            a0, a1, a2, a3, a4, a5 = _sym6_times(IA, i, c[0], c[1], c[2], c[3], c[4], c[5])
+            g0 = u[d0] - _dot6(U[d0], c[0], c[1], c[2], c[3], c[4], c[5])
+            g1 = u[d0 + 1] - _dot6(U[d0 + 1], c[0], c[1], c[2], c[3], c[4], c[5])
+            g2 = u[d0 + 2] - _dot6(U[d0 + 2], c[0], c[1], c[2], c[3], c[4], c[5])
+            g0, g1, g2 = k00 * g0 + k01 * g1 + k02 * g2, k01 * g0 + k11 * g1 + k12 * g2, k02 * g0 + k12 * g1 + k22 * g2
+            f[0] += a0 + t00 * g0 + t01 * g1 + t02 * g2
+            f[1] += a1 + t10 * g0 + t11 * g1 + t12 * g2
+            f[2] += a2 + t20 * g0 + t21 * g1 + t22 * g2
+            f[3] += a3 + w00 * g0 + w01 * g1 + w02 * g2
+            f[4] += a4 + w10 * g0 + w11 * g1 + w12 * g2
+            f[5] += a5 + w20 * g0 + w21 * g1 + w22 * g2
+            for row in range(6):  # constant trip counts: unrolled, SYM6_INDEX folded
+                x0, x1, x2 = U[d0, row], U[d0 + 1, row], U[d0 + 2, row]
+                y0, y1, y2 = _sym3_times(k00, k01, k02, k11, k12, k22, x0, x1, x2)
+                for col in range(row, 6):
+                    a[SYM6_INDEX[row, col]] -= y0 * U[d0, col] + y1 * U[d0 + 1, col] + y2 * U[d0 + 2, col]
+        else:  # fixed (k = 0), free (6): D k x k, inverted in place (Gauss-Jordan: D is SPD)
             k = d1 - d0
             for j in range(d0, d1):
                 s = motion[j]
@@ -414,6 +500,20 @@ def tree_accelerations(tree, work, force, torque, joint_force, qdd) -> None:  # 
             s = motion[d0]
             e0_, e1_, e2_ = e0_ + s[0] * g, e1_ + s[1] * g, e2_ + s[2] * g
             e3_, e4_, e5_ = e3_ + s[3] * g, e4_ + s[4] * g, e5_ + s[5] * g
+        elif k == 3:  # ball: omega'' (world-aligned) = D'^-1 (u' - U'^T a'), a += S' omega'', qdd = R^T omega''
+            g0 = u[d0] - _dot6(U[d0], e0_, e1_, e2_, e3_, e4_, e5_)
+            g1 = u[d0 + 1] - _dot6(U[d0 + 1], e0_, e1_, e2_, e3_, e4_, e5_)
+            g2 = u[d0 + 2] - _dot6(U[d0 + 2], e0_, e1_, e2_, e3_, e4_, e5_)
+            z0 = dinv[e0] * g0 + dinv[e0 + 1] * g1 + dinv[e0 + 2] * g2
+            z1 = dinv[e0 + 3] * g0 + dinv[e0 + 4] * g1 + dinv[e0 + 5] * g2
+            z2 = dinv[e0 + 6] * g0 + dinv[e0 + 7] * g1 + dinv[e0 + 8] * g2
+            cx, cy, cz = motion[d0 + 1, 5], -motion[d0, 5], motion[d0, 4]
+            y0, y1, y2 = _cross(cx, cy, cz, z0, z1, z2)
+            e0_, e1_, e2_, e3_, e4_, e5_ = e0_ + z0, e1_ + z1, e2_ + z2, e3_ + y0, e4_ + y1, e5_ + y2
+            Rm = work.rotation[i]
+            qdd[d0] = Rm[0, 0] * z0 + Rm[1, 0] * z1 + Rm[2, 0] * z2
+            qdd[d0 + 1] = Rm[0, 1] * z0 + Rm[1, 1] * z1 + Rm[2, 1] * z2
+            qdd[d0 + 2] = Rm[0, 2] * z0 + Rm[1, 2] * z1 + Rm[2, 2] * z2
         elif k > 1:
             for l in range(d0, d1):  # u becomes u - U^T a' (recomputed by every call)
                 u[l] -= _dot6(U[l], e0_, e1_, e2_, e3_, e4_, e5_)
