@@ -21,7 +21,8 @@ them (a ball's relative angular velocity in the link frame, a free root's (omega
                          work ABA reads: r, S, v, c, R diag(I) R^T
     tree_accelerations   F, tau (world, per body), joint forces -> qdd (ABA's passes 1b, 2, 3)
 
-Both are STEP_KERNEL (no NRT: no allocation); every array lives in TreeTable / TreeWork. The numpy
+Both are STEP_KERNEL (no NRT: no allocation) and stage-sized, so compiled once and called by symbol
+(kernel_link.py); every array lives in TreeTable / TreeWork. The numpy
 reference (reference.py: body frames, 6 x 6 Plucker matrices, CRBA + RNEA and a dense solve) is what
 tests/physics/test_tree_aba.py checks them against.
 """
@@ -34,6 +35,7 @@ import numba
 
 from rbcli.physics import kernel_cache
 from rbcli.physics.joints.tables import JOINT_BALL, JOINT_HINGE, JOINT_SLIDER
+from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.step import STEP_KERNEL
 from rbcli.physics.tree.table import SYM6_INDEX, TREE_FREE
 
@@ -77,6 +79,7 @@ def _sym6_times(A, i, v0, v1, v2, v3, v4, v5):  # noqa: ANN001, ANN202
     )
 
 
+@separately_compiled
 @numba.njit(**STEP_KERNEL)
 def forward_kinematics(tree, coord, rate, work, x, q, P, L) -> None:  # noqa: ANN001
     """Each link's pose and velocity from the joint coordinates `coord` (C,) and rates `rate` (D,).
@@ -296,6 +299,7 @@ def _add_to_parent(work, i, p) -> None:  # noqa: ANN001
     F[5] += f[5]
 
 
+@separately_compiled
 @numba.njit(**STEP_KERNEL)
 def tree_accelerations(tree, work, force, torque, joint_force, qdd) -> None:  # noqa: ANN001
     """qdd (D,), the rates' derivatives, by ABA at the state `forward_kinematics` last saw.

@@ -143,7 +143,9 @@ def tree_table(
         row += dofs[i]
     w, v = rest[:, :1], rest[:, 1:]  # rest (0, a) = (-v . a, w a + v x a)
     rest_axis = np.concatenate([-np.sum(v * axis, axis=1, keepdims=True), w * axis + np.cross(v, axis)], axis=1)
-    starts = [frozen_ints(np.concatenate([[0], np.cumsum(c)])) for c in (coords, dofs, dofs * dofs)]
+    coord_start, dof_start, dinv_start = (
+        frozen_ints(np.concatenate([[0], np.cumsum(c)])) for c in (coords, dofs, dofs * dofs)
+    )
     return TreeTable(
         parent,
         kind,
@@ -155,7 +157,9 @@ def tree_table(
         frozen_floats(rest_axis, 4),
         frozen_floats(mass),
         frozen_floats(inertia, 3),
-        *starts,
+        coord_start,
+        dof_start,
+        dinv_start,
         frozen_floats(motion, 6),
     )
 
