@@ -17,6 +17,9 @@ rbsim, one thread, in a compiled loop:
   1,000 steps as MuJoCo's: the nearest thing to mj_step until the tree integrators exist. Gravity enters
   as each link's external force m g.
 
+"fell" is how far below the start the lowest link is at the end of the last segment [m]: a sanity check (a
+ball chain released in a plane falls as the hinge chain does).
+
 Costs are CPU ns per link-step of this process (time.process_time: the 2-core machine is shared, and CPU
 time is what load changes least), best of `--repeats`, rbsim and MuJoCo interleaved; "spread" is median /
 best - 1 and the load average is printed at the start and the end.
