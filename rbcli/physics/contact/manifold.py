@@ -16,14 +16,19 @@ MANIFOLD_ROWS rows: box-box gathers up to 8 candidate points before it keeps 4.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numba
 import numpy as np
 
 from rbcli.physics import kernel_cache
+from rbcli.physics.step import STEP_KERNEL
 
 kernel_cache.install()  # before this module's kernels first run: their cache is keyed on the physics sources
+
+# the primitive kernels are step kernels (step.py: no reference counting of the arrays passed, IEEE
+# division); their small helpers are inlined into them
+INLINE_KERNEL: dict[str, Any] = {**STEP_KERNEL, "inline": "always"}
 
 MANIFOLD_POINTS = 4
 MANIFOLD_ROWS = 8
@@ -48,7 +53,7 @@ def make_manifold() -> Manifold:
     return Manifold(np.zeros((rows, 3)), np.zeros((rows, 3)), np.zeros(rows), np.zeros(rows, dtype=np.int64))
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(**INLINE_KERNEL)
 def emit(out, count, b0, b1, b2, n0, n1, n2, depth, feature) -> int:  # noqa: ANN001
     """Row `count` of `out`: b's surface point s_b, normal n (b to a), depth d and feature; the point is
     s_b - d / 2 n. Returns count + 1."""
@@ -60,12 +65,12 @@ def emit(out, count, b0, b1, b2, n0, n1, n2, depth, feature) -> int:  # noqa: AN
     return count + 1
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(**INLINE_KERNEL)
 def clamp(x, lo, hi):  # noqa: ANN001, ANN201
     return lo if x < lo else (hi if x > hi else x)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(**INLINE_KERNEL)
 def segment_closest(r0, r1, r2, u0, u1, u2, ha, v0, v1, v2, hb):  # noqa: ANN001, ANN201
     """(s, t) minimising |r + s u - t v| over |s| <= ha, |t| <= hb: the closest points c_a + s u and
     c_b + t v of two segments with centres r = c_a - c_b apart, unit directions u, v and half-lengths ha,
@@ -87,7 +92,7 @@ def segment_closest(r0, r1, r2, u0, u1, u2, ha, v0, v1, v2, hb):  # noqa: ANN001
     return s, t
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(**INLINE_KERNEL)
 def round_contact(out, count, a0, a1, a2, ra, b0, b1, b2, rb, f0, f1, f2, feature) -> int:  # noqa: ANN001
     """Sphere a (centre a, radius ra) against sphere b: the point of a sphere-sphere contact (also the
     contact of any two points of swept shapes, capsule cores) written at row `count` if they overlap;

@@ -21,8 +21,9 @@ import math
 
 import numba
 
-from rbcli.physics.contact.manifold import clamp, emit, round_contact, segment_closest
+from rbcli.physics.contact.manifold import INLINE_KERNEL, clamp, emit, round_contact, segment_closest
 from rbcli.physics.contact.primitive_boxes import box_box, capsule_box, sphere_box
+from rbcli.physics.step import STEP_KERNEL
 
 PRIMITIVE_SPHERE, PRIMITIVE_CAPSULE, PRIMITIVE_BOX = 0, 1, 2
 
@@ -31,7 +32,7 @@ PRIMITIVE_SPHERE, PRIMITIVE_CAPSULE, PRIMITIVE_BOX = 0, 1, 2
 SPAN_FRACTION = 1e-9
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(**INLINE_KERNEL)
 def perpendicular(u0, u1, u2):  # noqa: ANN001, ANN201
     """A unit vector perpendicular to unit u: u x e with e the world axis least along u."""
     a0, a1, a2 = abs(u0), abs(u1), abs(u2)
@@ -45,13 +46,13 @@ def perpendicular(u0, u1, u2):  # noqa: ANN001, ANN201
     return p0 / length, p1 / length, p2 / length
 
 
-@numba.njit(cache=True)
+@numba.njit(**STEP_KERNEL)
 def sphere_sphere(ca, Ra, sa, cb, Rb, sb, out) -> int:  # noqa: ANN001
     """d = r_a + r_b - |c_a - c_b|, n = (c_a - c_b) / |c_a - c_b| (coincident centres: +z); feature 0."""
     return round_contact(out, 0, ca[0], ca[1], ca[2], sa[0], cb[0], cb[1], cb[2], sb[0], 0.0, 0.0, 1.0, 0)
 
 
-@numba.njit(cache=True)
+@numba.njit(**STEP_KERNEL)
 def sphere_capsule(ca, Ra, sa, cb, Rb, sb, out) -> int:  # noqa: ANN001
     """Sphere a against the sphere of b's radius at the point of b's segment closest to c_a,
     c_b + clamp(u . (c_a - c_b), -h, h) u; feature 0."""
@@ -62,7 +63,7 @@ def sphere_capsule(ca, Ra, sa, cb, Rb, sb, out) -> int:  # noqa: ANN001
                          sb[0], f0, f1, f2, 0)  # fmt: skip
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(**INLINE_KERNEL)
 def _end_code(s, h, first):  # noqa: ANN001, ANN201
     """first (s = -h) or first + 1 (s = +h) for a segment parameter clamped at an end, else -1."""
     if s <= -h:
@@ -72,7 +73,7 @@ def _end_code(s, h, first):  # noqa: ANN001, ANN201
     return -1
 
 
-@numba.njit(cache=True)
+@numba.njit(**STEP_KERNEL)
 def capsule_capsule(ca, Ra, sa, cb, Rb, sb, out) -> int:  # noqa: ANN001
     """The segments' closest points (manifold.segment_closest) as a sphere-sphere contact; then, unless
     that pair is two crossing interiors, a second point: of the segment ends whose foot on the other
@@ -132,14 +133,14 @@ def capsule_capsule(ca, Ra, sa, cb, Rb, sb, out) -> int:  # noqa: ANN001
                          cb[0] + t2 * v0, cb[1] + t2 * v1, cb[2] + t2 * v2, rb, f0, f1, f2, code)  # fmt: skip
 
 
-@numba.njit(cache=True)
+@numba.njit(**STEP_KERNEL)
 def sphere_plane(c, R, size, plane_point, plane_normal, out) -> int:  # noqa: ANN001
     """d = r - (c - p0) . n, normal n (the plane is b); feature 0."""
     n0, n1, n2 = plane_normal[0], plane_normal[1], plane_normal[2]
     return _ball_plane(out, 0, c[0], c[1], c[2], size[0], plane_point, n0, n1, n2, 0)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(**INLINE_KERNEL)
 def _ball_plane(out, count, c0, c1, c2, r, plane_point, n0, n1, n2, feature) -> int:  # noqa: ANN001
     """A ball of radius r at c against the plane: its point at `count` if it overlaps; the new count."""
     dist = (c0 - plane_point[0]) * n0 + (c1 - plane_point[1]) * n1 + (c2 - plane_point[2]) * n2
@@ -149,7 +150,7 @@ def _ball_plane(out, count, c0, c1, c2, r, plane_point, n0, n1, n2, feature) -> 
     return emit(out, count, c0 - dist * n0, c1 - dist * n1, c2 - dist * n2, n0, n1, n2, depth, feature)
 
 
-@numba.njit(cache=True)
+@numba.njit(**STEP_KERNEL)
 def capsule_plane(c, R, size, plane_point, plane_normal, out) -> int:  # noqa: ANN001
     """The balls at the segment's two ends against the plane (its deepest points: up to 2, both when it
     lies flat), as MuJoCo's mjc_PlaneCapsule; feature 0 (the end at -h) and 1 (+h)."""
@@ -160,7 +161,7 @@ def capsule_plane(c, R, size, plane_point, plane_normal, out) -> int:  # noqa: A
     return _ball_plane(out, count, c[0] + u0, c[1] + u1, c[2] + u2, r, plane_point, n0, n1, n2, 1)
 
 
-@numba.njit(cache=True)
+@numba.njit(**STEP_KERNEL)
 def box_plane(c, R, size, plane_point, plane_normal, out) -> int:  # noqa: ANN001
     """The box's vertices below the plane, the 4 deepest where more are (a box deeper than its own
     thickness), as MuJoCo's mjc_PlaneBox (which keeps the first 4). Feature: the vertex index, bit k set
@@ -188,7 +189,7 @@ def box_plane(c, R, size, plane_point, plane_normal, out) -> int:  # noqa: ANN00
     return count
 
 
-@numba.njit(cache=True)
+@numba.njit(**STEP_KERNEL)
 def primitive_pair(kind_a, ca, Ra, sa, kind_b, cb, Rb, sb, out) -> int:  # noqa: ANN001
     """The manifold of primitives a and b (kinds PRIMITIVE_*; module docstring), normals from b to a.
     A pair in the other order (box-sphere) runs its kernel as b-a and turns the normals round: the
@@ -201,7 +202,7 @@ def primitive_pair(kind_a, ca, Ra, sa, kind_b, cb, Rb, sb, out) -> int:  # noqa:
     return count
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(**STEP_KERNEL)
 def _ordered_pair(kind_a, ca, Ra, sa, kind_b, cb, Rb, sb, out) -> int:  # noqa: ANN001
     if kind_a == PRIMITIVE_SPHERE:
         if kind_b == PRIMITIVE_SPHERE:
@@ -216,7 +217,7 @@ def _ordered_pair(kind_a, ca, Ra, sa, kind_b, cb, Rb, sb, out) -> int:  # noqa: 
     return box_box(ca, Ra, sa, cb, Rb, sb, out)
 
 
-@numba.njit(cache=True)
+@numba.njit(**STEP_KERNEL)
 def primitive_plane(kind, c, R, size, plane_point, plane_normal, out) -> int:  # noqa: ANN001
     """The manifold of a primitive (a) against a plane (b), normal the plane's."""
     if kind == PRIMITIVE_SPHERE:
