@@ -1,4 +1,5 @@
-"""Primitive contact kernels (physics/contact/primitives.py, primitive_boxes.py) against numpy references.
+"""Primitive contact kernels (physics/contact/primitives.py, primitive_boxes.py, box_box.py) against numpy
+references.
 
 References, independent of the kernels' algorithms:
 - the distance of two cores (a sphere's centre, a capsule's segment): the distance from a's core point
@@ -21,8 +22,9 @@ import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
 
+from rbcli.physics.contact.box_box import EDGE_FEATURE
 from rbcli.physics.contact.manifold import MANIFOLD_POINTS, make_manifold
-from rbcli.physics.contact.primitive_boxes import AXIS_PREFERENCE, EDGE_FEATURE
+from rbcli.physics.contact.primitive_boxes import AXIS_PREFERENCE
 from rbcli.physics.contact.primitives import (
     PRIMITIVE_BOX,
     PRIMITIVE_CAPSULE,

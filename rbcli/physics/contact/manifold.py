@@ -1,5 +1,6 @@
 """The contact manifold a pair of primitives writes (primitives.py, primitive_boxes.py): its arrays, and
-the pieces every primitive kernel shares (writing a point, closest points of two segments).
+the pieces every primitive kernel shares (writing a point, closest points of two segments, small
+selections).
 
 A manifold is up to MANIFOLD_POINTS contact points between shapes a and b, row i of each array:
     point   [m] (MANIFOLD_ROWS, 3), world: halfway between the two surfaces
@@ -107,3 +108,15 @@ def round_contact(out, count, a0, a1, a2, ra, b0, b1, b2, rb, f0, f1, f2, featur
     else:
         n0, n1, n2 = f0, f1, f2
     return emit(out, count, b0 + rb * n0, b1 + rb * n1, b2 + rb * n2, n0, n1, n2, depth, feature)
+
+
+@numba.njit(**INLINE_KERNEL)
+def sign_of(x):  # noqa: ANN001, ANN201
+    """+1.0 for x >= 0, else -1.0."""
+    return 1.0 if x >= 0.0 else -1.0
+
+
+@numba.njit(**INLINE_KERNEL)
+def pick3(t, m):  # noqa: ANN001, ANN201
+    """t[m] of a 3-tuple: selects, which compile far faster than numba's indexing of a tuple by a variable."""
+    return t[0] if m == 0 else (t[1] if m == 1 else t[2])

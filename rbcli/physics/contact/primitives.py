@@ -9,7 +9,7 @@ size (3,) [m]:
     sphere   (radius, -, -)                       PRIMITIVE_SPHERE
     capsule  (radius, half-length, -), axis R[:, 2]   PRIMITIVE_CAPSULE: the points within radius of the
              segment c +- half-length R[:, 2]
-    box      half extents along R[:, 0..2]        PRIMITIVE_BOX (primitive_boxes.py)
+    box      half extents along R[:, 0..2]        PRIMITIVE_BOX (primitive_boxes.py, box_box.py)
 A plane is a point on it and its unit normal (out of the solid), as in the contact table. Every kernel
 returns the number of points written; the kernels of a pair in the other order are `primitive_pair`'s.
 A particle sphere of a cloud is a sphere here, so sphere-X is also how a cloud touches a primitive.
@@ -21,14 +21,15 @@ import math
 
 import numba
 
+from rbcli.physics.contact.box_box import box_box
 from rbcli.physics.contact.manifold import INLINE_KERNEL, clamp, emit, round_contact, segment_closest
-from rbcli.physics.contact.primitive_boxes import box_box, capsule_box, sphere_box
+from rbcli.physics.contact.primitive_boxes import capsule_box, sphere_box
 from rbcli.physics.step import STEP_KERNEL
 
 PRIMITIVE_SPHERE, PRIMITIVE_CAPSULE, PRIMITIVE_BOX = 0, 1, 2
 
-# capsule-capsule: an overlap shorter than this fraction of the segments' length is one point, not two
-# (two coincident points would count the contact twice)
+# capsule-capsule: a second point closer to the first than this fraction of the segments' length is the
+# same point (two coincident points would count the contact twice)
 SPAN_FRACTION = 1e-9
 
 
