@@ -34,7 +34,6 @@ from typing import Any, NamedTuple
 
 import numba
 
-from rbcli.physics.joints.stages import joint_begin, joint_position, joint_record, joint_velocity
 from rbcli.physics.stages import (
     contact_begin_stage,
     contact_commit_stage,
@@ -56,6 +55,12 @@ integrator_step: Any = _unbound  # the integrator module's `step`, or `step_para
 integrator_materialise: Any = _unbound  # its `materialise`, where DEFERS
 HOLDS_JOINTS = False  # the joint stages run (split2, the one integrator that holds joints)
 DEFERS = False  # the step defers bodies' states and integrator_materialise writes them (exact)
+# physics/joints/stages.py's stages, where HOLDS_JOINTS: imported only for the loops that run them (the
+# import is ~20 ms of every other integrator's start-up)
+joint_begin: Any = _unbound
+joint_position: Any = _unbound
+joint_velocity: Any = _unbound
+joint_record: Any = _unbound
 
 
 def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, filled):  # noqa: ANN001, ANN201
@@ -132,7 +137,7 @@ class ChunkLoop(NamedTuple):
 def fixed_step_loop(module: str, *, joints: bool = False, defers: bool = False, threaded: bool = False) -> ChunkLoop:
     """`run_chunk` compiled for the integrator module `module` (integrators/__init__.py IntegratorInfo:
     its `joints`, `defers`; threaded: its `step_parallel`): the function itself, with its own copy of
-    the module's globals in which the integrator's names are bound."""
+    the module's globals in which the integrator's names (above run_chunk) are bound."""
     integrator = importlib.import_module(module)
     bound = {
         "integrator_step": integrator.step_parallel if threaded else integrator.step,
@@ -140,6 +145,11 @@ def fixed_step_loop(module: str, *, joints: bool = False, defers: bool = False, 
         "HOLDS_JOINTS": joints,
         "DEFERS": defers,
     }
+    if joints:
+        from rbcli.physics.joints import stages
+
+        names = ("joint_begin", "joint_position", "joint_velocity", "joint_record")
+        bound.update({name: getattr(stages, name) for name in names})
     function = types.FunctionType(run_chunk.__code__, {**run_chunk.__globals__, **bound}, run_chunk.__name__)
     function.__doc__ = run_chunk.__doc__
     # numba names each function's cache files and index after its qualified name (the code is the same)

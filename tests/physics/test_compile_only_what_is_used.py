@@ -98,6 +98,7 @@ if "--forces" in sys.argv:
     out["spring_impulse"] = run([spring, kick])
 out["states"] = states
 out["integrators"] = sorted(m for m in sys.modules if m.startswith("rbcli.physics.integrators."))
+out["joint_stages"] = "rbcli.physics.joints.stages" in sys.modules
 # physics/kernel_cache.py: loading rbcli's kernels does not build numba's compiler tables (which import
 # numba.np.arraymath); compiling does
 out["arraymath"] = "numba.np.arraymath" in sys.modules
@@ -132,6 +133,7 @@ def test_first_run_compiles_only_the_stages_the_scene_has_and_the_second_loads_t
     own = INTEGRATOR.replace("-", "_")
     assert first["integrators"] == [f"rbcli.physics.integrators.{m}" for m in sorted(("kinematics", own))]
     assert not [name for name in gravity if name.startswith("rbcli.physics.joints.")], sorted(gravity)
+    assert not first["joint_stages"]  # not even imported (~20 ms of a warm start: chunk_loop.py)
     # record_if_due copies with element loops: no array-assignment shape-error message (~2.5 s) compiled
     assert not [name for name in gravity if "shape_context" in name], sorted(gravity)
 

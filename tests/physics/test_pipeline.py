@@ -18,6 +18,7 @@ import pytest
 from rbcli.physics import adaptive_loop, chunk_loop
 from rbcli.physics.forces.stage_list import FORCE_STAGES, ForceStage, wrench_source
 from rbcli.physics.integrators import INTEGRATORS, get_integrator
+from rbcli.physics.joints import stages as joint_stages
 from rbcli.physics.pipeline import STEP_STAGES
 
 PHYSICS = Path(__file__).resolve().parents[2] / "rbcli" / "physics"
@@ -116,12 +117,14 @@ def test_each_integrator_s_loop_is_the_one_loop_bound_to_its_step(name):
         assert bound["integrator_step"] is step
         assert (bound["HOLDS_JOINTS"], bound["DEFERS"]) == (info.joints, info.defers)
         assert (bound["integrator_materialise"] is getattr(module, "materialise", None)) == info.defers
+        assert (bound["joint_position"] is joint_stages.joint_position) == info.joints
         assert loop.SCRATCH_WIDTH == module.SCRATCH_WIDTH
         assert info.chunk() is info.chunk()  # one dispatcher per integrator: compiled or loaded once
     names = {get_integrator(n).chunk().run_chunk.py_func.__qualname__ for n in INTEGRATORS}
     assert len(names) == len(INTEGRATORS)  # each loop has cache files of its own
     # the module's own names stand for no integrator: its function runs only as bound
     assert chunk_loop.integrator_step is chunk_loop._unbound and not chunk_loop.HOLDS_JOINTS
+    assert chunk_loop.joint_position is chunk_loop._unbound
 
 
 def test_a_loop_runs_the_joint_stages_only_where_its_integrator_holds_joints():
