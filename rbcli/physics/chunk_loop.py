@@ -3,26 +3,26 @@ for many steps. Written once; compiled once per integrator.
 
 Where the loops of two integrators differ, `run_chunk` names a module-level constant of this module:
 `integrator_step` (the integrator module's `step`, or `step_parallel` for the loop on threads),
-`HOLDS_JOINTS` (split2, the one integrator that holds joints: the joint stages run) and `DEFERS` with
-`integrator_materialise` (exact, which defers the state of torque-free bodies: its `materialise` runs).
-`fixed_step_loop` compiles the function with its own copy of those four names for one integrator, so
-numba sees constants: it prunes the `if HOLDS_JOINTS:` and `if DEFERS:` branches of the other
-integrators before it types the loop (its dead-branch pruning of global constants) and inlines the one
-`step` into the loop (STEP_ENTRY, physics/step.py), exactly as a loop written for that integrator
-alone. A scene's first run therefore compiles its own integrator and nothing of the others, and each
-integrator's loop is cached on its own (a qualified name of its own: `run_chunk[split2]`, ...).
+`HOLDS_JOINTS` (split2, the one integrator that holds joints: the joint stages `joint_begin` ...
+`joint_record` run, bound only into its loop) and `DEFERS` with `integrator_materialise` (exact, which
+defers the state of torque-free bodies: its `materialise` runs). `fixed_step_loop` compiles the
+function with its own copy of the module's globals, those names bound for one integrator, so numba sees
+constants: it prunes the other integrators' `if HOLDS_JOINTS:` and `if DEFERS:` branches before it
+types the loop (its dead-branch pruning of global constants) and inlines the one `step` (STEP_ENTRY,
+physics/step.py), exactly as in a loop written for that integrator alone. A scene's first run compiles
+its own integrator and nothing of the others, and each integrator's loop has cache files of its own
+(its qualified name: `run_chunk[split2]`, ...).
 
 Why not the integrator as an argument: numba cannot cache a loop that takes the step as an argument
-(its cache index would hold a dispatcher object that does not exist in the next process); an
-integer choosing at run time would compile every integrator's step (numba compiles both sides of a
-branch); and an integrator passed as an empty named tuple, resolved by a `numba.extending.overload`,
-costs either a call per step (each array of the model and the tables passed by value: a free body's
-split2 step 87 -> 153 ns) or, inlined, a second full compile of the step (numba compiles an inlined
-overload's implementation on its own before inlining it: a free body's first run 6.1 -> 13.7 s CPU).
+(its cache index would hold a dispatcher object that does not exist in the next process); an integer
+choosing at run time compiles every integrator's step (numba compiles both sides of a branch); and an
+integrator passed as an empty named tuple that a `numba.extending.overload` resolves to its step
+costs a call per step, every array passed by value, or, inlined, a second compile of the whole step
+(docs/performance.md, "The chunk loop as code").
 
-The optional stages of physics/stages.py are chosen the same way, from the types of the model's and
-the force tables (None where the scene lacks them: physics/dispatch.py). The runner (runner/loop.py)
-owns time, chunk sizes, sinks and interrupts; a chunk loop never prints, writes files or allocates.
+The optional stages (physics/stages.py) are chosen by the types of the model's and the force tables
+instead (None where the scene lacks them: physics/dispatch.py). The runner (runner/loop.py) owns time,
+chunk sizes, sinks and interrupts; a chunk loop never prints, writes files or allocates.
 """
 
 from __future__ import annotations
