@@ -110,7 +110,7 @@ class Simulation:
         # whether the joints' last (sub-)step impulses describe the step that led to the current state:
         # not before a step, nor after set_state or reset (restore: when the checkpoint carries them)
         self.reactions_known = False
-        if tolerance is not None:  # the error-controlled loop, generated from the same stages (physics/adaptive.py)
+        if tolerance is not None:  # the error-controlled loop (physics/adaptive_loop.py, the method: adaptive.py)
             self._chunk = info.adaptive_chunk().run_chunk
             self.data = make_data(
                 compiled.initial_state, self.model, 0, adaptive=True, tolerance=tolerance,

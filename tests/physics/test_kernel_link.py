@@ -70,9 +70,10 @@ class Recorder(ev.Listener):
 ev.register("numba:compile", Recorder())
 
 from rbcli.physics import kernel_link
-from rbcli.physics.chunks.split2 import run_chunk
+from rbcli.physics.integrators import get_integrator
 from rbcli.runner.simulation import Simulation
 
+run_chunk = get_integrator("split2").chunk().run_chunk
 out = {"runs": [], "separate": None}
 for path in sys.argv[1:]:
     start = len(compiled)
@@ -120,7 +121,7 @@ def test_a_second_kind_of_scene_compiles_none_of_the_first_ones_functions_and_li
     names_a = {name for name, _ in compiled_a}
     # the empty cache really compiled A's loop and joint stages, and B compiled a loop of its own types...
     assert {f"rbcli.physics.joints.stages.{stage}" for stage in JOINT_STAGES} <= names_a, sorted(names_a)
-    assert any(name == "rbcli.physics.chunks.split2.run_chunk" for name, _ in compiled_b)
+    assert any(name == "rbcli.physics.chunk_loop.run_chunk[split2]" for name, _ in compiled_b)
     # ...but none of rbcli's functions with the types A already compiled it for (its stages are reused, not
     # recompiled; numba's own overload implementations, builtins min and max, are compiled again for each
     # calling function's options, so B's contact kernels bring their own), and no joint stage at all: B's
