@@ -15,7 +15,7 @@ A step from grid index n (t = n dt) to n + 1 runs, in this order:
       contact_begin   the contact springs' clock: the (sub-)step being taken            (contact/force.py)
       kinematic_begin kinematic bodies at their exact pose, at their mean velocity  (physics/kinematic.py)
       update          the integrator's maths (integrators/<name>.py `step`); every force evaluation it
-                      needs is the force pass `forces/wrench.accumulate_wrench`, generated from its own
+                      needs is the force pass `forces/wrench.accumulate_wrench`, the stages of its own
                       list of force stages (forces/stage_list.py FORCE_STAGES: gravity, fields, point
                       forces, torques, springs, drag, contact), each present only when the scene has it
       kinematic_end   kinematic bodies at their exact state at the end of the (sub-)step

@@ -1,34 +1,25 @@
 """The step pipeline: the stage list of physics/pipeline.py is what the chunk loops run, in its order,
-and each integrator's loop is compiled with its own step and only the stages its integrator has.
-
-    python tests/physics/test_pipeline.py --regenerate    # rewrite rbcli/physics/forces/wrench_pass.py
-"""
+and each integrator's loop is compiled with its own step and only the stages its integrator has; the
+force pass (forces/wrench_pass.py) calls the stages of forces/stage_list.py FORCE_STAGES in its order."""
 
 from __future__ import annotations
 
 import ast
-import importlib.util
 import inspect
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from rbcli.physics import adaptive_loop, chunk_loop
-from rbcli.physics.forces.stage_list import FORCE_STAGES, ForceStage, wrench_source
+from rbcli.physics.forces import wrench_pass
+from rbcli.physics.forces.stage_list import FORCE_STAGES
 from rbcli.physics.integrators import INTEGRATORS, get_integrator
 from rbcli.physics.joints import stages as joint_stages
 from rbcli.physics.pipeline import STEP_STAGES
 
 PHYSICS = Path(__file__).resolve().parents[2] / "rbcli" / "physics"
-WRENCH_PASS = PHYSICS / "forces" / "wrench_pass.py"
 STAGE_CALLS = {stage.fixed for stage in STEP_STAGES} | {stage.adaptive for stage in STEP_STAGES}
-
-
-def regenerate() -> None:
-    WRENCH_PASS.write_text(wrench_source())
-    print("wrote", WRENCH_PASS)
 
 
 def _loop(module) -> ast.FunctionDef:  # noqa: ANN001
@@ -157,58 +148,59 @@ def test_a_loop_runs_the_joint_stages_only_where_its_integrator_holds_joints():
             assert np.max(np.abs(x - free_fall)) < 1e-12, name
 
 
-def test_committed_force_pass_is_generated_from_the_force_stage_list():
-    assert WRENCH_PASS.read_text() == wrench_source(), f"{WRENCH_PASS} is stale: run this file with --regenerate"
+def _force_pass_calls() -> list[tuple[str, bool, str]]:
+    """(stage, called only under `if dissipative:`, the comment line above the call) of every stage call
+    in accumulate_wrench, in source order; gravity's stage is its inline accumulate_gravity call."""
+    source = inspect.getsource(wrench_pass)
+    lines = source.splitlines()
+    function = next(
+        node
+        for node in ast.parse(source).body
+        if isinstance(node, ast.FunctionDef) and node.name == "accumulate_wrench"
+    )
+    found = []
+
+    def visit(node: ast.AST, dissipative: bool) -> None:
+        for child in ast.iter_child_nodes(node):
+            gated = dissipative or (
+                isinstance(child, ast.If) and isinstance(child.test, ast.Name) and child.test.id == "dissipative"
+            )
+            if isinstance(child, ast.Call) and isinstance(child.func, ast.Name):
+                name = child.func.id
+                stage = "gravity" if name == "accumulate_gravity" else name.removesuffix("_stage")
+                if name == "accumulate_gravity" or name.endswith("_stage"):
+                    statement = child.lineno - 1
+                    while not lines[statement - 1].strip().startswith("#"):  # up to the comment above
+                        statement -= 1
+                    found.append((stage, dissipative, lines[statement - 1].strip().removeprefix("# ")))
+            visit(child, gated)
+
+    visit(function, False)
+    return found
+
+
+def test_the_force_pass_calls_the_force_stages_in_the_list_order():
     names = ["gravity", "field", "point_force", "torque", "spring", "drag", "contact"]
     assert [stage.name for stage in FORCE_STAGES] == names
     assert [stage.name for stage in FORCE_STAGES if stage.dissipative] == ["drag"]
     assert [stage.name for stage in FORCE_STAGES if not stage.tables] == ["gravity"]  # a flag, no table
+    calls = _force_pass_calls()
+    assert [name for name, _, _ in calls] == names
+    for stage, (_, dissipative, comment) in zip(FORCE_STAGES, calls, strict=True):
+        assert dissipative == stage.dissipative, stage.name
+        assert comment == stage.why, stage.name
 
 
-# A force stage as a new force type would add one: a constant world force on every body that has a field
-# row, dispatched on the field table (so it compiles away where fields do), added after the list's own.
-KICK = 1.5  # [N], world y
-KICK_STAGE = ForceStage(
-    "kick",
-    "kick: a constant force on the bodies of the field rows (test stage)",
-    (),
-    f"for row in range(forces.field.body.shape[0]):\n    F[forces.field.body[row], 1] += {KICK!r}",
-    tables=("forces.field",),
-)
-
-
-def test_a_force_stage_added_to_the_list_runs_in_the_generated_pass(tmp_path):
-    """Gravity only: F = M g exactly. With the kick stage: the same plus KICK in y on the body that has
-    the field row, exactly (no other stage touches F_y here), and the stage compiled away when the
-    field table is None (KernelForceTables of a scene without fields): F = M g again. The force table
-    is built by hand: a zero field on body 1 (it adds exactly 0.0), whose row names the kicked body."""
-    from conftest import make_scene, random_bodies
-
-    from rbcli.api import prepare
-    from rbcli.physics.forces import NO_SCHEDULE, make_force_data
-    from rbcli.physics.forces.tables import field_table
-
-    path = tmp_path / "kicked_pass.py"
-    path.write_text(wrench_source((*FORCE_STAGES, KICK_STAGE)))
-    spec = importlib.util.spec_from_file_location("_test_kicked_pass", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    compiled = prepare(make_scene(random_bodies(3, seed=4), gravity=np.array([0.0, 0.0, -9.81])))
-    model, s = compiled.model.kernel(), compiled.initial_state
-    bodies, force_data = compiled.model.kernel_bodies(), make_force_data(model)  # as a chunk loop passes them
-    field = field_table(body=[1], per_mass=[False], value=[[0.0, 0.0, 0.0]], gradient=[np.zeros((3, 3))],
-                        schedule=[NO_SCHEDULE])  # fmt: skip
-    with_field = compiled.forces._replace(field=field)
-    expected = compiled.model.body_mass[:, None] * np.array([0.0, 0.0, -9.81])
-    for forces, kick in ((with_field.kernel(), KICK), (compiled.forces.kernel(), 0.0)):  # only what each has
-        F, tau = np.zeros((3, 3)), np.zeros((3, 3))
-        module.accumulate_wrench(bodies, forces, model.contact, force_data, 0.0, s.x, s.q, s.P, s.L, F, tau)
-        assert np.array_equal(F[:, 0::2], expected[:, 0::2])
-        assert np.array_equal(F[:, 1], np.array([0.0, kick, 0.0]))
-
-
-if __name__ == "__main__":
-    if "--regenerate" in sys.argv:
-        regenerate()
-    else:
-        print(__doc__)
+def test_each_force_stage_is_dispatched_on_its_tables():
+    """`<name>_stage = force_stage(_<name>, *tables)` in wrench_pass.py, with FORCE_STAGES' tables: the
+    dispatcher compiles the stage to nothing where one of them is None."""
+    tree = ast.parse(inspect.getsource(wrench_pass))
+    dispatched = {}
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and isinstance(node.value, ast.Call):
+            call = node.value
+            if isinstance(call.func, ast.Name) and call.func.id == "force_stage":
+                target = node.targets[0].id  # type: ignore[attr-defined]
+                assert call.args[0].id == "_" + target.removesuffix("_stage")  # type: ignore[attr-defined]
+                dispatched[target.removesuffix("_stage")] = tuple(arg.value for arg in call.args[1:])  # type: ignore[attr-defined]
+    assert dispatched == {stage.name: stage.tables for stage in FORCE_STAGES if stage.tables}

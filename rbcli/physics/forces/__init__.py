@@ -2,9 +2,9 @@
 
 Force types are data: `ForceTables` holds one parameter table per type (`tables.py`), with 0 rows
 when the scene does not use it, so the compiled step does no work for terms a scene does not have,
-and a table lists only the bodies its terms touch. The compiled force pass `accumulate_wrench` is
-generated from one list, `stage_list.py: FORCE_STAGES` (into `wrench_pass.py`; each stage's dispatcher
-comes from `stages.py: force_stage`).
+and a table lists only the bodies its terms touch. The compiled force pass `accumulate_wrench`
+(`wrench_pass.py`) calls the stages of one list, `stage_list.py: FORCE_STAGES`, in its order (each
+stage's dispatcher comes from `stages.py: force_stage`).
 
 Adding a force type, in physics/ (what each place is for):
   1. its module here: the compiled `accumulate_<name>` kernel, a numpy reference, a potential energy
@@ -12,8 +12,9 @@ Adding a force type, in physics/ (what each place is for):
   2. `tables.py`: its table (NamedTuple + constructor), a field in ForceTables and KernelForceTables
      (numba needs a typed field per table: a dict of tables would not compile), and its TERM_<NAME>
      counter in TERM_NAMES (`force_terms_present` and `ForceTables.kernel()` then cover it);
-  3. one entry in `stage_list.py: FORCE_STAGES`, then `python tests/physics/test_pipeline.py
-     --regenerate` (the dispatcher and the call in accumulate_wrench are generated);
+  3. one entry in `stage_list.py: FORCE_STAGES` and its stage in `wrench_pass.py` (a `_<name>`
+     function, its `<name>_stage = force_stage(...)` dispatcher and the call in accumulate_wrench, where
+     the list puts it: tests/physics/test_pipeline.py checks the two agree);
   4. the Python side that is not compiled: a line each in `wrench.py: wrench_numpy` and, when
      conservative, `potential_energy` (each reference has its own arguments), a keyword of
      `build_force_tables`, and its torque rule in `terms_with_torque` / `bodies_with_torque` when it can

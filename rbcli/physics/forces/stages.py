@@ -1,7 +1,7 @@
 """The force pass's stages, each called through a dispatcher that compiles to nothing when the scene
 does not have it: numba compiles only the force types a scene has (physics/dispatch.py says why).
 
-The force pass (forces/wrench_pass.accumulate_wrench, generated from forces/stage_list.py FORCE_STAGES)
+The force pass (forces/wrench_pass.accumulate_wrench, the stages of forces/stage_list.py FORCE_STAGES)
 calls each stage that has a table through a dispatcher made here by `force_stage`, from the stage's
 code and the tables it needs, each adding its rows to `counts` (the ForceData.term_evaluations
 counter). Gravity has no table (a flag and a vector) and is not dispatched. The pipeline's own optional
@@ -25,7 +25,7 @@ def force_stage(run: Callable[..., None], *tables: str) -> Callable[..., None]:
     """The dispatcher of a force stage: compiles to `run(model, forces, contact, force_data, t, x, q, P, L,
     F, tau, counts, dissipative)` when each of `tables` ("forces.<field>", "force_data.<field>", or
     "contact": the model's contact table) is a table in the caller's argument types, and to nothing when
-    one is None. `run` is a plain function of the generated forces/wrench_pass.py, compiled with the step
+    one is None. `run` is a plain function of forces/wrench_pass.py, compiled with the step
     kernels' options into its caller."""
     owners = tuple(table.partition(".")[::2] for table in tables)
 

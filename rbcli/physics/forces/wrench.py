@@ -1,7 +1,7 @@
 """The total wrench of all force terms on every body: `accumulate_wrench`, the one function integrators
 call, and its numpy reference and the potential energy.
 
-`accumulate_wrench` is generated (forces/wrench_pass.py) from the one list of force stages,
+`accumulate_wrench` (forces/wrench_pass.py) calls the one list of force stages,
 forces/stage_list.py FORCE_STAGES: gravity, per-particle fields, point forces, torques,
 springs-dampers, drag, contact (physics/contact: broad phase and contact forces), then static bodies
 held (their wrench zeroed), each a loop over its own table's rows only (rows list only touched bodies).
