@@ -17,8 +17,8 @@ import typer
 
 from rbcli.cli import messages
 from rbcli.cli.exit_codes import ExitCode, signal_exit
-from rbcli.runner.threads import ENV as THREADS_ENV
 from rbcli.runner.threads import AUTO, PARALLEL_MIN_BODIES, parse_threads
+from rbcli.runner.threads import ENV as THREADS_ENV
 
 if TYPE_CHECKING:
     from rbcli.runner.compile_progress import CompileProgress
