@@ -27,8 +27,10 @@ EARLY_REJECT = 1.5  # the short run is rejected when its cost per step is this m
 # (a wrong switch to threads under load costs more than a missed gain), one thread merely win
 SWITCH_GAIN = {True: 1.1, False: 1.0}  # keyed by "the probe has more threads"
 MIN_WAIT = 2  # slices of the current choice before the first probe, and after a switch
-MAX_WAIT = 64  # the longest wait between probes (~3 s of slices)
-CHANGE = 1.5  # the current choice's cost moved by this factor since the last comparison: probe soon
+# the longest wait between probes (~1.6 s of slices): a load that leaves without changing the current
+# choice's speed (a second run that kept to its own core) is noticed this late
+MAX_WAIT = 32
+CHANGE = 1.3  # the current choice's cost moved by this factor since the last comparison: probe soon
 SMOOTHING = 0.3  # weight of a new slice in the current choice's running mean
 
 
