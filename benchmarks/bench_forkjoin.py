@@ -77,20 +77,22 @@ def child(pattern: str, seconds: float, repeats: int, forever: bool) -> None:
         print("ready", flush=True)
         while True:
             rounds(a, b, 1000, n, serial)
-    # rounds per timed run: about `seconds` on one thread
-    started = time.perf_counter()
-    numba.set_num_threads(1)
-    rounds(a, b, 50, n, serial)
-    reps = max(20, int(50 * seconds / max(time.perf_counter() - started, 1e-9)))
+    # rounds per timed run: about `seconds` on each thread count (a loaded 2-thread round can cost 100x)
+    reps = {}
+    for threads in (1, 2):
+        numba.set_num_threads(threads)
+        started = time.perf_counter()
+        rounds(a, b, 20, n, serial)
+        reps[threads] = max(5, int(20 * seconds / max(time.perf_counter() - started, 1e-9)))
     per = {1: [], 2: []}
     cpu = []
     for _ in range(repeats):
         for threads in (1, 2):
             numba.set_num_threads(threads)
             wall, process = time.perf_counter(), time.process_time()
-            rounds(a, b, reps, n, serial)
+            rounds(a, b, reps[threads], n, serial)
             wall, process = time.perf_counter() - wall, time.process_time() - process
-            per[threads].append(wall / reps)
+            per[threads].append(wall / reps[threads])
             if threads == 2:
                 cpu.append(process / wall)
     print(json.dumps({
