@@ -6,8 +6,9 @@ change between any two steps without changing a result. The governor runs its cu
 of ~SLICE_SECONDS and keeps a running mean of its wall seconds per step. Now and then it probes the
 other choice: first a short run (PROBE_FRACTION of a slice), rejected at once when it is slower by
 EARLY_REJECT, then a whole slice, taken when it beats the current choice (by SWITCH_GAIN). A rejected
-probe doubles the slices until the next one (up to MAX_WAIT), so a choice that keeps losing costs
-little: under a load that made threads 10x slower, a short probe every MAX_WAIT slices would cost ~4 %.
+probe doubles the slices until the next one (up to MAX_WAIT), and probes are sized in wall time from
+the other choice's last cost, so a choice that keeps losing costs little however much slower it is: a
+short probe (PROBE_FRACTION of a slice's time) every MAX_WAIT slices is < 1 %.
 A switch, or the current choice's cost moving by CHANGE since the last comparison (load came or went),
 brings the next probe forward. It starts on one thread, the safe choice while nothing is known, and
 the first run of each choice (which launches or wakes its threads) is not measured.
@@ -21,7 +22,7 @@ from __future__ import annotations
 # a slice's wall time: ~25 us of Python and dispatch per slice is ~0.05 % of it, and it spans several of
 # the scheduler's time slices (~3 ms), so a slice that lost the core for one of them still measures the rate
 SLICE_SECONDS = 0.05
-PROBE_FRACTION = 0.25  # a probe's short run, as a fraction of a slice's steps
+PROBE_FRACTION = 0.25  # a probe's short run, as a fraction of a slice's time
 EARLY_REJECT = 1.5  # the short run is rejected when its cost per step is this much above the current's
 # the whole-slice probe must be this much cheaper per step to take over: more threads must win clearly
 # (a wrong switch to threads under load costs more than a missed gain), one thread merely win
@@ -63,9 +64,10 @@ class ThreadGovernor:
             self.probe = "short"
         if self.probe is None:
             threads, steps = self.current, self.slice_steps
-        else:
+        else:  # sized in time from the other choice's last cost: a probe of a much slower choice stays short
             threads = self.other
-            steps = max(1, round(self.slice_steps * PROBE_FRACTION)) if self.probe == "short" else self.slice_steps
+            seconds = self.slice_seconds * (PROBE_FRACTION if self.probe == "short" else 1.0)
+            steps = max(1, int(seconds / self.cost.get(threads, self.cost[self.current])))
         if threads not in self.warm:
             steps = 1
         return threads, max(1, min(steps, remaining))
@@ -81,7 +83,9 @@ class ThreadGovernor:
         per_step = seconds / steps
         if threads == self.current:
             self._current_ran(per_step)
-        elif self.probe == "short":
+            return
+        self.cost[threads] = per_step  # the other choice's latest cost sizes its next probe
+        if self.probe == "short":
             if per_step > EARLY_REJECT * self.cost[self.current]:
                 self._reject()
             else:

@@ -132,3 +132,15 @@ def test_noisy_timings_keep_the_targets(seed):
     assert mean * steps * loaded(1, 0) / wall > 0.85
     wall, _ = drive(ThreadGovernor(2), noisy(idle), steps)
     assert mean * steps * idle(1, 0) / wall > 1.55  # of 1.82 on threads all along
+
+
+def test_probes_of_a_much_slower_choice_stay_short():
+    """Threads 10x slower (issue 45's 0.10x): probes are sized in time from the last one, so even a
+    2.5 s run (5,000 steps; its first probes come every few slices) keeps >= 0.9x one thread."""
+
+    def much_slower(threads: int, index: int) -> float:
+        return ONE * (10.0 if threads > 1 else 1.0)
+
+    steps = 5_000
+    wall, _ = drive(ThreadGovernor(2), much_slower, steps)
+    assert steps * ONE / wall > 0.9
