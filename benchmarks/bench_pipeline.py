@@ -1,9 +1,9 @@
 """The step pipeline's cost, measured in one run (run on demand, not a test):
 
-1. the generated chunk loops (rbcli/physics/chunks/, impulse and record stages around the update)
+1. the chunk loops (rbcli/physics/chunk_loop.py, impulse and record stages around the update)
    against a frozen copy of the pre-pipeline loops (benchmarks/frozen_chunks.py), split2 and rk4, at
    N = 1, 100, 10,000 free bodies under gravity: interleaved medians, ratio new / frozen (target <= 1.05);
-2. the Python API `Simulation.step(1000)` against the bare generated chunk for the same 1,000 steps
+2. the Python API `Simulation.step(1000)` against the bare chunk loop for the same 1,000 steps
    (targets: <= 1.3x at N = 1, <= 1.1x at N = 100 and 10,000);
 3. `load_scene` + compile of a 10,000-body generated scene (target < 0.3 s; reported, not asserted).
 
@@ -59,7 +59,7 @@ def steps_for(n: int) -> int:
 
 
 def compare_chunks(integrator: str, n: int, repeats: int) -> tuple[float, float]:
-    """Median seconds per step of (generated, frozen), timed alternately from the same initial state."""
+    """Median seconds per step of (chunk loop, frozen), timed alternately from the same initial state."""
     sim = rbcli.Simulation(free_bodies(n, integrator))
     # the tables as runs pass them (None for unused force types: their stages compiled away)
     km, forces, initial = sim.model.kernel(), sim.forces.kernel(), sim.compiled.initial_state
@@ -140,8 +140,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=15)
     args = parser.parse_args()
-    print("generated chunk loops vs the frozen pre-pipeline loops (median ns per step, interleaved)")
-    print(f"{'integrator':<10} {'N':>6} {'generated':>12} {'frozen':>12} {'ratio':>7}")
+    print("chunk loops (chunk_loop.py) vs the frozen pre-pipeline loops (median ns per step, interleaved)")
+    print(f"{'integrator':<10} {'N':>6} {'loop':>12} {'frozen':>12} {'ratio':>7}")
     for integrator in ("split2", "rk4"):
         for n in (1, 100, 10_000):
             new, old = compare_chunks(integrator, n, args.repeats)

@@ -1,7 +1,7 @@
 """Frozen copy of the chunk loops as they were before the step pipeline (one per integrator module,
 positional state arrays, impulses applied by the runner between chunks), for split2 and rk4.
 
-bench_pipeline.py times the generated loops of rbcli/physics/chunks/ against these in the same run
+bench_pipeline.py times the chunk loops of rbcli/physics/chunk_loop.py against these in the same run
 (interleaved medians): the refactor must keep the chunk kernels within 5 % of them. Do not edit
 beyond following the step signature (force_data, the force pass's mutable arrays, and contact, the
 model's contact table, came later).

@@ -338,7 +338,7 @@ def broken_scene(draw, huge_sizes=(1000, 5000), **valid_options) -> str:
             text_edits.append((repr(float(marker)), draw(st.sampled_from([".nan", ".inf", "-.inf", ".NaN", ".Inf"]))))
         elif defect == "huge":
             one = {"particles": {"positions": [[0, 0, 0]], "masses": 1, "radius": 0.1}}
-            big = draw(st.sampled_from(["positions", "masses", "count", "grid", "random", "spacing", "steps"]))
+            big = draw(st.sampled_from(["positions", "masses", "count", "grid", "random", "chain", "spacing", "steps"]))
             n = draw(st.sampled_from(huge_sizes))
             cloud = _first_cloud(scene)
             if big == "positions" and cloud is not None:
@@ -371,6 +371,19 @@ def broken_scene(draw, huge_sizes=(1000, 5000), **valid_options) -> str:
                             "name": "huge",
                             "count": 10**8,
                             "box": {"min": [0, 0, 0], "max": [1, 1, 1]},
+                            "template": one,
+                        }
+                    }
+                )
+            elif big == "chain":
+                scene["bodies"].append(
+                    {
+                        "chain": {
+                            "name": "huge",
+                            "count": draw(st.sampled_from([100001, 10**8, 2**40])),
+                            "direction": [1.0, 0.0, 0.0],
+                            "spacing": 0.1,
+                            "joint": {"type": "ball"},
                             "template": one,
                         }
                     }

@@ -95,14 +95,24 @@ def _joints_line(spec) -> str:  # noqa: ANN001 - a SceneSpec with joints
     """The joints by type, their constraint rows, and the loops they close: a joint whose two ends the
     earlier joints already connect (through the world too) closes a loop, and the solver takes its rows as
     auxiliary rows (docs/joint_solver.md, "Loops")."""
+    import numpy as np
+
     kinds = Counter(joint.kind for joint in spec.joints)
     text = "joints: " + ", ".join(f"{count} {kind}" for kind, count in kinds.items())
-    table = spec.compiled_model.model.joint
+    compiled = spec.compiled_model
+    if compiled.parts is not None:  # welds merge bodies (scene/welds.py): they have no rows
+        merged = int(np.count_nonzero(~compiled.parts.alone))
+        bodies = len(set(compiled.parts.part_body[~compiled.parts.alone].tolist()))
+        text += f"; welds merge {merged} bodies into {bodies}" if merged else "; welds to the world: static"
+    table = compiled.model.joint
+    if table is None:
+        return text + "; no constraint rows"
     text += f"; {int(table.row_count.sum()):,} constraint rows"
     closing = [int(j) for j in (table.graph.joint_node < 0).nonzero()[0]]  # the solver's loop joints
     if not closing:
         return text + "; no loop"
-    names = ", ".join(repr(spec.joints[j].name) for j in closing)
+    joints = (compiled.simulated or spec).joints  # the table's joints: welds merged
+    names = ", ".join(repr(joints[j].name) for j in closing)
     loops = f"{len(closing)} loop{'s' * (len(closing) != 1)}"
     return text + f"; {loops}, closed by {names} ({table.graph.loop_joint.shape[0]:,} auxiliary rows)"
 

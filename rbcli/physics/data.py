@@ -43,7 +43,7 @@ JOINT_REACTIONS = "joint.joint_impulse"
 
 
 class KernelAdaptive(NamedTuple):
-    """What the adaptive loop (chunks/dopri5_adaptive.py) reads besides the state: see Data."""
+    """What the adaptive loop (physics/adaptive_loop.py) reads besides the state: see Data."""
 
     work: np.ndarray
     control: np.ndarray

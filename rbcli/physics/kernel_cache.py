@@ -23,7 +23,7 @@ without importing numba.np.arraymath, and gets the bits of the process that comp
 
 A cache that cannot serve a stale kernel. numba keys a function's cache on its own source file (the
 index holds a hash of that file's contents, and an index with another hash is discarded) and on its
-bytecode, never on its callees: a chunk loop in chunks/split2.py inlines and links accumulate_contact of
+bytecode, never on its callees: split2's chunk loop (chunk_loop.py) inlines and links accumulate_contact of
 contact/force.py, so an edit of force.py left the cached loop running the old contact force (the
 head-on restitution tests passed with the dashpot deleted, issue 30). `install()` therefore folds
 `physics_source_hash()` (SHA-256 of every rbcli/physics/**/*.py file, path and contents) into the source

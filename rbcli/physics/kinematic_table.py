@@ -10,6 +10,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from rbcli.physics.table_arrays import frozen_floats, frozen_ints
+
 
 class KinematicTable(NamedTuple):
     """The prescribed motions of a scene's kinematic bodies, one row each."""
@@ -25,18 +27,6 @@ class KinematicTable(NamedTuple):
     orientation: np.ndarray  # q0 (row_count, 4) wxyz, world-from-principal at t = 0
 
 
-def _f(values, *shape: int) -> np.ndarray:  # noqa: ANN001
-    out = np.ascontiguousarray(np.asarray(values, dtype=np.float64).reshape((-1, *shape)))
-    out.setflags(write=False)
-    return out
-
-
-def _i(values) -> np.ndarray:  # noqa: ANN001
-    out = np.ascontiguousarray(np.asarray(values, dtype=np.int64).reshape(-1))
-    out.setflags(write=False)
-    return out
-
-
 def kinematic_table(
     body=(),  # noqa: ANN001
     schedule=(),  # noqa: ANN001
@@ -48,5 +38,12 @@ def kinematic_table(
 ) -> KinematicTable:
     """A KinematicTable with consistent dtypes (empty: a scene without kinematic bodies)."""
 
-    return KinematicTable(_i(body), _i(schedule), _f(velocity, 3), _f(angular_velocity, 3), _f(pivot, 3),
-                          _f(position, 3), _f(orientation, 4))  # fmt: skip
+    return KinematicTable(
+        frozen_ints(body),
+        frozen_ints(schedule),
+        frozen_floats(velocity, 3),
+        frozen_floats(angular_velocity, 3),
+        frozen_floats(pivot, 3),
+        frozen_floats(position, 3),
+        frozen_floats(orientation, 4),
+    )

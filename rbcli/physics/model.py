@@ -72,7 +72,7 @@ class KernelBodies(NamedTuple):
     """The model's body and particle arrays as compiled kernels take them (a numba-friendly named tuple):
     what every kernel below the chunk loops takes as `model`. One numba type for every scene, so a stage
     kernel compiled for one kind of scene serves every other (physics/kernel_link.py); the chunk loops
-    take the whole KernelModel and pass its tables by name (physics/pipeline.py)."""
+    take the whole KernelModel and pass its tables by name (physics/chunk_loop.py)."""
 
     body_mass: np.ndarray  # [kg], (body_count,)
     body_inertia: np.ndarray  # principal moments [kg m^2], (body_count, 3)

@@ -1,4 +1,4 @@
-"""The optional stages of a step that the chunk loops call (physics/pipeline.py), each through a
+"""The optional stages of a step that the chunk loops call (physics/pipeline.py lists them), each through a
 dispatcher that compiles to nothing when the scene does not have it (physics/dispatch.py): impulses,
 contact_begin, kinematic_begin, kinematic_end, contact_commit, contact_record; and for adaptive stepping
 the contacts' step limit, the next step that holds an impulse and the schedules' step floor.

@@ -1,4 +1,4 @@
-"""Shared pieces of the chunk loops (physics/pipeline.py generates the loops themselves): the frame
+"""Shared pieces of the chunk loops (physics/chunk_loop.py, physics/adaptive_loop.py): the frame
 buffers, the recording stage `record_if_due`, the divergence check, the chunk status codes and
 `model_bodies`, the model's body arrays that the loops hand every stage.
 

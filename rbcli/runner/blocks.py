@@ -1,4 +1,7 @@
-"""Turn raw recorded states (internal principal frame) into FrameBlocks for the sinks."""
+"""Turn raw recorded states (internal principal frame) into FrameBlocks for the sinks.
+
+The raw states are the simulated bodies'; a scene with welds records its own bodies (the parts,
+scene/parts.py) and its welds' reactions (runner/weld_reactions.py), its invariants from the simulated ones."""
 
 from __future__ import annotations
 
@@ -6,9 +9,11 @@ import numpy as np
 
 from rbcli.physics.energy import CONTACT_INVARIANT_NAMES, JOINT_INVARIANT_NAMES, invariants_from_totals
 from rbcli.physics.frames import particle_world
+from rbcli.physics.model import Model
 from rbcli.physics.outputs import TOTALS_WIDTH, derive_outputs
 from rbcli.record.frame import FrameBlock
 from rbcli.scene.compile import CompiledScene
+from rbcli.scene.parts import part_states
 
 
 def make_block(
@@ -20,23 +25,34 @@ def make_block(
     L: np.ndarray,
     contact: np.ndarray | None = None,
     joint: np.ndarray | None = None,
+    previous: np.ndarray | None = None,
 ) -> FrameBlock:
     """A FrameBlock of K frames from raw (K, N, ...) arrays; copies, so buffers can be reused. contact:
     (K, 4) the contact statistics of each frame (FrameBuffers.contact), for scenes with contact; joint:
-    (K, J, 12) the joints' reactions (FrameBuffers.joint), kept with the joint_forces stream."""
+    (K, J, 12) the joints' reactions (FrameBuffers.joint), kept with the joint_forces stream. previous:
+    scenes with welds, (K, N, 13) the state one step before each frame (x, q, P, L; NaN: unknown), from
+    which the welds' reactions are read."""
     model, settings = compiled.model, compiled.settings
     q_user, v, omega = np.empty_like(q), np.empty_like(P), np.empty_like(L)
     totals = np.empty((q.shape[0], TOTALS_WIDTH))
     derive_outputs(model.body_mass, 1.0 / model.body_inertia, model.body_frame_q, x, q, P, L, q_user, v, omega, totals)
+    recorded = (x.copy(), q, P.copy(), L.copy())
+    parts = compiled.parts
+    if parts is not None:  # the scene's bodies, welded ones on their simulated body
+        recorded = part_states(parts, model, x, q, P, L)
+        body = parts.model
+        q_user, v, omega = np.empty_like(recorded[1]), np.empty_like(recorded[2]), np.empty_like(recorded[3])
+        derive_outputs(body.body_mass, 1.0 / body.body_inertia, body.body_frame_q, *recorded, q_user, v, omega,
+                       np.empty_like(totals))  # fmt: skip
     block = FrameBlock(
         step=step.astype(np.int64, copy=True),
         t=step * settings.dt,
-        x=x.copy(),
+        x=recorded[0],
         q=q_user,
         v=v,
         omega=omega,
-        P=P.copy(),
-        L=L.copy(),
+        P=recorded[2],
+        L=recorded[3],
     )
     if "invariants" in settings.streams:
         block.invariants = invariants_from_totals(model, compiled.forces, x, q, totals)
@@ -50,17 +66,37 @@ def make_block(
             for name, column in zip(JOINT_INVARIANT_NAMES, joint_invariants(compiled, x, q, P, L).T, strict=True):
                 block.invariants[name] = np.ascontiguousarray(column)
     if "particles" in settings.streams:
-        block.particle_position, _ = particle_world(model, x, q, P, L)
+        block.particle_position, _ = particle_world(recorded_model(compiled), *recorded)
     if "contacts" in settings.streams and compiled.contact is not None:
         block.contact_point, block.contact_force = frame_contacts(compiled, x, q, P, L)
-    if recorded_joint_count(compiled):
-        count = recorded_joint_count(compiled)
-        block.joint_force = np.full((q.shape[0], count, 12), np.nan) if joint is None else joint.copy()
+    count = recorded_joint_count(compiled)
+    table = np.full((q.shape[0], count, 12), np.nan) if joint is None else joint.copy()
+    if parts is not None and recorded_joint_names(compiled):
+        from rbcli.runner.weld_reactions import joint_reactions
+
+        block.joint_force = joint_reactions(parts, model, settings.dt, step, previous, (x, q, P, L), table)
+    elif count:
+        block.joint_force = table
     return block
 
 
+def recorded_model(compiled: CompiledScene) -> Model:
+    """The bodies a recording shows: the scene's own (with welds, the parts: scene/parts.py)."""
+    return compiled.parts.model if compiled.parts is not None else compiled.model
+
+
+def recorded_joint_names(compiled: CompiledScene) -> tuple[str, ...]:
+    """The joints whose reactions the recording holds (the joint_forces stream): the scene's, welds too."""
+    if "joint_forces" not in compiled.settings.streams:
+        return ()
+    if compiled.parts is not None:
+        return tuple(joint.name for joint in compiled.spec.joints)
+    return tuple(joint.name for joint in compiled.spec.joints) if compiled.model.joint is not None else ()
+
+
 def recorded_joint_count(compiled: CompiledScene) -> int:
-    """The joints whose reactions the run records: all of them with the joint_forces stream, else 0."""
+    """The joint table's joints whose reactions the chunks record (FrameBuffers.joint): all of them with
+    the joint_forces stream, else 0 (a scene with welds records its welds' beside them: make_block)."""
     table = compiled.model.joint
     if table is None or "joint_forces" not in compiled.settings.streams:
         return 0

@@ -18,7 +18,7 @@ import numpy as np
 from rbcli._version import __version__
 from rbcli.physics.energy import CONTACT_INVARIANT_NAMES, INVARIANT_NAMES, JOINT_INVARIANT_NAMES
 from rbcli.record.frame import FrameBlock, RunHeader, RunSummary, Sink
-from rbcli.runner.blocks import recorded_joint_count
+from rbcli.runner.blocks import recorded_joint_names, recorded_model
 from rbcli.runner.divergence import GUARD_STEPS, JUMP_FACTOR, EnergyGuard, explain, likely_cause
 from rbcli.runner.recorder import Recorder
 from rbcli.scene.compile import CompiledScene
@@ -50,7 +50,7 @@ def frame_capacity(body_count: int) -> int:
 def run_header(compiled: CompiledScene, *, steps: int | None = None, record_every: int | None = None) -> RunHeader:
     """The header every sink receives before the first frame (steps and record_every: what this run
     uses when it is not the scene's own)."""
-    spec, model, settings = compiled.spec, compiled.model, compiled.settings
+    spec, model, settings = compiled.spec, recorded_model(compiled), compiled.settings
     return RunHeader(
         scene_name=spec.name,
         scene_text=spec.source_text,
@@ -69,7 +69,7 @@ def run_header(compiled: CompiledScene, *, steps: int | None = None, record_ever
         rbsim_version=__version__,
         seed=settings.seed,
         tolerance=settings.tolerance,
-        joint_names=tuple(joint.name for joint in spec.joints) if recorded_joint_count(compiled) else (),
+        joint_names=recorded_joint_names(compiled),
         invariant_names=(
             (
                 *INVARIANT_NAMES,
@@ -149,6 +149,9 @@ def run_simulation(
             record_contact_state(sim.model.contact, contact, state.x, state.q, buf.contact, frames)
         if buf.joint.shape[1]:  # the last step's reactions (joint_record's), unknown before any step
             buf.joint[frames] = sim.last_reactions() if sim.reactions_known else np.nan
+        previous = recorder.previous(buf)
+        if previous is not None:  # welds: the state before the last step, their reactions' other end
+            previous[frames] = sim.previous_state()
         return frames + 1
 
     handed_at = checkpointed_at = time.perf_counter()
@@ -180,7 +183,7 @@ def run_simulation(
                 if frames == capacity:  # a chunk needs room for at least one frame
                     frames = hand_over(frames)
                 before = frames
-                done, frames, code = sim.advance(todo, every, buf, frames)
+                done, frames, code = sim.advance(todo, every, buf, frames, recorder.previous(buf))
                 state.step += int(done)
                 elapsed = time.perf_counter() - started
                 if code == STATUS_NO_ROOM:

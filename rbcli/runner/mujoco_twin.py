@@ -77,7 +77,7 @@ def refusal(compiled: CompiledScene) -> str | None:
         terms.append("static bodies")
     if contact.sphere_body.size and "contact" not in terms:
         terms.append("contact")
-    if compiled.model.joint is not None:  # the twin builds free bodies only (a jointed twin: next)
+    if compiled.model.joint is not None or compiled.parts is not None:  # free bodies only (a jointed twin: next)
         terms.append("joints")
     if terms:
         return (

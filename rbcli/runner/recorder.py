@@ -29,7 +29,7 @@ import numpy as np
 
 from rbcli.physics.step import FrameBuffers, empty_buffers
 from rbcli.record.frame import Checkpoint, FrameBlock, RunHeader, RunSummary, Sink
-from rbcli.runner.blocks import make_block, recorded_joint_count
+from rbcli.runner.blocks import make_block, recorded_joint_count, recorded_joint_names
 from rbcli.scene.compile import CompiledScene
 
 # Buffers in flight: one being filled, one being written, one ready; more only adds memory.
@@ -46,8 +46,13 @@ class Recorder:
         self._threaded = threaded
         n = compiled.model.body_count
         self._free: queue.Queue[FrameBuffers] = queue.Queue()
+        # welds recording their reactions: beside each buffer, the state one step before each of its frames
+        self._previous: dict[int, np.ndarray] = {}
         for _ in range(POOL_BUFFERS if threaded else 1):
-            self._free.put(empty_buffers(capacity, n, recorded_joint_count(compiled)))
+            buffers = empty_buffers(capacity, n, recorded_joint_count(compiled))
+            if compiled.parts is not None and recorded_joint_names(compiled):
+                self._previous[id(buffers)] = np.full((capacity, n, 13), np.nan)
+            self._free.put(buffers)
         self._todo: queue.Queue[tuple[FrameBuffers, int, Checkpoint | None] | None] = queue.Queue()
         self._thread: threading.Thread | None = None
         self._error: BaseException | None = None
@@ -66,6 +71,11 @@ class Recorder:
                 return self._free.get(timeout=_WAIT_SECONDS)
             except queue.Empty:
                 continue
+
+    def previous(self, buffers: FrameBuffers) -> np.ndarray | None:
+        """The array beside `buffers` for the state one step before each frame (scenes with welds that
+        record the joint_forces stream: runner/weld_reactions.py), else None."""
+        return self._previous.get(id(buffers))
 
     def write_blocks(self, blocks: Iterable[FrameBlock]) -> None:
         """Write ready-made blocks to every sink, in this thread, before any buffer is submitted (a
@@ -128,10 +138,11 @@ class Recorder:
         b = buffers
         # the last frames before a divergence hold huge numbers whose squares overflow to inf in the
         # invariants: that is what the log should show, without numpy warnings on the terminal
+        previous = self.previous(b)
         with np.errstate(over="ignore", invalid="ignore"):
             block = make_block(
                 self._compiled, b.step[:frames], b.x[:frames], b.q[:frames], b.P[:frames], b.L[:frames],
-                b.contact[:frames], b.joint[:frames],
+                b.contact[:frames], b.joint[:frames], None if previous is None else previous[:frames],
             )  # fmt: skip
             for sink in self._sinks:
                 sink.write(block)

@@ -99,19 +99,25 @@ def _copied_frames(plan: ResumePlan) -> Iterator[FrameBlock]:
     from rbcli.physics.frames import internal_orientation
     from rbcli.physics.rotation import quat_to_matrix
     from rbcli.record.mcap_recovery import iter_mcap_frames_before
-    from rbcli.runner.blocks import frame_contacts
+    from rbcli.runner.blocks import frame_contacts, recorded_model
+    from rbcli.scene.parts import merged_state
 
-    model = plan.compiled.model
-    particles = "particles" in plan.compiled.settings.streams
-    contacts = "contacts" in plan.compiled.settings.streams and plan.compiled.contact is not None
+    compiled = plan.compiled
+    model = recorded_model(compiled)  # the recorded bodies: with welds, the scene's parts
+    particles = "particles" in compiled.settings.streams
+    contacts = "contacts" in compiled.settings.streams and compiled.contact is not None
     body_of = np.repeat(np.arange(model.body_count), model.body_particle_count)
     for block in iter_mcap_frames_before(plan.log, plan.checkpoint.step):
         if particles:  # x + R(q_user) r_user: the recorded pose moves the user-frame cloud
             R = quat_to_matrix(block.q)[:, body_of]
             block.particle_position = block.x[:, body_of] + np.einsum("kpij,pj->kpi", R, model.particle_offset_user)
         if contacts:
-            q = internal_orientation(model, block.q)
-            block.contact_point, block.contact_force = frame_contacts(plan.compiled, block.x, q, block.P, block.L)
+            x, q, P, L = block.x, internal_orientation(model, block.q), block.P, block.L
+            if compiled.parts is not None:  # the simulated bodies' states, which the contacts are of
+                states = [merged_state(compiled.parts, compiled.model, *(a[k] for a in (x, q, P, L)))
+                          for k in range(len(block))]  # fmt: skip
+                x, q, P, L = (np.stack([s[i] for s in states]) for i in range(4))
+            block.contact_point, block.contact_force = frame_contacts(compiled, x, q, P, L)
         yield block
 
 

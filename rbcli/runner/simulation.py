@@ -12,7 +12,9 @@
 
 A Simulation owns the compiled scene (constant Model and force tables, runner settings) and one Data
 (every mutable array, physics/data.py). The user's frames (the particle frame given in the scene) are
-converted to the internal principal frame only here and in the recording blocks.
+converted to the internal principal frame only here and in the recording blocks; so are the scene's
+bodies welded into one simulated body (scene/welds.py): `state`, `set_state` and `joint_reactions` show
+the scene's bodies (scene/parts.py).
 """
 
 from __future__ import annotations
@@ -28,9 +30,11 @@ from rbcli.physics.data import make_data
 from rbcli.physics.frames import body_angular_velocity, internal_orientation, user_orientation
 from rbcli.physics.integrators import get_integrator
 from rbcli.physics.rotation import quat_rotate, quat_rotate_inverse
+from rbcli.physics.state import State
 from rbcli.runner.governor import ThreadGovernor
 from rbcli.runner.threads import chunk_threads, contact_threads, plan_threads, prepare_pool, serial_reason
 from rbcli.scene.compile import CompiledScene, RunOptions, RunOverrides
+from rbcli.scene.parts import merged_state, part_states
 
 if TYPE_CHECKING:
     from rbcli.record.frame import Checkpoint, RunSummary, Sink
@@ -39,6 +43,8 @@ if TYPE_CHECKING:
 
 # record_every for steps that record nothing: no grid index below 2^62 is a multiple of it but 0
 NEVER = 2**62
+# a checkpoint's array of the simulated state before its step, in scenes with welds (their reactions)
+WELD_PREVIOUS = "weld.previous"
 
 
 class SimulationDiverged(RuntimeError):
@@ -108,7 +114,7 @@ class Simulation:
         # whether the joints' last (sub-)step impulses describe the step that led to the current state:
         # not before a step, nor after set_state or reset (restore: when the checkpoint carries them)
         self.reactions_known = False
-        if tolerance is not None:  # the error-controlled loop, generated from the same stages (physics/adaptive.py)
+        if tolerance is not None:  # the error-controlled loop (physics/adaptive_loop.py, the method: adaptive.py)
             self._chunk = info.adaptive_chunk().run_chunk
             self.data = make_data(
                 compiled.initial_state, self.model, 0, adaptive=True, tolerance=tolerance,
@@ -142,6 +148,10 @@ class Simulation:
                 compiled.initial_state, self.model, chunk.SCRATCH_WIDTH, substeps=self.settings.substeps,
                 contact_threads=self.contact_threads,
             )  # fmt: skip
+        # welds (scene/welds.py): the scene's bodies on the simulated ones, and the simulated state before the
+        # last step, (body_count, 13) x, q, P, L, from which the welds' reactions are read (runner/weld_reactions.py)
+        self.parts = compiled.parts
+        self._previous: np.ndarray | None = None
         self._kmodel = self.model.kernel()  # None for the tables the scene lacks: their stages compile away
         self._kforces = self.forces.kernel()  # None for unused force types, likewise
         self._kdata = self.data.kernel()
@@ -193,37 +203,48 @@ class Simulation:
         self,
         n_steps: int,
         record_every: int = NEVER,
-        frames=None,
-        filled: int = 0,  # noqa: ANN001 - FrameBuffers
+        frames=None,  # noqa: ANN001 - FrameBuffers
+        filled: int = 0,
+        previous: np.ndarray | None = None,
     ) -> tuple[int, int, int]:
         """At most n_steps grid steps from the current one, recording due frames into `frames` (from
         `filled` on; None: record nothing); returns (steps done, frames filled, status) and raises nothing.
-        The caller adds the steps done to `data.state.step` (the runner does, between chunks)."""
+        The caller adds the steps done to `data.state.step` (the runner does, between chunks). previous:
+        scenes with welds recording the joint_forces stream, (K, body_count, 13), where the state one step
+        before each recorded frame goes (x, q, P, L: the welds' reactions are read off that step)."""
         if frames is None:
             frames, record_every = self._no_frames, NEVER
-        if self.governor is not None and n_steps > 0:
-            return self._advance_governed(self.governor, n_steps, record_every, frames, filled)
-        if max(self.threads, self.contact_threads) > 1:  # per calling thread in numba; launches its pool
-            import numba  # on the first call
+        if self.governor is None and max(self.threads, self.contact_threads) > 1:  # per calling thread in numba;
+            import numba  # launches its pool on the first call (with a governor: per slice, _run_governed)
 
             numba.set_num_threads(max(self.threads, self.contact_threads))
-        done, filled, status = self._chunk(
-            self._kmodel, self._kforces, self._kdata, self.settings.dt, self.data.state.step, n_steps,
-            record_every, frames, filled,
-        )  # fmt: skip
+        # adaptive runs land their steps on the chunk's ends: a stop one step early would change them (runs
+        # must not depend on chunking), so their welds' reactions stay unknown (NaN)
+        if self.parts is not None and n_steps and not self.adaptive:
+            done, filled, status = self._advance_welded(n_steps, record_every, frames, filled, previous)
+        else:
+            done, filled, status = self._run_chunk(self.data.state.step, n_steps, record_every, frames, filled)
         if done:
             self.reactions_known = True
         return done, filled, status
 
-    def _advance_governed(
+    def _run_chunk(self, step0: int, n_steps: int, record_every: int, frames, filled: int) -> tuple[int, int, int]:  # noqa: ANN001
+        if self.governor is not None and n_steps > 0:
+            return self._run_governed(self.governor, step0, n_steps, record_every, frames, filled)
+        return self._chunk(
+            self._kmodel, self._kforces, self._kdata, self.settings.dt, step0, n_steps, record_every, frames, filled
+        )
+
+    def _run_governed(
         self,
         governor: ThreadGovernor,
+        step0: int,
         n_steps: int,
         record_every: int,
         frames,  # noqa: ANN001 - FrameBuffers
         filled: int,
     ) -> tuple[int, int, int]:
-        """`advance` in the governor's slices, each on the threads it chose (the threaded loop on one
+        """`_run_chunk` in the governor's slices, each on the threads it chose (the threaded loop on one
         thread is the serial loop's arithmetic: the same bits, ~the serial loop's speed)."""
         import time
 
@@ -237,15 +258,47 @@ class Simulation:
             numba.set_num_threads(threads)
             started = time.perf_counter()
             ran, filled, status = self._chunk(
-                self._kmodel, self._kforces, self._kdata, self.settings.dt, self.data.state.step + done, steps,
-                record_every, frames, filled,
+                self._kmodel, self._kforces, self._kdata, self.settings.dt, step0 + done, steps, record_every,
+                frames, filled,
             )  # fmt: skip
             governor.record(threads, ran, time.perf_counter() - started)
             done += ran
             if status != STATUS_OK or ran < steps:
                 break
-        if done:
-            self.reactions_known = True
+        return done, filled, status
+
+    def _advance_welded(
+        self,
+        n_steps: int,
+        record_every: int,
+        frames,
+        filled: int,
+        previous: np.ndarray | None,  # noqa: ANN001
+    ) -> tuple[int, int, int]:
+        """`advance` in a scene with welds: the chunk stops one step before each recorded step (when
+        `previous` (K, body_count, 13) is given, for the joint_forces stream) and before the last step, so
+        the state before those steps is kept: the welds' reactions are read off the step (module
+        runner/weld_reactions.py). Bitwise the same steps as one chunk: a chunk carries nothing else."""
+        from rbcli.physics.step import STATUS_OK
+
+        s = self.data.state
+        start, end = s.step, s.step + n_steps
+        done, status = 0, STATUS_OK
+        while done < n_steps and status == STATUS_OK:
+            index = start + done
+            due = (index // record_every + 1) * record_every if previous is not None else end
+            target = min(due, end)
+            if target - index > 1:  # nothing is recorded before `target`
+                ran, filled, status = self._run_chunk(index, target - 1 - index, record_every, frames, filled)
+                done += ran
+                continue
+            before = np.concatenate([s.x, s.q, s.P, s.L], axis=1)
+            if previous is not None and target == due and filled < previous.shape[0]:
+                previous[filled] = before
+            ran, filled, status = self._run_chunk(index, 1, record_every, frames, filled)
+            if ran:
+                self._previous = before
+            done += ran
         return done, filled, status
 
     def threads_report(self) -> str:
@@ -276,15 +329,19 @@ class Simulation:
     def state(self) -> BodyState:
         """A copy of the current state in the user's frames (see BodyState)."""
         s, model = self.data.state, self.model
+        x, q, P, L = s.x.copy(), s.q, s.P.copy(), s.L.copy()
+        if self.parts is not None:  # the scene's bodies, welded ones on their simulated body
+            x, q, P, L = part_states(self.parts, model, s.x, s.q, s.P, s.L)
+            model = self.parts.model
         return BodyState(
             step=s.step,
             t=self.time,
-            x=s.x.copy(),
-            q=user_orientation(model, s.q),
-            v=s.P / model.body_mass[:, None],
-            omega=body_angular_velocity(model, s.q, s.L),
-            P=s.P.copy(),
-            L=s.L.copy(),
+            x=x,
+            q=user_orientation(model, q),
+            v=P / model.body_mass[:, None],
+            omega=body_angular_velocity(model, q, L),
+            P=P,
+            L=L,
         )
 
     @property
@@ -296,10 +353,35 @@ class Simulation:
         sub-steps, the last sub-step's). Zeros before the first step; {} in a scene without joints.
         A kick's reaction (an impulse on a jointed body, or initial velocities that break a joint: the
         step's joint_begin projection) is not in it: it is an impulse, not a force over the step."""
+        if self.parts is not None:
+            names = [joint.name for joint in self.compiled.spec.joints]
+            reactions = self.scene_reactions()
+            return {name: reaction.reshape(2, 6) for name, reaction in zip(names, reactions, strict=True)}
         if self.data.joint is None:
             return {}
         names = [joint.name for joint in self.compiled.spec.joints]
         return {name: reaction.reshape(2, 6) for name, reaction in zip(names, self.last_reactions(), strict=True)}
+
+    def scene_reactions(self) -> np.ndarray:
+        """(scene joints, 12): `joint_reactions` in the scene's joint order, the welds' among them (their
+        reactions over the last step: runner/weld_reactions.py); NaN for a weld before the first step."""
+        if self.parts is None:
+            return self.last_reactions()
+        from rbcli.runner.weld_reactions import joint_reactions
+
+        s = self.data.state
+        previous = self._previous if self.reactions_known else None
+        table = self.last_reactions() if self.reactions_known else np.full_like(self.last_reactions(), np.nan)
+        return joint_reactions(
+            self.parts, self.model, self.settings.dt, np.array([s.step]), None if previous is None else previous[None],
+            (s.x[None], s.q[None], s.P[None], s.L[None]), table[None],
+        )[0]  # fmt: skip
+
+    def previous_state(self) -> np.ndarray:
+        """(body_count, 13): the simulated state before the last step (x, q, P, L), NaN when unknown."""
+        if self.reactions_known and self._previous is not None:
+            return self._previous
+        return np.full((self.model.body_count, 13), np.nan)
 
     def last_reactions(self) -> np.ndarray:
         """(J, 12): `joint_reactions` as one array in joint order (the joint_forces stream's layout)."""
@@ -326,6 +408,11 @@ class Simulation:
         work is cleared, as at the start of a run.
         """
         s, model = self.data.state, self.model
+        parts = self.parts
+        if parts is not None:  # the scene's bodies: set on a copy of theirs, the simulated ones follow
+            model = parts.model
+            x_p, q_p, P_p, L_p = part_states(parts, self.model, s.x, s.q, s.P, s.L)
+            s = State(x_p, q_p, P_p, L_p, s.step)
         n = model.body_count
 
         def rows(value: np.ndarray, width: int, name: str) -> np.ndarray:
@@ -359,8 +446,13 @@ class Simulation:
             if step < 0:
                 raise ValueError(f"step must be >= 0, got {step}")
             s.step = int(step)
+        if parts is not None:  # each simulated body follows its first part (scene/parts.py merged_state)
+            state = self.data.state
+            state.x[:], state.q[:], state.P[:], state.L[:] = merged_state(parts, self.model, s.x, s.q, s.P, s.L)
+            state.step = s.step
         self.data.clear_work()
         self.reactions_known = False
+        self._previous = None
 
     def checkpoint(self) -> Checkpoint:
         """A copy of everything the run carries between steps (Checkpoint): `restore` it into a
@@ -370,6 +462,8 @@ class Simulation:
         from rbcli.record.frame import Checkpoint
 
         arrays = {name: array.copy() for name, array in self.data.carried().items()}
+        if self.parts is not None and self.reactions_known and self._previous is not None:
+            arrays[WELD_PREVIOUS] = self._previous.copy()  # read by no step: the welds' first resumed reactions
         return Checkpoint(step=int(self.data.state.step), t=self.time, arrays=arrays)
 
     def restore(self, checkpoint: Checkpoint) -> None:
@@ -379,9 +473,16 @@ class Simulation:
             raise ValueError(f"checkpoint step must be >= 0, got {checkpoint.step}")
         from rbcli.physics.data import JOINT_REACTIONS
 
-        self.data.restore_carried(checkpoint.arrays)
+        arrays = dict(checkpoint.arrays)
+        previous = arrays.pop(WELD_PREVIOUS, None) if self.parts is not None else None
+        self.data.restore_carried(arrays)
         self.data.state.step = int(checkpoint.step)
-        self.reactions_known = checkpoint.step > 0 and JOINT_REACTIONS in checkpoint.arrays
+        self._previous = None
+        if previous is not None and np.shape(previous) == (self.model.body_count, 13):
+            self._previous = np.array(previous, dtype=np.float64)
+        # the last step's reactions are known when the checkpoint carries them (welds: the state before it)
+        carried = JOINT_REACTIONS in arrays if self.data.joint is not None else self._previous is not None
+        self.reactions_known = checkpoint.step > 0 and carried
 
     def reset(self) -> None:
         """Back to the scene's initial state at step 0, with cleared work arrays."""
@@ -391,6 +492,7 @@ class Simulation:
         s.step = 0
         self.data.clear_work()
         self.reactions_known = False
+        self._previous = None
         if self.data.adaptive_counters is not None:
             self.data.adaptive_counters[:] = 0
         self.data.force.term_evaluations[:] = 0

@@ -432,7 +432,8 @@ def study(
         raise ValueError(f"the minimum timing must be >= 0 s, got {min_time}")
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
     spec = _study_spec(scene)
-    names = tuple(integrators) if integrators else applicable_integrators(jointed=bool(spec.joints))
+    jointed = any(joint.kind != "fixed" for joint in spec.joints)  # welds are merged bodies, no constraints
+    names = tuple(integrators) if integrators else applicable_integrators(jointed=jointed)
     infos = [get_integrator(name) for name in names]  # KeyError names the known ones
     adaptive = [i for i in infos if is_adaptive(i)]  # also by tolerance (their fixed-step rows fit the order)
     dts = tuple(sorted({float(d) for d in (dts or default_dts(spec.simulation.dt))}, reverse=True))
@@ -463,7 +464,7 @@ def study(
         return compile_scene(spec, dt=dt / scale, duration=grid.duration, integrator=name, record_every=every)
 
     # joints: the pendulum's exact motion, else the finest run of a method that holds joints
-    ref_name = None if exact or pendulum is not None else reference_integrator(jointed=bool(spec.joints))
+    ref_name = None if exact or pendulum is not None else reference_integrator(jointed=jointed)
     dt_ref = min(dts) / REFERENCE_REFINEMENT
     tolerances = tuple(tolerances or DEFAULT_TOLERANCES)
     total = float(len(dts) * (len(infos) + len(mujoco_methods)) + len(adaptive) * len(tolerances) + 1)

@@ -93,7 +93,7 @@ class BodyResolver:
     # ---- entries -----------------------------------------------------------------------------------
     def body(self, entry: dict[str, Any], path: YamlPath) -> BodySpec | None:
         """One `{name, ...}` entry."""
-        proto = self._prototype(entry, path)
+        proto = self.prototype(entry, path)
         if proto is None:
             return None
         position = entry.get("position", [0.0, 0.0, 0.0])
@@ -110,7 +110,7 @@ class BodyResolver:
                 (*gpath, "count"), f"{total:,} bodies is too many", f"at most {MAX_GENERATED_BODIES:,} bodies"
             )
             return []
-        proto = self._prototype(gen["template"], (*gpath, "template"))
+        proto = self.prototype(gen["template"], (*gpath, "template"))
         if proto is None:
             return []
         spacing = np.broadcast_to(np.asarray(gen["spacing"], dtype=float), (3,))
@@ -164,7 +164,7 @@ class BodyResolver:
                 key=True,
             )
             ok = False
-        proto = self._prototype(template, (*gpath, "template"))
+        proto = self.prototype(template, (*gpath, "template"))
         if proto is None or not ok:
             return []
         rng = np.random.default_rng(int(gen.get("seed", 0)))
@@ -194,7 +194,9 @@ class BodyResolver:
         return bodies
 
     # ---- a body without name and position -------------------------------------------------------------
-    def _prototype(self, entry: dict[str, Any], path: YamlPath) -> BodySpec | None:
+    def prototype(self, entry: dict[str, Any], path: YamlPath) -> BodySpec | None:
+        """The body an entry (or a generator's template) describes, named "" at the origin (the generators,
+        here and in scene/chains.py, copy it with each body's name and position); None with its errors."""
         before = self.issues.error_count
         cloud = self._cloud(entry, path)
         if cloud is not None and self._check_numbers(cloud, entry, path):

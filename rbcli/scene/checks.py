@@ -31,7 +31,7 @@ if TYPE_CHECKING:  # for the annotations only: compile.py runs these checks (Com
 
 
 def _inverse_effective_mass(compiled: CompiledScene, end: BodyPoint) -> float:
-    spec, model = compiled.spec, compiled.model
+    spec, model = compiled.simulated_spec, compiled.model  # welds merged: the model's bodies
     b = model.body_names.index(end.body)
     body = spec.bodies[b]
     start = int(model.body_particle_start[b])
@@ -134,7 +134,7 @@ def stability_warnings(compiled: CompiledScene) -> list[SceneIssue]:
     the contact warnings (`contact_warnings`)."""
     dt = compiled.settings.dt
     issues = contact_warnings(compiled)
-    for force in compiled.spec.forces:
+    for force in compiled.simulated_spec.forces:  # the springs as simulated (welded ends re-expressed)
         if not isinstance(force, ForceSpring) or force.stiffness <= 0.0:
             continue
         inv_mass = _inverse_effective_mass(compiled, force.end_a)

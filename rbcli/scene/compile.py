@@ -20,6 +20,7 @@ from rbcli.physics.state import STATE_LIMIT, State
 from rbcli.scene.compile_contact import ContactSummary, compile_contact, kinematic_initial_state, kinematic_rows
 from rbcli.scene.compile_forces import compile_force_tables
 from rbcli.scene.contact_speed import impact_bound
+from rbcli.scene.parts import PartView
 from rbcli.scene.spec import SceneError, SceneIssue, SceneSpec
 
 
@@ -93,6 +94,11 @@ class CompiledModel:
     forces: ForceTables
     initial_state: State
     contact: ContactSummary | None = None  # None: the scene has no contact section
+    # with welds (scene/welds.py): the scene's bodies as parts of the simulated bodies (every output shows the
+    # parts), the simulated scene the model was compiled from, and what the merge could not keep exactly
+    parts: PartView | None = None
+    simulated: SceneSpec | None = None
+    warnings: tuple[SceneIssue, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -105,6 +111,14 @@ class CompiledScene:
     initial_state: State
     settings: RunSettings
     contact: ContactSummary | None = None
+    parts: PartView | None = None  # the scene's bodies on the simulated ones (welds: CompiledModel.parts)
+    simulated: SceneSpec | None = None  # the scene the model was compiled from (welds merged); None: spec
+    weld_warnings: tuple[SceneIssue, ...] = ()
+
+    @property
+    def simulated_spec(self) -> SceneSpec:
+        """The scene as simulated: welded bodies merged into one (scene/welds.py), else the scene itself."""
+        return self.simulated if self.simulated is not None else self.spec
 
     @property
     def scene_sha256(self) -> str:
@@ -116,11 +130,12 @@ class CompiledScene:
         stability limit against the effective dt, whatever the scene's own dt was)."""
         from rbcli.scene.checks import stability_warnings
 
-        issues = [*self.spec.warnings, *stability_warnings(self)]
-        if self.spec.joints:
+        issues = [*self.spec.warnings, *self.weld_warnings, *stability_warnings(self)]
+        simulated = self.simulated_spec
+        if simulated.joints:
             from rbcli.scene.compile_joints import redundant_row_warnings
 
-            issues += redundant_row_warnings(self.spec.joints, self.model.joint, self.model, self.initial_state)
+            issues += redundant_row_warnings(simulated.joints, self.model.joint, self.model, self.initial_state)
         return sorted(issues, key=SceneIssue.order)
 
 
@@ -136,31 +151,21 @@ def compile_scene(
     """Model, forces and initial state (compiled once per spec: reused from loading when there) with the
     run settings: the scene's, changed by `options` and then by keyword overrides (RunOptions' fields)."""
     base = spec.compiled_model if isinstance(spec.compiled_model, CompiledModel) else compile_model(spec)
-    settings = run_settings(spec, (options or RunOptions()).merged(overrides), contact=base.contact)
-    return CompiledScene(spec, base.model, base.forces, base.initial_state.copy(), settings, base.contact)
+    settings = run_settings(
+        spec, (options or RunOptions()).merged(overrides), contact=base.contact, jointed=base.model.joint is not None
+    )
+    return CompiledScene(spec, base.model, base.forces, base.initial_state.copy(), settings, base.contact,
+                         base.parts, base.simulated, base.warnings)  # fmt: skip
 
 
-def compile_model(spec: SceneSpec) -> CompiledModel:
+def compile_model(spec: SceneSpec, *, merge_welds: bool = True) -> CompiledModel:
     """The model, force tables and initial state of a validated scene; SceneError for what only the
-    assembled scene shows (singular inertia, a force naming an unknown body or particle)."""
-    try:
-        model, centres = build_model(
-            [b.name for b in spec.bodies],
-            [b.particle_position for b in spec.bodies],
-            [b.particle_mass for b in spec.bodies],
-            [b.particle_radius for b in spec.bodies],
-        )
-    except ValueError as exc:
-        body = next((b for b in spec.bodies if repr(b.name) in str(exc)), None)
-        raise SceneError([SceneIssue(body.location if body else None, str(exc))]) from None
-    kinematic = np.array([b.kinematic for b in spec.bodies], dtype=bool)
-    if kinematic.any():
-        # a kinematic body spins uniformly about its given angular velocity: with an isotropic inertia
-        # (the mean principal moment) torque-free rotation is exactly that, for every integrator
-        inertia = model.body_inertia.copy()
-        inertia[kinematic] = inertia[kinematic].mean(axis=1, keepdims=True)
-        inertia.setflags(write=False)
-        model = replace(model, body_inertia=inertia)
+    assembled scene shows (singular inertia, a force naming an unknown body or particle). Bodies joined by
+    `fixed` joints are merged into one simulated body (scene/welds.py); merge_welds=False keeps them as
+    bodies held by 6-row constraints instead (the joint kernels' tests: a weld's rows stay tested)."""
+    if merge_welds and any(joint.kind == "fixed" for joint in spec.joints):
+        return _compile_welded(spec)
+    model, centres = _bodies_model(spec)
     state = initial_state(spec, model)
     _check_initial_state(spec, state)
     body_index = {name: i for i, name in enumerate(model.body_names)}
@@ -183,6 +188,71 @@ def compile_model(spec: SceneSpec) -> CompiledModel:
         joints = compile_joints(spec.joints, spec.bodies, model, centres, state, has_contact=spec.contact is not None)
         model = replace(model, joint=joints)
     return CompiledModel(model, forces, state, summary)
+
+
+def _bodies_model(spec: SceneSpec) -> tuple[Model, np.ndarray]:
+    """The model of the scene's bodies (build_model, errors located at the body) and their user-frame
+    centres of mass; kinematic bodies isotropic."""
+    try:
+        model, centres = build_model(
+            [b.name for b in spec.bodies],
+            [b.particle_position for b in spec.bodies],
+            [b.particle_mass for b in spec.bodies],
+            [b.particle_radius for b in spec.bodies],
+        )
+    except ValueError as exc:
+        body = next((b for b in spec.bodies if repr(b.name) in str(exc)), None)
+        raise SceneError([SceneIssue(body.location if body else None, str(exc))]) from None
+    kinematic = np.array([b.kinematic for b in spec.bodies], dtype=bool)
+    if kinematic.any():
+        # a kinematic body spins uniformly about its given angular velocity: with an isotropic inertia
+        # (the mean principal moment) torque-free rotation is exactly that, for every integrator
+        inertia = model.body_inertia.copy()
+        inertia[kinematic] = inertia[kinematic].mean(axis=1, keepdims=True)
+        inertia.setflags(write=False)
+        model = replace(model, body_inertia=inertia)
+    return model, centres
+
+
+def _compile_welded(spec: SceneSpec) -> CompiledModel:
+    """compile_model of a scene with welds: the scene's bodies as parts (their own model, initial state and
+    force tables, for the outputs and the welds' reactions), the simulated scene of the welded bodies merged
+    (scene/welds.py) compiled as any scene, and the PartView between them."""
+    from rbcli.scene.compile_joints import compile_joints
+    from rbcli.scene.welds import merge_welds, part_view
+
+    parts, centres = _bodies_model(spec)
+    parts_state = initial_state(spec, parts)
+    _check_initial_state(spec, parts_state)
+    index = {name: i for i, name in enumerate(parts.body_names)}
+    # what the welds' own entries say is checked as for any joint (anchors that miss each other at the
+    # initial poses, both ends fixed): they hold nothing as constraints, but a wrong one is still wrong
+    welds = [joint for joint in spec.joints if joint.kind == "fixed"]
+    compile_joints(welds, spec.bodies, parts, centres, parts_state, has_contact=spec.contact is not None)
+    # the external force and torque on each part, for the welds' reactions (runner/weld_reactions.py)
+    part_forces, _ = compile_force_tables(spec.gravity, spec.forces, parts, index, centres)
+    merge = merge_welds(spec, parts, centres, parts_state)
+    base = compile_model(merge.spec, merge_welds=False)
+    model = base.model
+    static = np.array([b.static for b in merge.spec.bodies], dtype=bool)
+    if static.any() and not model.contact.static_body.shape[0]:
+        # a body welded to the world in a scene without contact: a contact table of no spheres holds it
+        # (the contact stage zeroes a static body's wrench; its momenta are zero from the start)
+        from rbcli.physics.contact.tables import contact_table
+
+        n = model.body_count
+        with np.errstate(invalid="ignore"):  # the empty bodies' boxes: inf - inf, masked there
+            hold = contact_table(
+                static_body=np.flatnonzero(static), body_inv_contact_mass=np.where(static, 0.0, 1.0 / model.body_mass),
+                body_stiffness=np.ones(n), body_damping_ratio=np.zeros(n), body_friction=np.zeros(n),
+            )  # fmt: skip
+        model = replace(model, contact=hold)
+    contact_parts = np.zeros(len(spec.bodies), dtype=bool)
+    if spec.contact is not None:
+        contact_parts[:] = [b.collide for b in spec.bodies]
+    view = replace(part_view(merge, parts, model, base.initial_state, parts_state), forces=part_forces,
+                   contact_parts=contact_parts)  # fmt: skip
+    return CompiledModel(model, base.forces, base.initial_state, base.contact, view, merge.spec, merge.warnings)
 
 
 def _jointed_pairs(spec: SceneSpec, body_index: dict[str, int], body_count: int) -> np.ndarray:
@@ -228,10 +298,15 @@ def _check_initial_state(spec: SceneSpec, state: State) -> None:
 
 
 def run_settings(
-    spec: SceneSpec, options: RunOptions | None = None, *, contact: ContactSummary | None = None
+    spec: SceneSpec,
+    options: RunOptions | None = None,
+    *,
+    contact: ContactSummary | None = None,
+    jointed: bool | None = None,
 ) -> RunSettings:
     """The scene's run settings with `options` applied: the one place run options meet the scene.
-    contact: the compiled contacts' summary, whose stable step sets `contact.substeps: auto`.
+    contact: the compiled contacts' summary, whose stable step sets `contact.substeps: auto`. jointed:
+    the compiled model has joint rows (None: the scene has joints other than welds, which are merged).
 
     Every value, given or the scene's, passes the checks the scene loader makes (load.py `_simulation`):
     dt and duration positive and finite, duration / dt a finite number of at least one step, a known
@@ -292,7 +367,9 @@ def run_settings(
     name = integrator if integrator is not None else sim.integrator
     from rbcli.physics.integrators import check_integrator
 
-    refusal = check_integrator(name, joints=bool(spec.joints))
+    if jointed is None:
+        jointed = any(joint.kind != "fixed" for joint in spec.joints)
+    refusal = check_integrator(name, joints=jointed)
     if refusal is not None and refusal.key == "integrator":
         raise refuse("integrator", name, f"{refusal.reason}; {refusal.expected}")
     if tolerance is not None or sim.tolerance is not None:
@@ -320,7 +397,7 @@ def run_settings(
         if settings.tolerance is not None:
             substeps = 1  # adaptive steps are capped at the contacts' stable step instead (physics/adaptive.py)
         settings = replace(settings, substeps=int(substeps))
-    refusal = check_integrator(settings.integrator, tolerance=settings.tolerance is not None, joints=bool(spec.joints))
+    refusal = check_integrator(settings.integrator, tolerance=settings.tolerance is not None, joints=jointed)
     if refusal is not None:
         raise ValueError(refusal.reason)
     return settings

@@ -87,9 +87,14 @@ def lattice_surface(points: np.ndarray, spacing: float) -> np.ndarray:
     return np.flatnonzero(surface)
 
 
-def _spheres(body: BodySpec, model: Model, b: int, centre: np.ndarray, E: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def spheres_of(
+    body: BodySpec, model: Model, b: int, centre: np.ndarray, E: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """(offsets in the principal frame (k, 3), radii (k,)) of body b's contact spheres; E is its
     user-from-principal rotation."""
+    if body.contact_spheres is not None:  # a welded body: its parts' own spheres (scene/welds.py)
+        centres, radii = body.contact_spheres
+        return (centres - centre) @ E, np.asarray(radii, dtype=float)
     if body.contact_geometry == "sphere":
         return ((np.zeros(3) - centre) @ E)[None, :], np.array([body.contact_size])
     start, count = int(model.body_particle_start[b]), int(model.body_particle_count[b])
@@ -134,7 +139,7 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
         friction[b] = material.friction
         if not body.collide:
             continue
-        off, rad = _spheres(body, model, b, centres_user[b], frames[b])
+        off, rad = spheres_of(body, model, b, centres_user[b], frames[b])
         sphere_body.append(np.full(len(rad), b))
         offsets.append(off)
         radii.append(rad)

@@ -12,6 +12,7 @@ Contact: the compiled ContactTable skips the pairs of jointed bodies (scene/comp
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 
@@ -20,7 +21,7 @@ from rbcli.physics.model import Model
 from rbcli.physics.rotation import quat_conjugate, quat_multiply, quat_to_matrix
 from rbcli.physics.state import State
 from rbcli.scene.joint_spec import WORLD_NAME, JointSpec
-from rbcli.scene.spec import BodySpec, SceneError, SceneIssue
+from rbcli.scene.spec import BodySpec, SceneError, SceneIssue, SourceLocation
 
 # anchors that miss each other by more than this fraction of the bodies' size (at least 1 m: a tiny
 # body's anchors are still read to ~1e-16 m) were not meant to coincide; 1e-9 leaves room for anchors
@@ -28,6 +29,15 @@ from rbcli.scene.spec import BodySpec, SceneError, SceneIssue
 ANCHOR_TOLERANCE = 1e-9
 # axes given per body that differ by more than this [rad] at the initial poses were not meant as one
 AXIS_TOLERANCE = 1e-9
+
+
+class _Frames(NamedTuple):
+    """Every body's rotations at t = 0, shape (body_count, 3, 3): world-from-principal R and
+    user-from-principal E; and its size [m], shape (body_count,) (_body_sizes)."""
+
+    R: np.ndarray
+    E: np.ndarray
+    size: np.ndarray
 
 
 class _Invalid(Exception):
@@ -52,19 +62,29 @@ def compile_joints(
     index = {b.name: i for i, b in enumerate(bodies)}
     rows: dict[str, list] = {
         k: []
-        for k in ("kind", "body_a", "body_b", "anchor_a", "anchor_b", "axis_a", "normal_b", "relative_q", "length",
+        for k in ("kind", "body_a", "body_b", "anchor_a", "anchor_b", "axis_a", "normal_b", "end_q", "length",
                   "damping", "motor_speed", "motor_cap", "limit_lower", "limit_upper", "reference_a", "travel0")
     }  # fmt: skip
-    issues = []
+    # the joints refused, by (place, reason): a generated chain's joints share their place in the file, and
+    # one reason refusing all 5,000 of them is one issue that says how many
+    refused: dict[tuple[SourceLocation | None, str, str], list[str]] = {}
+    frames = _Frames(quat_to_matrix(state.q), quat_to_matrix(model.body_frame_q), _body_sizes(model))  # once
     for joint in joints:
         try:
-            for key, value in _joint_row(joint, index, ground, model, centres_user, state, has_contact).items():
+            for key, value in _joint_row(joint, index, ground, model, centres_user, state, frames).items():
                 rows[key].append(value)
         except _Invalid as exc:
-            where = joint.locations.get(exc.key, joint.location)
-            issues.append(SceneIssue(where, f"joint '{joint.name}': {exc}", exc.expected))
-    if issues:
-        raise SceneError(issues)
+            refused.setdefault((joint.locations.get(exc.key, joint.location), str(exc), exc.expected), []).append(
+                joint.name
+            )
+    end_q = np.array(rows.pop("end_q")).reshape(-1, 2, 4)  # (q_b, q_a) per joint: one product for them all
+    rows["relative_q"] = list(quat_multiply(quat_conjugate(end_q[:, 0]), end_q[:, 1]))
+    if refused:
+        raise SceneError([
+            SceneIssue(where, f"joint '{names[0]}': {reason}" + (f" (and {len(names) - 1:,} more joints given "
+                       "here)" if len(names) > 1 else ""), expected)
+            for (where, reason, expected), names in refused.items()
+        ])  # fmt: skip
     return joint_table(**rows, body_ground=ground)
 
 
@@ -82,7 +102,7 @@ def _joint_row(
     model: Model,
     centres: np.ndarray,
     state: State,
-    has_contact: bool,
+    frames: _Frames,
 ) -> dict[str, object]:
     _unsupported(joint)
     ends = [WORLD if name == WORLD_NAME else index[name] for name in joint.bodies]
@@ -100,8 +120,7 @@ def _joint_row(
             f"both ends are fixed (a static or kinematic body and {what}): the joint holds nothing",
             "at least one end a moving (dynamic) body",
         )
-    R = quat_to_matrix(state.q)  # world-from-principal at t = 0
-    E = quat_to_matrix(model.body_frame_q)  # user-from-principal
+    R, E, sizes = frames
 
     def to_body(end: int, world_vector: np.ndarray, point: bool) -> np.ndarray:
         if end == WORLD:
@@ -134,7 +153,7 @@ def _joint_row(
             assert axes is not None  # the schema requires axis or axes
             axis_a, axis_b = from_user(a, axes[0], False), from_user(b, axes[1], False)
             u_a, u_b = world_vector(a, axis_a), world_vector(b, axis_b)
-            angle = float(np.arctan2(np.linalg.norm(np.cross(u_a, u_b)), np.dot(u_a, u_b)))
+            angle = float(np.arctan2(np.linalg.norm(_cross(u_a, u_b)), np.dot(u_a, u_b)))
             if angle > AXIS_TOLERANCE:
                 raise _Invalid(
                     "axes",
@@ -146,7 +165,7 @@ def _joint_row(
     if joint.kind == "slider":  # only the offset across the axis must vanish: along it is the slider's travel
         u = world_vector(b, normals[0]), world_vector(b, normals[1])
         offset = np.array([offset @ u[0], offset @ u[1], 0.0])
-    size = max(1.0, *(_body_size(model, end) for end in (a, b) if end != WORLD))
+    size = max(1.0, *(float(sizes[end]) for end in (a, b) if end != WORLD))
     length = 0.0
     if joint.kind == "distance":
         length = float(np.linalg.norm(p_a - p_b))
@@ -172,14 +191,13 @@ def _joint_row(
                 "anchors that are the same world point at the initial poses (or one `anchor`)",
             )
     q_b = np.array([1.0, 0.0, 0.0, 0.0]) if b == WORLD else state.q[b]
-    relative = quat_multiply(quat_conjugate(q_b), state.q[a])
     motor = joint.motor
     reference = np.zeros(3)
     travel0 = 0.0
     if joint.kind == "hinge":  # n_b1 at the initial poses, in a's frame: the angle's zero
         reference = R[a].T @ world_vector(b, normals[0])
     if joint.kind == "slider":
-        travel0 = float((p_a - p_b) @ world_vector(b, np.cross(normals[0], normals[1])))
+        travel0 = float((p_a - p_b) @ world_vector(b, _cross(normals[0], normals[1])))
     lower, upper = joint.limits if joint.limits is not None else (-np.inf, np.inf)
     return dict(
         limit_lower=lower,
@@ -196,7 +214,7 @@ def _joint_row(
         anchor_b=anchor_b,
         axis_a=axis_a / np.linalg.norm(axis_a),
         normal_b=normals,
-        relative_q=relative,
+        end_q=(q_b, state.q[a]),  # relative_q = q_b^* q_a, computed for every joint at once
         length=length,
     )
 
@@ -205,16 +223,26 @@ def _normals(axis: np.ndarray) -> np.ndarray:
     """Two unit vectors perpendicular to `axis` and to each other (2, 3)."""
     u = axis / np.linalg.norm(axis)
     helper = np.eye(3)[int(np.argmin(np.abs(u)))]  # the basis vector least parallel to u
-    n1 = np.cross(u, helper)
+    n1 = _cross(u, helper)
     n1 /= np.linalg.norm(n1)
-    return np.array([n1, np.cross(u, n1)])
+    return np.array([n1, _cross(u, n1)])
 
 
-def _body_size(model: Model, body: int) -> float:
-    """The largest particle distance from the body's centre of mass [m] (its size for tolerances)."""
-    start, count = int(model.body_particle_start[body]), int(model.body_particle_count[body])
-    offsets = model.particle_offset[start : start + count]
-    return float(np.max(np.linalg.norm(offsets, axis=1))) if count else 0.0
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b of two 3-vectors, in np.cross's operations (the same bits) without its ~40 us of axis
+    handling per call: a scene compiles a few per joint, and a generated chain has thousands of joints."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+def _body_sizes(model: Model) -> np.ndarray:
+    """Each body's largest particle distance from its centre of mass [m] (its size for tolerances), shape
+    (body_count,); 0 for a body without particles."""
+    sizes = np.zeros(model.body_particle_count.shape[0])
+    filled = model.body_particle_count > 0
+    if np.any(filled):
+        distance = np.linalg.norm(model.particle_offset, axis=1)
+        sizes[filled] = np.maximum.reduceat(distance, model.body_particle_start[filled])
+    return sizes
 
 
 # the dense check of loops builds A = G W G^T densely (R^2 floats, R^3 flops): 3,000 rows is 72 MB, ~1 s

@@ -82,12 +82,17 @@ def _unit(value: Any, path: YamlPath, issues: IssueCollector) -> np.ndarray | No
 
 
 def joints_from_list(
-    entries: Sequence[Any], body_names: Sequence[str], issues: IssueCollector, clean: Any
+    entries: Sequence[Any],
+    body_names: Sequence[str],
+    issues: IssueCollector,
+    clean: Any,
+    taken: dict[str, YamlPath] | None = None,
 ) -> tuple[JointSpec, ...]:
-    """JointSpecs of the `joints:` entries that passed the schema (`clean(path)`); errors go to `issues`."""
+    """JointSpecs of the `joints:` entries that passed the schema (`clean(path)`); errors go to `issues`.
+    taken: joint names already given (a chain's), each with the path where it is given."""
     known = set(body_names)
     joints: list[JointSpec] = []
-    first_name: dict[str, YamlPath] = {}
+    first_name: dict[str, YamlPath] = dict(taken or {})
     for i, entry in enumerate(entries):
         path: YamlPath = ("joints", i)
         if not clean(path):
@@ -133,6 +138,28 @@ def _joint(
             f"{what}: a joint connects two different bodies",
             f"two different bodies, or one body and '{WORLD_NAME}'",
         )
+    options = joint_options(entry, path, issues)
+    if options is None or issues.error_count > before:
+        return None
+    locations = {key: issues.locate((*path, key)) for key in entry}
+    return JointSpec(
+        name=name,
+        kind=kind,
+        bodies=(a, b),
+        anchor=_frozen(entry["anchor"], (3,)) if "anchor" in entry else None,
+        anchors=_frozen(entry["anchors"], (2, 3)) if "anchors" in entry else None,
+        length=float(entry["length"]) if "length" in entry else None,
+        location=issues.locate(path),
+        locations=locations,
+        **options,
+    )
+
+
+def joint_options(entry: dict[str, Any], path: YamlPath, issues: IssueCollector) -> dict[str, Any] | None:
+    """JointSpec's axis, axes, limits, damping, motor and collide from a schema-valid joint mapping at `path`
+    (a `joints:` entry, or a chain's `joint:`, whose options every joint of the chain takes); None with a
+    located error for a zero axis or limits with lower > upper."""
+    before = issues.error_count
     axis = axes = None
     if "axis" in entry:
         axis = _unit(entry["axis"], (*path, "axis"), issues)
@@ -156,20 +183,11 @@ def _joint(
         motor = JointMotor(float(value["speed"]), float(cap))
     if issues.error_count > before:
         return None
-    locations = {key: issues.locate((*path, key)) for key in entry}
-    return JointSpec(
-        name=name,
-        kind=kind,
-        bodies=(a, b),
-        anchor=_frozen(entry["anchor"], (3,)) if "anchor" in entry else None,
-        anchors=_frozen(entry["anchors"], (2, 3)) if "anchors" in entry else None,
+    return dict(
         axis=None if axis is None else _frozen(axis, (3,)),
         axes=None if axes is None else _frozen(axes, (2, 3)),
-        length=float(entry["length"]) if "length" in entry else None,
         limits=limits,
         damping=float(entry.get("damping", 0.0)),
         motor=motor,
         collide=bool(entry.get("collide", False)),
-        location=issues.locate(path),
-        locations=locations,
     )

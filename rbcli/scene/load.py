@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from rbcli.scene.bodies import MAX_GENERATED_BODIES, SAMPLING_KEYS, BodyResolver
+from rbcli.scene.chains import ChainPlan, chain_joints, chain_links
 from rbcli.scene.issues import IssueCollector
 from rbcli.scene.schema_errors import SchemaErrorFormatter
 from rbcli.scene.schema_path import scene_schema
@@ -32,6 +33,7 @@ from rbcli.scene.spec import (
     SceneIssue,
     SceneSpec,
     SimulationSpec,
+    SourceLocation,
 )
 from rbcli.scene.yaml_located import (
     MAX_SCENE_BYTES,
@@ -49,6 +51,9 @@ EXCLUSIVE_GROUPS = (
     ("spacing", "count"),
     ("density", "mass"),
 )
+
+# the `bodies:` entries that stand for several bodies (bodies.py, chains.py)
+GENERATORS = ("grid", "random", "chain")
 
 # the integrator of a scene with contact that names none (euler-matrix, the tutorial's, warns with contact)
 CONTACT_DEFAULT_INTEGRATOR = "split2"
@@ -141,6 +146,7 @@ def _analyse(
     bodies: list[BodySpec] = []
     resolver = BodyResolver(issues, base_dir)
     entries = data["bodies"] if isinstance(data.get("bodies"), list) else []
+    chains: list[ChainPlan] = []
     for i, entry in enumerate(entries):
         if not clean(("bodies", i)):
             continue
@@ -148,6 +154,11 @@ def _analyse(
             bodies.extend(resolver.grid(entry, ("bodies", i)))
         elif "random" in entry:
             bodies.extend(resolver.random(entry, ("bodies", i)))
+        elif "chain" in entry:
+            links, plan = chain_links(resolver, entry, ("bodies", i))
+            bodies.extend(links)
+            if plan is not None:
+                chains.append(plan)
         else:
             body = resolver.body(entry, ("bodies", i))
             if body is not None:
@@ -156,8 +167,10 @@ def _analyse(
     forces = _forces(data, clean, issues)
     contact = None
     if "contact" not in data:
+        refused: set[SourceLocation] = set()  # a generator's bodies share its location: told once
         for body in bodies:
-            if (body.static or body.kinematic) and body.location is not None:
+            if (body.static or body.kinematic) and body.location is not None and body.location not in refused:
+                refused.add(body.location)
                 what = "static" if body.static else "kinematic"
                 issues.issues.append(SceneIssue(body.location, f"body '{body.name}': {what} bodies need contact",
                                                 "a `contact:` section (docs/contact.md)"))  # fmt: skip
@@ -174,14 +187,16 @@ def _analyse(
             # the tutorial's default (euler-matrix) gains energy in every bounce; split2 is symplectic,
             # second order and evaluates the contact forces once per step
             simulation = replace(simulation, integrator=CONTACT_DEFAULT_INTEGRATOR)
-    joints: tuple[Any, ...] = ()
+    joints, chain_joint_names = chain_joints(chains, bodies, issues) if chains else ([], {})
     if isinstance(data.get("joints"), list):
         from rbcli.scene.joint_spec import joints_from_list
 
-        joints = joints_from_list(data["joints"], [b.name for b in bodies], issues, clean)
-        if joints and simulation is not None:
-            if "integrator" not in data["simulation"]:  # the one method that holds joints (docs/joints.md)
-                simulation = replace(simulation, integrator=JOINTS_DEFAULT_INTEGRATOR)
+        names = [b.name for b in bodies]
+        joints += joints_from_list(data["joints"], names, issues, clean, taken=chain_joint_names)
+    if joints and simulation is not None:
+        if "integrator" not in data["simulation"]:  # the one method that holds joints (docs/joints.md)
+            simulation = replace(simulation, integrator=JOINTS_DEFAULT_INTEGRATOR)
+        if any(joint.kind != "fixed" for joint in joints):  # welds are merged bodies (scene/welds.py)
             _check_joint_integrator(data["simulation"], simulation, issues)
     if issues.error_count or simulation is None:
         return None, issues.sorted()
@@ -193,7 +208,7 @@ def _analyse(
         gravity=None if gravity is None else _frozen_vector(gravity),
         forces=forces,
         contact=contact,
-        joints=joints,
+        joints=tuple(joints),
         source_path=file,
         source_text=text,
     )
@@ -228,10 +243,17 @@ def _warn_streams_without_their_section(data: dict[str, Any], issues: IssueColle
         return
     for i, stream in enumerate(streams):
         section = _STREAM_SECTIONS.get(stream) if isinstance(stream, str) else None
+        if section == "joints" and _has_chain(data):
+            continue  # a chain brings its joints
         if section is not None and not data.get(section):
             issues.add(("simulation", "record", "streams", i),
                        f"stream {stream!r} records nothing in a scene without `{section}:`",
                        f"a `{section}:` section, or no {stream!r} stream", severity="warning")  # fmt: skip
+
+
+def _has_chain(data: dict[str, Any]) -> bool:
+    bodies = data.get("bodies")
+    return isinstance(bodies, list) and any(isinstance(entry, dict) and "chain" in entry for entry in bodies)
 
 
 def _warn_materials_without_contact(entries: list[Any], issues: IssueCollector) -> None:
@@ -242,7 +264,7 @@ def _warn_materials_without_contact(entries: list[Any], issues: IssueCollector) 
     for i, entry in enumerate(entries):
         if not isinstance(entry, dict):
             continue
-        kind = "grid" if "grid" in entry else "random" if "random" in entry else None
+        kind = _generator_kind(entry)
         owner = entry.get(kind) if kind is not None else None
         target = owner.get("template") if isinstance(owner, dict) else entry
         if not isinstance(target, dict) or "material" not in target:
@@ -316,7 +338,7 @@ def _merge_defaults(doc: LocatedDocument, data: dict[str, Any]) -> dict[str, Any
         if not isinstance(entry, dict):
             merged_bodies.append(entry)
             continue
-        kind = "grid" if "grid" in entry else "random" if "random" in entry else None
+        kind = _generator_kind(entry)
         if kind is None:
             merged_bodies.append(_merge_into(doc, defaults, entry, ("bodies", i), skip=("name",)))
             continue
@@ -330,6 +352,11 @@ def _merge_defaults(doc: LocatedDocument, data: dict[str, Any]) -> dict[str, Any
         template = _merge_into(doc, defaults, gen["template"], ("bodies", i, kind, "template"), skip=tuple(skip))
         merged_bodies.append({**entry, kind: {**gen, "template": template}})
     return {**data, "bodies": merged_bodies}
+
+
+def _generator_kind(entry: dict[str, Any]) -> str | None:
+    """The generator a body entry is (`grid`, `random`, `chain`), or None for one body."""
+    return next((kind for kind in GENERATORS if kind in entry), None)
 
 
 def _merge_into(
@@ -481,10 +508,11 @@ def _check_unique_names(entries: list[Any], issues: IssueCollector) -> None:
 
 
 def _entry_names(entry: Any, path: YamlPath) -> list[tuple[str, YamlPath]]:
-    """Names a body entry gives: its `name`, or a generator's `<name>_<n>` (when its count is readable)."""
+    """Names a body entry gives: its `name`, or a generator's `<name>_<n>` (a chain's `<name><n>`) when its
+    count is readable."""
     if not isinstance(entry, dict):
         return []
-    for kind in ("grid", "random"):
+    for kind in GENERATORS:
         gen = entry.get(kind)
         if isinstance(gen, dict) and isinstance(gen.get("name"), str):
             count = gen.get("count")
@@ -492,7 +520,8 @@ def _entry_names(entry: Any, path: YamlPath) -> list[tuple[str, YamlPath]]:
                 count = math.prod(c if isinstance(c, int) and not isinstance(c, bool) and c > 0 else 0 for c in count)
             if not isinstance(count, int) or isinstance(count, bool) or not 0 < count <= MAX_GENERATED_BODIES:
                 return []
-            return [(f"{gen['name']}_{n}", (*path, kind, "name")) for n in range(count)]
+            separator = "" if kind == "chain" else "_"
+            return [(f"{gen['name']}{separator}{n}", (*path, kind, "name")) for n in range(count)]
         if gen is not None:
             return []
     name = entry.get("name")

@@ -171,6 +171,9 @@ class BodySpec:
     # surface particles of a lattice of spacing contact_size)
     contact_geometry: str = "particles"
     contact_size: float = 0.0
+    # explicit contact spheres (centres [m] (k, 3) in the body's own frame, radii [m] (k,)), used instead of
+    # contact_geometry: a welded body's parts keep their own spheres (scene/welds.py); None from the loader
+    contact_spheres: tuple[np.ndarray, np.ndarray] | None = None
 
 
 @dataclass(frozen=True)

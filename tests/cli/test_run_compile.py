@@ -69,7 +69,7 @@ def test_the_compile_is_announced_only_when_numba_compiles(tmp_path):
     _, stderr = cold.communicate(timeout=300)
     assert cold.returncode == 0, stderr
     lines = stderr.splitlines()
-    assert lines[0].startswith(COMPILING) and "rbcli.physics.chunks.euler_matrix.run_chunk" in lines[0], stderr
+    assert lines[0].startswith(COMPILING) and "rbcli.physics.chunk_loop.run_chunk[euler_matrix]" in lines[0], stderr
     # then what it compiled: the chunk loop and what it calls, and the recording's derive_outputs
     assert lines[1].startswith("compiled kernels: ") and int(lines[1].split()[2]) >= 2, stderr
     assert lines[2].startswith("completed: 100 steps") and len(lines) == 3, stderr

@@ -54,7 +54,7 @@ UNUSED_BY_GRAVITY = {
         contact_force.commit_contacts,
     )
 }
-CHUNK = f"rbcli.physics.chunks.{INTEGRATOR.replace('-', '_')}.run_chunk"
+CHUNK = f"rbcli.physics.chunk_loop.run_chunk[{INTEGRATOR.replace('-', '_')}]"  # its loop: chunk_loop.py
 
 # Run in a fresh process: prints the qualified names of the functions numba compiled (not loaded from
 # its cache) while stepping a gravity-only scene and, with --forces, then a scene with a spring and an
@@ -97,6 +97,8 @@ if "--forces" in sys.argv:
     kick = ForceImpulse(at=BodyPoint(body="h"), time=0.001, vector=np.array([0.0, 1.0, 0.0]))
     out["spring_impulse"] = run([spring, kick])
 out["states"] = states
+out["integrators"] = sorted(m for m in sys.modules if m.startswith("rbcli.physics.integrators."))
+out["joint_stages"] = "rbcli.physics.joints.stages" in sys.modules
 # physics/kernel_cache.py: loading rbcli's kernels does not build numba's compiler tables (which import
 # numba.np.arraymath); compiling does
 out["arraymath"] = "numba.np.arraymath" in sys.modules
@@ -125,6 +127,13 @@ def test_first_run_compiles_only_the_stages_the_scene_has_and_the_second_loads_t
     assert {CHUNK, _name(accumulate_gravity)} <= gravity, sorted(gravity)
     # ...and none of the kinds of force and stage the scene does not have
     assert not gravity & UNUSED_BY_GRAVITY, sorted(gravity & UNUSED_BY_GRAVITY)
+    # ...nor anything of another integrator (the one loop is compiled per integrator with its own step,
+    # physics/chunk_loop.py; the others' modules are not even imported) or the joint stages (its loop has
+    # none: only split2's runs them)
+    own = INTEGRATOR.replace("-", "_")
+    assert first["integrators"] == [f"rbcli.physics.integrators.{m}" for m in sorted(("kinematics", own))]
+    assert not [name for name in gravity if name.startswith("rbcli.physics.joints.")], sorted(gravity)
+    assert not first["joint_stages"]  # not even imported (~20 ms of a warm start: chunk_loop.py)
     # record_if_due copies with element loops: no array-assignment shape-error message (~2.5 s) compiled
     assert not [name for name in gravity if "shape_context" in name], sorted(gravity)
 

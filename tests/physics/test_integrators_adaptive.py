@@ -1,6 +1,6 @@
 """Adaptive dopri5 (`rbcli.physics.adaptive`): tolerance reached, uniform output, fewer steps on a transient.
 
-`run_adaptive` below drives the generated adaptive loop (chunks/dopri5_adaptive.py) the way the runner
+`run_adaptive` below drives the adaptive loop (physics/adaptive_loop.py) the way the runner
 does (chunks, frame buffers), on a Data of its own.
 """
 

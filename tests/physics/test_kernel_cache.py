@@ -23,7 +23,7 @@ PHYSICS = ROOT / "rbcli" / "physics"
 
 # one free body falling under gravity, semi-implicit Euler: the cheapest loop to compile (~7 s cold on
 # the 2-core machine; a contact scene's split2 loop takes ~55 s there, too long for the suite). The chunk
-# loop (chunks/semi_implicit.py) reaches the gravity kernel through two other files
+# loop (chunk_loop.py, compiled for semi-implicit) reaches the gravity kernel through two other files
 # (forces/wrench.py, forces/gravity.py): the edited file is neither the loop's nor its direct callee's.
 DT, STEPS, G = 1e-3, 100, 9.81
 SCENE = f"""\
@@ -38,15 +38,16 @@ bodies:
 CHILD = """
 import json, sys
 from rbcli.physics import kernel_cache
-from rbcli.physics.chunks import semi_implicit
+from rbcli.physics import chunk_loop
+from rbcli.physics.integrators import get_integrator
 from rbcli.runner.simulation import Simulation
 
 sim = Simulation(sys.argv[1])
 sim.step(sim.settings.steps)
-stats = semi_implicit.run_chunk.stats
+stats = get_integrator("semi-implicit").chunk().run_chunk.stats
 print(json.dumps({"vz": float(sim.state.v[0, 2]), "loaded": sum(stats.cache_hits.values()),
                   "compiled": sum(stats.cache_misses.values()), "guarded": kernel_cache.guarded(),
-                  "module": semi_implicit.__file__}))
+                  "module": chunk_loop.__file__}))
 """
 GRAVITY_LINE = "            F[b, k] += body_mass[b] * gravity[k]\n"
 DOUBLED_LINE = "            F[b, k] += 2.0 * body_mass[b] * gravity[k]\n"

@@ -1,13 +1,14 @@
 """Each kernel compiled once (physics/kernel_link.py): a second kind of scene reuses the first's compiled
 stages instead of compiling copies of them into its own loop, in the same process and from the cache.
 
-Scene A is a hinge pendulum; scene B is the same pendulum with a drag force and a ground to touch:
-another kind of scene, so another signature of the chunk loop (its force tables hold a drag table, its
-model a contact table), whose joint stages take the same types as A's: the loop hands every stage the
-model's body arrays alone (physics/step.py model_bodies), whatever tables the model holds. Checked with
-numba's compile events (they fire only for real compilations) and with the machine code of B's loop: it
-must not define the joint stages' functions (numba's own linking puts a copy of every callee's code
-into each caller, so the loop would define them all)."""
+Scene A is a hinge pendulum; scene B is the same pendulum with a drag force: another kind of scene, so
+another signature of the chunk loop (its force tables hold a drag table), whose joint stages take the
+same types as A's. That holds whatever tables the model holds too: the loop hands every stage the model's
+body arrays alone (physics/step.py model_bodies); checked without compiling on a pendulum with a ground
+(a contact table) and a kinematic body (B had a ground to touch before; compiling the contact stages cost
+the suite ~25 CPU-s more). Checked with numba's compile events (they fire only for real compilations) and
+with the machine code of B's loop: it must not define the joint stages' functions (numba's own linking
+puts a copy of every callee's code into each caller, so the loop would define them all)."""
 
 from __future__ import annotations
 
@@ -34,13 +35,19 @@ bodies:
     particles: {{positions: [[0, 0, -0.2], [0.05, 0, -0.6], [0, 0.03, -1.0]], masses: 0.2, radius: 0.02}}
     position: [-0.1, 0.0, 0.41]
     angular_momentum: [0.001, 0.002, 0.0005]
-joints:
+{bodies}joints:
   - {{name: pivot, type: hinge, bodies: [rod, world], anchor: [0, 0, 1], axis: [0, 1, 0]}}
 {forces}"""
 
-SCENE_A = PENDULUM.format(name="pendulum", forces="")
-SCENE_B = PENDULUM.format(
-    name="pendulum-drag-ground", forces="forces:\n  - {type: drag, bodies: all, linear: 0.3}\ncontact: {ground: -5}\n"
+SCENE_A = PENDULUM.format(name="pendulum", bodies="", forces="")
+DRAG = "forces:\n  - {type: drag, bodies: all, linear: 0.3}\n"
+SCENE_B = PENDULUM.format(name="pendulum-drag", bodies="", forces=DRAG)
+# the pendulum again, its model holding a contact and a kinematic table as well as the joint table
+SCENE_C = PENDULUM.format(
+    name="pendulum-ground-conveyor",
+    bodies="  - {name: conveyor, shape: {type: box, size: [0.2, 0.2, 0.1]}, spacing: 0.05, density: 1000,\n"
+    "     position: [0, 2, -4], kinematic: {velocity: [0.1, 0, 0]}}\n",
+    forces="contact: {ground: -5}\n",
 )
 
 # the joint stages the split2 loop calls (physics/joints/stages.py), and what the pendulum's solve calls
@@ -63,9 +70,10 @@ class Recorder(ev.Listener):
 ev.register("numba:compile", Recorder())
 
 from rbcli.physics import kernel_link
-from rbcli.physics.chunks.split2 import run_chunk
+from rbcli.physics.integrators import get_integrator
 from rbcli.runner.simulation import Simulation
 
+run_chunk = get_integrator("split2").chunk().run_chunk
 out = {"runs": [], "separate": None}
 for path in sys.argv[1:]:
     start = len(compiled)
@@ -113,7 +121,7 @@ def test_a_second_kind_of_scene_compiles_none_of_the_first_ones_functions_and_li
     names_a = {name for name, _ in compiled_a}
     # the empty cache really compiled A's loop and joint stages, and B compiled a loop of its own types...
     assert {f"rbcli.physics.joints.stages.{stage}" for stage in JOINT_STAGES} <= names_a, sorted(names_a)
-    assert any(name == "rbcli.physics.chunks.split2.run_chunk" for name, _ in compiled_b)
+    assert any(name == "rbcli.physics.chunk_loop.run_chunk[split2]" for name, _ in compiled_b)
     # ...but none of rbcli's functions with the types A already compiled it for (its stages are reused, not
     # recompiled; numba's own overload implementations, builtins min and max, are compiled again for each
     # calling function's options, so B's contact kernels bring their own), and no joint stage at all: B's
@@ -131,6 +139,26 @@ def test_a_second_kind_of_scene_compiles_none_of_the_first_ones_functions_and_li
     again = _run(cache, scene_b, scene_a)
     assert [run["compiled"] for run in again["runs"]] == [[], []]
     assert [run["bits"] for run in again["runs"]] == [run_b["bits"], run_a["bits"]]
+
+
+def test_the_joint_stages_take_the_same_types_whatever_else_the_scene_holds(tmp_path):
+    """What lets B (and any other kind of scene) reuse A's compiled joint stages: the arguments the loop
+    passes them (the body arrays alone, the joint table, the joint work) have the same numba types with
+    or without a contact table, a kinematic table or force tables beside them. Compiles nothing."""
+    from rbcli.physics.step import model_bodies
+    from rbcli.runner.simulation import Simulation
+
+    types = []
+    for name, text in (("a", SCENE_A), ("b", SCENE_B), ("c", SCENE_C)):
+        path = tmp_path / f"{name}.yaml"
+        path.write_text(text)
+        sim = Simulation(path)
+        model = sim.model.kernel()
+        stage_arguments = (model_bodies.py_func(model), model.joint, sim.data.kernel().joint)
+        types.append(tuple(numba.typeof(v) for v in stage_arguments))
+        if name == "c":  # the scene really holds the other tables
+            assert model.contact is not None and model.kinematic is not None
+    assert types[0] == types[1] == types[2]
 
 
 def test_stage_kernels_are_called_by_symbol_and_small_kernels_stay_linked():

@@ -1,75 +1,51 @@
-"""The step pipeline: the committed chunk loops are what the stage list generates, and a stage added to
-the list runs in every integrator's loop.
+"""The step pipeline: the stage list of physics/pipeline.py is what the chunk loops run, in its order,
+and each integrator's loop is compiled with its own step and only the stages its integrator has.
 
-    python tests/physics/test_pipeline.py --regenerate    # rewrite rbcli/physics/chunks/*.py
+    python tests/physics/test_pipeline.py --regenerate    # rewrite rbcli/physics/forces/wrench_pass.py
 """
 
 from __future__ import annotations
 
+import ast
 import importlib.util
+import inspect
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from rbcli.physics import adaptive_loop, chunk_loop
 from rbcli.physics.forces.stage_list import FORCE_STAGES, ForceStage, wrench_source
-from rbcli.physics.integrators import INTEGRATORS
-from rbcli.physics.pipeline import ADAPTIVE, BOTH, FIXED, STEP_STAGES, Stage, adaptive_source, chunk_source
+from rbcli.physics.integrators import INTEGRATORS, get_integrator
+from rbcli.physics.joints import stages as joint_stages
+from rbcli.physics.pipeline import STEP_STAGES
 
-CHUNKS = Path(__file__).resolve().parents[2] / "rbcli" / "physics" / "chunks"
-WRENCH_PASS = CHUNKS.parent / "forces" / "wrench_pass.py"
-
-
-def _short(name: str) -> str:
-    return INTEGRATORS[name].module.rsplit(".", 1)[1]
-
-
-ADAPTIVE_NAMES = [name for name, info in INTEGRATORS.items() if info.adaptive]
-PARALLEL_NAMES = [name for name, info in INTEGRATORS.items() if info.parallel]
+PHYSICS = Path(__file__).resolve().parents[2] / "rbcli" / "physics"
+WRENCH_PASS = PHYSICS / "forces" / "wrench_pass.py"
+STAGE_CALLS = {stage.fixed for stage in STEP_STAGES} | {stage.adaptive for stage in STEP_STAGES}
 
 
 def regenerate() -> None:
-    for name in INTEGRATORS:
-        path = CHUNKS / f"{_short(name)}.py"
-        path.write_text(chunk_source(_short(name), name))
-        print("wrote", path)
-    for name in PARALLEL_NAMES:
-        path = CHUNKS / f"{_short(name)}_parallel.py"
-        path.write_text(chunk_source(_short(name), name, parallel=True))
-        print("wrote", path)
-    for name in ADAPTIVE_NAMES:
-        path = CHUNKS / f"{_short(name)}_adaptive.py"
-        path.write_text(adaptive_source(_short(name), name))
-        print("wrote", path)
     WRENCH_PASS.write_text(wrench_source())
     print("wrote", WRENCH_PASS)
 
 
-@pytest.mark.parametrize("name", list(INTEGRATORS))
-def test_committed_chunk_loops_are_generated_from_the_stage_list(name):
-    path = CHUNKS / f"{_short(name)}.py"
-    assert path.read_text() == chunk_source(_short(name), name), f"{path} is stale: run this file with --regenerate"
-    assert INTEGRATORS[name].chunk().run_chunk is not None
+def _loop(module) -> ast.FunctionDef:  # noqa: ANN001
+    """The AST of `module`'s run_chunk, as written in its file."""
+    tree = ast.parse(inspect.getsource(module))
+    return next(node for node in tree.body if isinstance(node, ast.FunctionDef) and node.name == "run_chunk")
 
 
-@pytest.mark.parametrize("name", PARALLEL_NAMES)
-def test_committed_parallel_loops_are_generated_from_the_stage_list(name):
-    """The threaded loop is the serial one but for the step it calls (docs/performance.md, "Threads")."""
-    path = CHUNKS / f"{_short(name)}_parallel.py"
-    source = chunk_source(_short(name), name, parallel=True)
-    assert path.read_text() == source, f"{path} is stale: run this file with --regenerate"
-    serial = chunk_source(_short(name), name)
-    assert "import step_parallel as integrator_step" in source and "import step as integrator_step" in serial
-    body = source.split("def run_chunk", 1)[1]
-    assert body == serial.split("def run_chunk", 1)[1], "the threaded loop must run the serial loop's stages"
+def _stage_calls(node: ast.AST) -> list[ast.Call]:
+    """The calls of a stage's function under `node`, in source order."""
+    calls = [n for n in ast.walk(node) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)]
+    calls = [call for call in calls if call.func.id in STAGE_CALLS]  # type: ignore[union-attr]
+    return sorted(calls, key=lambda call: (call.lineno, call.col_offset))
 
 
-@pytest.mark.parametrize("name", ADAPTIVE_NAMES)
-def test_committed_adaptive_loops_are_generated_from_the_stage_list(name):
-    path = CHUNKS / f"{_short(name)}_adaptive.py"
-    assert path.read_text() == adaptive_source(_short(name), name), f"{path} is stale: run this file with --regenerate"
-    assert INTEGRATORS[name].adaptive_chunk().run_chunk is not None
+def _names(calls: list[ast.Call]) -> list[str]:
+    return [call.func.id for call in calls]  # type: ignore[union-attr]
 
 
 def test_stage_list_is_impulses_contact_update_record():
@@ -77,104 +53,108 @@ def test_stage_list_is_impulses_contact_update_record():
              "joint_position", "joint_velocity", "contact_commit", "materialise", "contact_record",
              "joint_record", "record"]  # fmt: skip
     assert [stage.name for stage in STEP_STAGES] == names
-    # materialise belongs to exact's loop alone (it writes the states exact defers), the joint stages to
-    # split2's (the one integrator that holds joints: integrators.check_integrator)
-    owned = {stage.name: stage.integrators for stage in STEP_STAGES if stage.integrators}
-    joint_stages = {name: ("split2",) for name in ("joint_begin", "joint_position", "joint_velocity", "joint_record")}
-    assert owned == {"materialise": ("exact",), **joint_stages}
-    assert "materialise(" in chunk_source("exact", "exact") and "materialise(" not in chunk_source("split2", "split2")
-    assert "joint_position(" in chunk_source("split2", "split2")
-    assert "joint_position(" not in chunk_source("split4", "split4")
     assert [stage.name for stage in STEP_STAGES if stage.substep] == names[2:9]
-    # which loops have which stage: one field per stage; materialise (exact's) and the joint stages
-    # (split2's: joints refuse a tolerance) are fixed-step only
-    fixed_only = ("materialise", "joint_begin", "joint_position", "joint_velocity", "joint_record")
-    assert {stage.name: stage.loops for stage in STEP_STAGES} == {
-        **dict.fromkeys(names, BOTH),
-        **dict.fromkeys(fixed_only, (FIXED,)),
+    # materialise belongs to exact's loop alone (it writes the states exact defers), the joint stages to
+    # split2's (the one integrator that holds joints: integrators.check_integrator); neither to the
+    # adaptive loop (joints refuse a tolerance, dopri5 defers nothing)
+    joint_stages = ["joint_begin", "joint_position", "joint_velocity", "joint_record"]
+    assert {stage.name: stage.only for stage in STEP_STAGES if stage.only} == {
+        **dict.fromkeys(joint_stages, "joints"),
+        "materialise": "defers",
     }
-    adaptive = adaptive_source("dopri5", "dopri5")
-    in_adaptive = [stage.name for stage in STEP_STAGES if ADAPTIVE in stage.loops and stage.name != "update"]
-    assert all(f"# {name}: " in adaptive for name in in_adaptive), in_adaptive
-    assert "materialise" not in adaptive and "integrator_step" not in adaptive and "joint_" not in adaptive
+    assert [stage.name for stage in STEP_STAGES if stage.adaptive is None] == [*joint_stages[:3], "materialise",
+                                                                               "joint_record"]  # fmt: skip
+    assert all(stage.fixed for stage in STEP_STAGES)
+    assert [name for name, info in INTEGRATORS.items() if info.joints] == ["split2"]
+    assert [name for name, info in INTEGRATORS.items() if info.defers] == ["exact"]
 
 
-# A trivial stage, as a user of the pipeline would add one: a constant push on every body, applied as an
-# exact momentum jump after each step. Tested through the generated source exactly as the committed
-# loops are built, so what this shows holds for them.
-PUSH = 0.25  # [N s] per step, world x
-PUSH_STAGE = Stage(
-    "push",
-    "push: a constant momentum jump on every body after each update (test stage)",
-    (),
-    f"for b in range(P.shape[0]):\n    P[b, 0] += {PUSH!r}",
-)
+def test_the_fixed_step_loop_calls_the_stages_in_the_list_order():
+    """chunk_loop.run_chunk's source: one call per stage, in STEP_STAGES order; the sub-step stages, and
+    only they, inside the loop over the sub-steps; the stages of some integrators, and only they, under
+    the constant naming their flag (`if HOLDS_JOINTS:`, `if DEFERS:`), which chunk_loop binds per
+    integrator; and the comment above each call is the list's `name: why`."""
+    loop = _loop(chunk_loop)
+    assert _names(_stage_calls(loop)) == [stage.fixed for stage in STEP_STAGES]
+    substeps = [n for n in ast.walk(loop) if isinstance(n, ast.For) and "substeps" in ast.unparse(n.iter)]
+    assert len(substeps) == 1
+    assert _names(_stage_calls(substeps[0])) == [stage.fixed for stage in STEP_STAGES if stage.substep]
+    constants = {"joints": "HOLDS_JOINTS", "defers": "DEFERS"}
+    for flag, constant in constants.items():
+        gated = ast.Module([n for n in ast.walk(loop) if isinstance(n, ast.If) and ast.unparse(n.test) == constant], [])
+        inside = _names(_stage_calls(gated))
+        assert inside == [stage.fixed for stage in STEP_STAGES if stage.only == flag], flag
+    lines = inspect.getsource(chunk_loop).splitlines()
+    for call, stage in zip(_stage_calls(loop), STEP_STAGES, strict=True):
+        above = lines[call.lineno - 2].strip() if stage.name != "materialise" else lines[call.lineno - 4].strip()
+        assert above.startswith(f"# {stage.name}: {stage.why}"), (stage.name, above)
 
 
-def _load_generated(tmp_path: Path, name: str, stages: tuple[Stage, ...], source=chunk_source):  # noqa: ANN001, ANN202
-    path = tmp_path / f"chunk_{_short(name)}.py"
-    path.write_text(source(_short(name), name, stages))
-    spec = importlib.util.spec_from_file_location(f"_test_chunk_{_short(name)}", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+def test_the_adaptive_loop_calls_its_stages_in_the_list_order():
+    """adaptive_loop.run_chunk's source: the stages with an adaptive call, first met in STEP_STAGES order
+    (the loop calls some at more than one place: Stage's docstring), and none of the others."""
+    calls = _names(_stage_calls(_loop(adaptive_loop)))
+    first = list(dict.fromkeys(calls))
+    assert first == [stage.adaptive for stage in STEP_STAGES if stage.adaptive]
+    fixed_only = {stage.fixed for stage in STEP_STAGES if stage.adaptive is None}
+    assert not fixed_only & set(calls)
 
 
-@pytest.mark.parametrize("name", ["split2", "rk4", "euler-matrix", "exact"])
-def test_a_stage_added_to_the_list_runs_in_the_generated_loop(tmp_path, name):
-    """With no forces, P only changes through the added stage: after n steps every body's P_x is its
-    initial value plus n pushes (exactly: the pushes are 0.25, the sums exact in binary), while a loop
-    built from the unchanged list leaves P alone. Four integrators of four different kinds stand for all
-    (each generated loop compiles anew, ~2 s apiece: the stale-file test covers all ten)."""
-    from conftest import make_scene, random_bodies
+@pytest.mark.parametrize("name", list(INTEGRATORS))
+def test_each_integrator_s_loop_is_the_one_loop_bound_to_its_step(name):
+    """Every integrator's loop is chunk_loop.run_chunk's code with its own module's step (and, for
+    split2, the threaded loop with step_parallel), its own flags, and its own cache name; nothing is
+    compiled here (numba compiles at the first call)."""
+    info = get_integrator(name)
+    module = info.load()
+    loops = [(info.chunk(), module.step)]
+    if info.parallel:
+        loops.append((info.parallel_chunk(), module.step_parallel))
+    for loop, step in loops:
+        function = loop.run_chunk.py_func
+        assert function.__code__ is chunk_loop.run_chunk.__code__
+        bound = function.__globals__
+        assert bound["integrator_step"] is step
+        assert (bound["HOLDS_JOINTS"], bound["DEFERS"]) == (info.joints, info.defers)
+        assert (bound["integrator_materialise"] is getattr(module, "materialise", None)) == info.defers
+        assert (bound["joint_position"] is joint_stages.joint_position) == info.joints
+        assert loop.SCRATCH_WIDTH == module.SCRATCH_WIDTH
+        assert info.chunk() is info.chunk()  # one dispatcher per integrator: compiled or loaded once
+    names = {get_integrator(n).chunk().run_chunk.py_func.__qualname__ for n in INTEGRATORS}
+    assert len(names) == len(INTEGRATORS)  # each loop has cache files of its own
+    # the module's own names stand for no integrator: its function runs only as bound
+    assert chunk_loop.integrator_step is chunk_loop._unbound and not chunk_loop.HOLDS_JOINTS
+    assert chunk_loop.joint_position is chunk_loop._unbound
 
+
+def test_a_loop_runs_the_joint_stages_only_where_its_integrator_holds_joints():
+    """The hinged pendulum (scenes/joints/pendulum.yaml: centre of mass d = 0.6 m from the pivot, at rest)
+    through two loops for 0.2 s. split2's runs the joint stages: the hinge holds, |x - pivot| = d to
+    round-off (1e-12 m; docs/joints.md). rk4's has none (joints refuse rk4 when a scene is loaded; its
+    loop is called directly here): the rod falls freely, x_z = x_z(0) - g t^2 / 2, which rk4 integrates
+    exactly under constant gravity (to round-off, 1e-12 m). So the flags reach the compiled loops."""
     from rbcli.api import prepare
     from rbcli.physics.data import make_data
     from rbcli.physics.step import empty_buffers
 
-    stages = (*STEP_STAGES[:-1], PUSH_STAGE, STEP_STAGES[-1])
-    pushed = _load_generated(tmp_path, name, stages)
-    compiled = prepare(make_scene(random_bodies(3, seed=2), integrator=name))
-    data = make_data(compiled.initial_state, compiled.model, pushed.SCRATCH_WIDTH)
-    P0 = data.state.P.copy()
-    frames = empty_buffers(4, 3)
-    steps = 12
-    done, filled, status = pushed.run_chunk(
-        compiled.model.kernel(), compiled.forces.kernel(), data.kernel(), 1e-3, 0, steps, 5, frames, 0
-    )
-    assert (done, filled, status) == (steps, 2, 0)
-    assert np.array_equal(data.state.P[:, 0], P0[:, 0] + steps * PUSH)
-    assert np.array_equal(data.state.P[:, 1:], P0[:, 1:])
-    assert np.array_equal(frames.P[0][:, 0], P0[:, 0] + 5 * PUSH)  # the stage ran before the record stage
-
-
-def test_a_step_start_stage_added_to_the_list_runs_at_every_grid_step_of_the_adaptive_loop(tmp_path):
-    """The same push as a step-start stage (before the impulses), with no `lands_at`: the adaptive loop
-    must land on every grid index and run it there, as the fixed-step loop does, so after n grid steps
-    P_x is P0 + n pushes exactly (no forces: dopri5 leaves P as it is, exactly; with `lands_at="end"`
-    the stage runs at the chunk's start only: one push, checked by hand) and the frame at grid step 5
-    holds five pushes."""
-    from conftest import make_scene, random_bodies
-
-    from rbcli.api import prepare
-    from rbcli.physics.data import make_data
-    from rbcli.physics.step import empty_buffers
-
-    pushed = _load_generated(tmp_path, "dopri5", (PUSH_STAGE, *STEP_STAGES), adaptive_source)
-    assert "land = min(land, index + 1)" in adaptive_source("dopri5", "dopri5", (PUSH_STAGE, *STEP_STAGES))
-    compiled = prepare(make_scene(random_bodies(3, seed=2), integrator="dopri5"))
-    steps, every = 12, 5
-    data = make_data(compiled.initial_state, compiled.model, 0, adaptive=True, tolerance=1e-6, duration=0.012)
-    P0 = data.state.P.copy()
-    frames = empty_buffers(4, 3)
-    done, filled, status = pushed.run_chunk(
-        compiled.model.kernel(), compiled.forces.kernel(), data.kernel(), 1e-3, 0, steps, every, frames, 0
-    )
-    assert (done, filled, status) == (steps, 2, 0)
-    assert np.array_equal(frames.P[0][:, 0], P0[:, 0] + every * PUSH)
-    assert np.array_equal(data.state.P[:, 0], P0[:, 0] + steps * PUSH) and np.array_equal(
-        data.state.P[:, 1:], P0[:, 1:]
-    )
+    compiled = prepare(Path(__file__).resolve().parents[2] / "scenes" / "joints" / "pendulum.yaml")
+    pivot, d, g, steps, dt = np.array([0.0, 0.0, 1.0]), 0.6, 9.81, 200, 1e-3
+    x0 = compiled.initial_state.x[0].copy()
+    assert abs(np.linalg.norm(x0 - pivot) - d) < 1e-12
+    for name in ("split2", "rk4"):
+        chunk = get_integrator(name).chunk()
+        data = make_data(compiled.initial_state, compiled.model, chunk.SCRATCH_WIDTH)
+        frames = empty_buffers(1, 1, 1)
+        done, _, status = chunk.run_chunk(
+            compiled.model.kernel(), compiled.forces.kernel(), data.kernel(), dt, 0, steps, 10**9, frames, 0
+        )
+        assert (done, status) == (steps, 0)
+        x = data.state.x[0]
+        if name == "split2":
+            assert abs(np.linalg.norm(x - pivot) - d) < 1e-12, name
+        else:
+            free_fall = x0 + np.array([0.0, 0.0, -0.5 * g * (steps * dt) ** 2])
+            assert np.max(np.abs(x - free_fall)) < 1e-12, name
 
 
 def test_committed_force_pass_is_generated_from_the_force_stage_list():

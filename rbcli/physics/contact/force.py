@@ -37,7 +37,7 @@ import numpy as np
 from numba.core import types
 from numba.extending import overload
 
-from rbcli.physics.contact.law import apply_contact, body_velocities, contact_values, velocity_at
+from rbcli.physics.contact.law import ContactGeometry, apply_contact, body_velocities, contact_values, velocity_at
 from rbcli.physics.contact.quiet import try_quiet
 from rbcli.physics.contact.search import contact_found, sphere_positions
 from rbcli.physics.contact.tables import COUNT_CANDIDATES, COUNT_EVALUATIONS
@@ -171,11 +171,8 @@ def _contact_force(sink, contact, work, owner, partner, ba, bb, n0, n1, n2, over
         return None
 
     def resolve(sink, contact, work, owner, partner, ba, bb, n0, n1, n2, overlap, c0, c1, c2, k, zeta, mu):  # noqa: ANN001, ANN202
-        x = sink.x
-        f0, f1, f2, u0, u1, u2, limit, energy = contact_values(
-            contact, work, x, sink.s, owner, partner, ba, bb, n0, n1, n2, overlap, c0, c1, c2, k, zeta, mu
-        )
-        apply_contact(work, x, sink.F, sink.tau, owner, partner, ba, bb, n0, n1, n2, overlap, c0, c1, c2,
-                      mu > 0.0, f0, f1, f2, u0, u1, u2, limit, energy)  # fmt: skip
+        geometry = ContactGeometry(owner, partner, ba, bb, (n0, n1, n2), overlap, (c0, c1, c2))
+        outcome = contact_values(contact, work, sink.x, sink.s, geometry, k, zeta, mu)
+        apply_contact(work, sink.x, sink.F, sink.tau, geometry, mu > 0.0, outcome)
 
     return resolve

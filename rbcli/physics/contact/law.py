@@ -8,6 +8,7 @@ the recorded state's statistics (state.py) the history. Body velocities are in C
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 
@@ -19,6 +20,33 @@ from rbcli.physics.contact.tables import (
     STAT_MAX_PENETRATION,
 )
 from rbcli.physics.rotation_kernels import rotate, rotate_inverse
+
+
+class ContactGeometry(NamedTuple):
+    """One contact as the search found it (search.py `contact_found`): contact sphere `owner` of body
+    `body_a` touching `partner` (a sphere of body `body_b`, or a plane: body_b = -1), the unit normal
+    n pointing from b to a, the overlap d [m] and the contact point c [m, world]. Built inside kernels
+    and inlined away (LLVM keeps the scalars in registers: the same machine code as passing them one by
+    one)."""
+
+    owner: int
+    partner: int
+    body_a: int
+    body_b: int
+    normal: tuple[float, float, float]
+    overlap: float
+    point: tuple[float, float, float]
+
+
+class ContactOutcome(NamedTuple):
+    """What one contact does (`contact_values`): the force f [N, world] on body_a at the contact point
+    (body_b gets -f), the tangential spring's elongation u [m, world] at the evaluation's offset into the
+    step, its Coulomb limit mu f_n / k_t [m] (0 without friction) and the energy in its springs [J]."""
+
+    force: tuple[float, float, float]
+    elongation: tuple[float, float, float]
+    limit: float
+    energy: float
 
 
 @numba.njit(cache=True, inline="always")
@@ -128,12 +156,15 @@ def push(x, b, c0, c1, c2, f0, f1, f2, F, tau) -> None:  # noqa: ANN001
 
 
 @numba.njit(cache=True, inline="always")
-def contact_values(contact, work, x, s, owner, partner, ba, bb, n0, n1, n2, overlap, c0, c1, c2, k, zeta, mu):  # noqa: ANN001, ANN201
-    """What one contact does (module docstring), computed from the state and the history alone: the force
-    f [N, world] on body ba (owner) at c (bb, the partner, gets -f), the tangential spring's elongation
-    u [m] at offset s and its Coulomb limit mu f_n / k_t [m] (0 without friction), and the energy [J] in
-    its springs. Reads, writes nothing: the threaded search (threaded.py) computes it on any thread and
-    `apply_contact` does what it says in the search's order."""
+def contact_values(contact, work, x, s, geometry, k, zeta, mu):  # noqa: ANN001, ANN201
+    """What one contact (a ContactGeometry) does, a ContactOutcome (module docstring), computed from the
+    state and the history alone, at offset s [s] into the step, with stiffness k [N/m], damping ratio
+    zeta and friction coefficient mu. Reads, writes nothing: the threaded search (threaded.py) computes it
+    on any thread and `apply_contact` does what it says in the search's order."""
+    owner, partner, ba, bb = geometry.owner, geometry.partner, geometry.body_a, geometry.body_b
+    n0, n1, n2 = geometry.normal
+    c0, c1, c2 = geometry.point
+    overlap = geometry.overlap
     m_eff, vn, t0, t1, t2 = relative_velocity(contact, work, x, ba, bb, n0, n1, n2, c0, c1, c2)
     fn, cn = normal_force(k, zeta, m_eff, overlap, vn)
     energy = 0.5 * k * overlap * overlap
@@ -145,26 +176,31 @@ def contact_values(contact, work, x, s, owner, partner, ba, bb, n0, n1, n2, over
         energy += 0.5 * kt * (u0 * u0 + u1 * u1 + u2 * u2)
         f0, f1, f2 = f0 + g0, f1 + g1, f2 + g2
         limit = mu * fn / kt
-    return f0, f1, f2, u0, u1, u2, limit, energy
+    return ContactOutcome((f0, f1, f2), (u0, u1, u2), limit, energy)
 
 
 @numba.njit(cache=True, inline="always")
-def apply_contact(work, x, F, tau, owner, partner, ba, bb, n0, n1, n2, overlap, c0, c1, c2, friction,  # noqa: ANN001
-                  f0, f1, f2, u0, u1, u2, limit, energy) -> None:  # fmt: skip
-    """Do what `contact_values` computed: the force and torque on both bodies (F, tau), the spring proposed
-    to the history (trial arrays, with friction; commit_contacts advances it to the end of the step),
-    the evaluation's statistics and counters."""
+def apply_contact(work, x, F, tau, geometry, friction, outcome) -> None:  # noqa: ANN001
+    """Do what `contact_values` computed (`outcome`) for the contact `geometry`: the force and torque on
+    both bodies (F, tau), the spring proposed to the history (trial arrays, when the contact has
+    `friction`; commit_contacts advances it to the end of the step), the evaluation's statistics and
+    counters."""
+    owner, ba, bb = geometry.owner, geometry.body_a, geometry.body_b
+    n0, n1, n2 = geometry.normal
+    c0, c1, c2 = geometry.point
+    f0, f1, f2 = outcome.force
     if friction:
         slot = work.trial_count[owner]
         if slot < work.trial_partner.shape[1]:
-            work.trial_partner[owner, slot] = partner
+            u0, u1, u2 = outcome.elongation
+            work.trial_partner[owner, slot] = geometry.partner
             work.trial_xi[owner, slot, 0], work.trial_xi[owner, slot, 1] = u0, u1
             work.trial_xi[owner, slot, 2] = u2
             work.trial_normal[owner, slot, 0], work.trial_normal[owner, slot, 1] = n0, n1
             work.trial_normal[owner, slot, 2] = n2
             work.trial_point[owner, slot, 0], work.trial_point[owner, slot, 1] = c0, c1
             work.trial_point[owner, slot, 2] = c2
-            work.trial_limit[owner, slot] = limit
+            work.trial_limit[owner, slot] = outcome.limit
             work.trial_count[owner] = slot + 1
         else:
             work.counters[COUNT_OVERFLOW] += 1
@@ -174,6 +210,6 @@ def apply_contact(work, x, F, tau, owner, partner, ba, bb, n0, n1, n2, overlap, 
     if bb >= 0:
         push(x, bb, c0, c1, c2, -f0, -f1, -f2, F, tau)
     work.stats[STAT_CONTACTS] += 1.0
-    work.stats[STAT_MAX_PENETRATION] = max(work.stats[STAT_MAX_PENETRATION], overlap)
-    work.stats[STAT_ENERGY] += energy
+    work.stats[STAT_MAX_PENETRATION] = max(work.stats[STAT_MAX_PENETRATION], geometry.overlap)
+    work.stats[STAT_ENERGY] += outcome.energy
     work.counters[COUNT_CONTACTS] += 1

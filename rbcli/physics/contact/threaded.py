@@ -48,7 +48,7 @@ import numpy as np
 from numba.core import types
 from numba.extending import overload
 
-from rbcli.physics.contact.law import apply_contact, contact_values
+from rbcli.physics.contact.law import ContactGeometry, ContactOutcome, apply_contact, contact_values
 from rbcli.physics.contact.search import (
     contact_found,
     find_contacts,
@@ -164,16 +164,18 @@ def _coprime_stride(count) -> int:  # noqa: ANN001
 @numba.njit(cache=True, inline="always")
 def _apply_record(work, sink, ints, floats, row) -> None:  # noqa: ANN001
     """law.apply_contact of record `row`."""
-    r = floats[row]
-    apply_contact(
-        work, sink.x, sink.F, sink.tau, ints[row, RECORD_INT_OWNER], ints[row, RECORD_INT_PARTNER],
-        ints[row, RECORD_INT_BODY_A], ints[row, RECORD_INT_BODY_B],
-        r[RECORD_NORMAL], r[RECORD_NORMAL + 1], r[RECORD_NORMAL + 2], r[RECORD_OVERLAP],
-        r[RECORD_POINT], r[RECORD_POINT + 1], r[RECORD_POINT + 2], r[RECORD_FRICTION] != 0.0,
-        r[RECORD_FORCE], r[RECORD_FORCE + 1], r[RECORD_FORCE + 2],
-        r[RECORD_ELONGATION], r[RECORD_ELONGATION + 1], r[RECORD_ELONGATION + 2],
+    i, r = ints[row], floats[row]
+    geometry = ContactGeometry(
+        i[RECORD_INT_OWNER], i[RECORD_INT_PARTNER], i[RECORD_INT_BODY_A], i[RECORD_INT_BODY_B],
+        (r[RECORD_NORMAL], r[RECORD_NORMAL + 1], r[RECORD_NORMAL + 2]), r[RECORD_OVERLAP],
+        (r[RECORD_POINT], r[RECORD_POINT + 1], r[RECORD_POINT + 2]),
+    )  # fmt: skip
+    outcome = ContactOutcome(
+        (r[RECORD_FORCE], r[RECORD_FORCE + 1], r[RECORD_FORCE + 2]),
+        (r[RECORD_ELONGATION], r[RECORD_ELONGATION + 1], r[RECORD_ELONGATION + 2]),
         r[RECORD_LIMIT], r[RECORD_ENERGY],
     )  # fmt: skip
+    apply_contact(work, sink.x, sink.F, sink.tau, geometry, r[RECORD_FRICTION] != 0.0, outcome)
 
 
 @overload(contact_found, jit_options=_OPTIONS)
@@ -187,9 +189,10 @@ def _contact_record(sink, contact, work, owner, partner, ba, bb, n0, n1, n2, ove
         sink.counts[sink.block] = found + 1
         if found >= sink.rows:  # the block is searched again serially (find_contacts_threaded)
             return
-        f0, f1, f2, u0, u1, u2, limit, energy = contact_values(
-            contact, work, sink.x, sink.s, owner, partner, ba, bb, n0, n1, n2, overlap, c0, c1, c2, k, zeta, mu
-        )
+        geometry = ContactGeometry(owner, partner, ba, bb, (n0, n1, n2), overlap, (c0, c1, c2))
+        outcome = contact_values(contact, work, sink.x, sink.s, geometry, k, zeta, mu)
+        (f0, f1, f2), (u0, u1, u2) = outcome.force, outcome.elongation
+        limit, energy = outcome.limit, outcome.energy
         row = sink.block * sink.rows + found
         i, r = sink.ints[row], sink.floats[row]
         i[RECORD_INT_OWNER], i[RECORD_INT_PARTNER], i[RECORD_INT_BODY_A], i[RECORD_INT_BODY_B] = owner, partner, ba, bb

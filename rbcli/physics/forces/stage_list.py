@@ -1,6 +1,6 @@
 """The force pass as one list: FORCE_STAGES, the stages of `accumulate_wrench` in order, and the
-generator of the compiled pass (forces/wrench_pass.py) from it, as physics/pipeline.py generates the
-chunk loops from STEP_STAGES.
+generator of the compiled pass (forces/wrench_pass.py) from it. (The step's own list, physics/pipeline.py
+STEP_STAGES, is checked against loops written as code instead: physics/chunk_loop.py.)
 
 The pass sets F [N] and tau [N m] (body_count, 3), world frame, about each centre of mass, to the sum of
 the scene's force terms at time t: F = sum over stages, tau likewise. Each stage that has a table is

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 
 from rbcli.physics.contact.tables import ContactTable, ContactWork, contact_present, make_contact_work
+from rbcli.physics.table_arrays import frozen_bools, frozen_floats, frozen_ints
 
 if TYPE_CHECKING:
     from rbcli.physics.model import KernelModel, Model
@@ -45,24 +46,6 @@ SCHEDULE_KINDS = {"constant": SCHEDULE_CONSTANT, "piecewise_linear": SCHEDULE_PI
 # Indices into ForceData.term_evaluations, and the names force_terms_present reports.
 TERM_NAMES = ("gravity", "field", "point_force", "torque", "spring", "drag", "impulse", "contact")
 TERM_GRAVITY, TERM_FIELD, TERM_POINT_FORCE, TERM_TORQUE, TERM_SPRING, TERM_DRAG, TERM_IMPULSE, TERM_CONTACT = range(8)
-
-
-def _f(values, *shape: int) -> np.ndarray:  # noqa: ANN001
-    out = np.ascontiguousarray(np.asarray(values, dtype=np.float64).reshape((-1, *shape)))
-    out.setflags(write=False)
-    return out
-
-
-def _i(values) -> np.ndarray:  # noqa: ANN001
-    out = np.ascontiguousarray(np.asarray(values, dtype=np.int64).reshape(-1))
-    out.setflags(write=False)
-    return out
-
-
-def _b(values) -> np.ndarray:  # noqa: ANN001
-    out = np.ascontiguousarray(np.asarray(values, dtype=np.bool_).reshape(-1))
-    out.setflags(write=False)
-    return out
 
 
 class ScheduleTable(NamedTuple):
@@ -264,31 +247,64 @@ def schedule_table(
     times: Any = np.concatenate([np.asarray(t, dtype=np.float64) for t, _ in knots]) if counts else []
     values: Any = np.concatenate([np.asarray(v, dtype=np.float64) for _, v in knots]) if counts else []
     return ScheduleTable(
-        _i(kind), _f(start), _f(stop), _f(amplitude), _f(frequency), _f(phase), _f(offset),
-        _i(starts), _i(counts), _f(times), _f(values),
-    )  # fmt: skip
+        frozen_ints(kind),
+        frozen_floats(start),
+        frozen_floats(stop),
+        frozen_floats(amplitude),
+        frozen_floats(frequency),
+        frozen_floats(phase),
+        frozen_floats(offset),
+        frozen_ints(starts),
+        frozen_ints(counts),
+        frozen_floats(times),
+        frozen_floats(values),
+    )
 
 
 def field_table(body=(), per_mass=(), value=(), gradient=(), schedule=()) -> FieldTable:  # noqa: ANN001
-    return FieldTable(_i(body), _b(per_mass), _f(value, 3), _f(gradient, 3, 3), _i(schedule))
+    return FieldTable(
+        frozen_ints(body),
+        frozen_bools(per_mass),
+        frozen_floats(value, 3),
+        frozen_floats(gradient, 3, 3),
+        frozen_ints(schedule),
+    )
 
 
 def point_force_table(body=(), point=(), vector=(), body_frame=(), schedule=()) -> PointForceTable:  # noqa: ANN001
-    return PointForceTable(_i(body), _f(point, 3), _f(vector, 3), _b(body_frame), _i(schedule))
+    return PointForceTable(
+        frozen_ints(body),
+        frozen_floats(point, 3),
+        frozen_floats(vector, 3),
+        frozen_bools(body_frame),
+        frozen_ints(schedule),
+    )
 
 
 def torque_table(body=(), vector=(), body_frame=(), schedule=()) -> TorqueTable:  # noqa: ANN001
-    return TorqueTable(_i(body), _f(vector, 3), _b(body_frame), _i(schedule))
+    return TorqueTable(frozen_ints(body), frozen_floats(vector, 3), frozen_bools(body_frame), frozen_ints(schedule))
 
 
 def spring_table(body_a=(), point_a=(), body_b=(), point_b=(), stiffness=(), rest_length=(), damping=()) -> SpringTable:  # noqa: ANN001
     return SpringTable(
-        _i(body_a), _f(point_a, 3), _i(body_b), _f(point_b, 3), _f(stiffness), _f(rest_length), _f(damping)
+        frozen_ints(body_a),
+        frozen_floats(point_a, 3),
+        frozen_ints(body_b),
+        frozen_floats(point_b, 3),
+        frozen_floats(stiffness),
+        frozen_floats(rest_length),
+        frozen_floats(damping),
     )
 
 
 def drag_table(body=(), linear=(), quadratic=(), angular_linear=(), angular_quadratic=()) -> DragTable:  # noqa: ANN001
-    return DragTable(_i(body), _f(linear), _f(quadratic), _f(angular_linear), _f(angular_quadratic))
+    return DragTable(
+        frozen_ints(body),
+        frozen_floats(linear),
+        frozen_floats(quadratic),
+        frozen_floats(angular_linear),
+        frozen_floats(angular_quadratic),
+    )
 
 
 def impulse_table(body=(), time=(), vector=(), point=(), body_frame=()) -> ImpulseTable:  # noqa: ANN001
@@ -296,11 +312,11 @@ def impulse_table(body=(), time=(), vector=(), point=(), body_frame=()) -> Impul
     time = np.asarray(time, dtype=np.float64).reshape(-1)
     order = np.argsort(time, kind="stable")
     return ImpulseTable(
-        _i(np.asarray(body, dtype=np.int64).reshape(-1)[order]),
-        _f(time[order]),
-        _f(np.asarray(vector, dtype=np.float64).reshape(-1, 3)[order], 3),
-        _f(np.asarray(point, dtype=np.float64).reshape(-1, 3)[order], 3),
-        _b(np.asarray(body_frame, dtype=np.bool_).reshape(-1)[order]),
+        frozen_ints(np.asarray(body, dtype=np.int64).reshape(-1)[order]),
+        frozen_floats(time[order]),
+        frozen_floats(np.asarray(vector, dtype=np.float64).reshape(-1, 3)[order], 3),
+        frozen_floats(np.asarray(point, dtype=np.float64).reshape(-1, 3)[order], 3),
+        frozen_bools(np.asarray(body_frame, dtype=np.bool_).reshape(-1)[order]),
     )
 
 

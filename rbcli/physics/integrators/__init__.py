@@ -5,14 +5,13 @@ Every integrator module defines only its update maths:
   step_numpy(model, forces, t, dt, x, q, P, L)                                  # numpy reference, in place
 and `SCRATCH_WIDTH`, the float64 scratch columns per body its compiled step needs. model: the body
 arrays (KernelBodies); contact: the model's contact table (None without contact), for the force pass.
-The forces come only from `accumulate_wrench`. The chunk loop that runs a step's stages around it is generated from
-physics/pipeline.py into physics/chunks/<module>.py (`IntegratorInfo.chunk`).
-`kinematics.py` holds the per-body kernels they share (not a method).
+The forces come only from `accumulate_wrench`. The chunk loop that runs a step's stages around it is
+physics/chunk_loop.py `run_chunk`, written once and compiled per integrator with that module's `step`
+(`IntegratorInfo.chunk`; `parallel_chunk`: with `step_parallel`, the passes over the bodies on threads,
+for those flagged `parallel`). `kinematics.py` holds the per-body kernels they share (not a method).
 Adaptive time stepping (a tolerance instead of dt) is `rbcli.physics.adaptive` (the method) and
-physics/chunks/<module>_adaptive.py (its loop, generated from the same stages), for the methods
-flagged `adaptive`; physics/chunks/<module>_parallel.py, the loop calling `step_parallel` (the passes
-over the bodies on threads), for those flagged `parallel`. docs/integrators.md has the measured orders,
-errors and costs.
+physics/adaptive_loop.py (its loop), for the methods flagged `adaptive`. docs/integrators.md has the
+measured orders, errors and costs.
 """
 
 from __future__ import annotations
@@ -21,6 +20,10 @@ import difflib
 import importlib
 from dataclasses import dataclass
 from types import ModuleType
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from rbcli.physics.chunk_loop import ChunkLoop
 
 
 @dataclass(frozen=True)
@@ -46,37 +49,42 @@ class IntegratorInfo:
     adaptive: bool = False
     demonstration: bool = False
     joints: bool = False  # holds joints (physics/joints/: its loop runs the joint stages; docs/joints.md)
-    # has `step_parallel` (its passes over the bodies on threads) and a chunk loop that calls it,
-    # physics/chunks/<module>_parallel.py (`parallel_chunk`; docs/performance.md, "Threads")
+    # has `step_parallel` (its passes over the bodies on threads) and a chunk loop that calls it
+    # (`parallel_chunk`; docs/performance.md, "Threads")
     parallel: bool = False
+    # its step defers the state of some bodies (exact: torque-free bodies under constant forces, written
+    # from their anchors): its loop runs the module's `materialise` after each step
+    defers: bool = False
 
     def load(self) -> ModuleType:
         """Import the integrator's module: step, step_numpy, SCRATCH_WIDTH (pulls in numba)."""
         return importlib.import_module(self.module)
 
-    @property
-    def chunk_module(self) -> str:
-        """The module of its generated chunk loop (physics/pipeline.py)."""
-        return f"{_PKG.rsplit('.', 1)[0]}.chunks.{self.module.rsplit('.', 1)[1]}"
+    def chunk(self) -> ChunkLoop:
+        """Its chunk loop (physics/chunk_loop.py): run_chunk(model, forces, data, dt, step0, n_steps,
+        record_every, frames, filled), compiled with this integrator's step, and SCRATCH_WIDTH."""
+        from rbcli.physics.chunk_loop import fixed_step_loop
 
-    def chunk(self) -> ModuleType:
-        """Import the generated chunk loop: run_chunk(model, forces, data, dt, step0, n_steps,
-        record_every, frames, filled) and SCRATCH_WIDTH."""
-        return importlib.import_module(self.chunk_module)
+        return fixed_step_loop(self.module, joints=self.joints, defers=self.defers)
 
-    def parallel_chunk(self) -> ModuleType:
-        """Import the generated chunk loop that calls `step_parallel`: `chunk`'s interface; bitwise its
-        results at any thread count (numba.set_num_threads before the call)."""
+    def parallel_chunk(self) -> ChunkLoop:
+        """The chunk loop that calls `step_parallel`: `chunk`'s interface; bitwise its results at any
+        thread count (numba.set_num_threads before the call)."""
         if not self.parallel:
             raise ValueError(f"{self.name!r} has no threaded step")
-        return importlib.import_module(f"{self.chunk_module}_parallel")
+        from rbcli.physics.chunk_loop import fixed_step_loop
 
-    def adaptive_chunk(self) -> ModuleType:
-        """Import the generated error-controlled loop of an `adaptive` method (physics/adaptive.py):
-        run_chunk with the same arguments as `chunk`'s, on a Data made with adaptive=True."""
+        return fixed_step_loop(self.module, joints=self.joints, defers=self.defers, threaded=True)
+
+    def adaptive_chunk(self) -> ChunkLoop:
+        """The error-controlled loop of an `adaptive` method (physics/adaptive_loop.py): run_chunk with the
+        same arguments as `chunk`'s, on a Data made with adaptive=True (its work is the Data's `adaptive`:
+        SCRATCH_WIDTH 0)."""
         if not self.adaptive:
             raise ValueError(f"{self.name!r} is fixed-step: it has no adaptive loop")
-        return importlib.import_module(f"{self.chunk_module}_adaptive")
+        from rbcli.physics.chunk_loop import adaptive_loop
+
+        return adaptive_loop()
 
 
 _PKG = "rbcli.physics.integrators"
@@ -163,6 +171,7 @@ INTEGRATORS: dict[str, IntegratorInfo] = {
             force_evals=1,
             summary="Exact free-body rotation (Jacobi elliptic functions) between force kicks "
             "(Celledoni, Fasso, Safstrom & Zanna 2008); second order only through the forces.",
+            defers=True,
         ),
         IntegratorInfo(
             "exact4",

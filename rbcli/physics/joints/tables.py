@@ -30,12 +30,18 @@ from typing import NamedTuple
 import numpy as np
 
 from rbcli.physics.joints.solver_layout import JointGraph, SolverWork, joint_graph, make_solver_work
+from rbcli.physics.table_arrays import frozen_floats, frozen_ints
 
 WORLD = -1
 
 JOINT_BALL, JOINT_HINGE, JOINT_FIXED, JOINT_SLIDER, JOINT_DISTANCE = range(5)
-JOINT_KINDS = {"ball": JOINT_BALL, "hinge": JOINT_HINGE, "fixed": JOINT_FIXED, "slider": JOINT_SLIDER,
-               "distance": JOINT_DISTANCE}  # fmt: skip
+JOINT_KINDS = {
+    "ball": JOINT_BALL,
+    "hinge": JOINT_HINGE,
+    "fixed": JOINT_FIXED,
+    "slider": JOINT_SLIDER,
+    "distance": JOINT_DISTANCE,
+}
 JOINT_ROWS = {JOINT_BALL: 3, JOINT_HINGE: 5, JOINT_FIXED: 6, JOINT_SLIDER: 5, JOINT_DISTANCE: 1}
 
 # columns of JointWork.stats: Newton iterations of the last position stage, the largest |g| it left
@@ -95,18 +101,6 @@ class JointWork(NamedTuple):
     solver: SolverWork
 
 
-def _f(values, *shape: int) -> np.ndarray:  # noqa: ANN001
-    out = np.ascontiguousarray(np.asarray(values, dtype=np.float64).reshape((-1, *shape)))
-    out.setflags(write=False)
-    return out
-
-
-def _i(values) -> np.ndarray:  # noqa: ANN001
-    out = np.ascontiguousarray(np.asarray(values, dtype=np.int64).reshape(-1))
-    out.setflags(write=False)
-    return out
-
-
 def joint_table(
     kind=(),
     body_a=(),
@@ -129,22 +123,39 @@ def joint_table(
 ) -> JointTable:  # noqa: ANN001
     """A JointTable from per-joint sequences (damping and motors default to none); rows numbered in
     joint order."""
-    kinds = _i(kind)
-    count = _i([JOINT_ROWS[int(k)] for k in kinds])
-    start = _i(np.concatenate([[0], np.cumsum(count)[:-1]]) if count.size else [])
+    kinds = frozen_ints(kind)
+    count = frozen_ints([JOINT_ROWS[int(k)] for k in kinds])
+    start = frozen_ints(np.concatenate([[0], np.cumsum(count)[:-1]]) if count.size else [])
     ground = np.ascontiguousarray(np.asarray(body_ground, dtype=np.bool_))
     ground.setflags(write=False)
-    a, b = _i(body_a), _i(body_b)
+    a, b = frozen_ints(body_a), frozen_ints(body_b)
     zeros, rows = np.zeros(kinds.shape[0]), kinds.shape[0]
-    damper, speed, cap = (_f(zeros if v is None else v) for v in (damping, motor_speed, motor_cap))
-    lower = _f(np.full(rows, -np.inf) if limit_lower is None else limit_lower)
-    upper = _f(np.full(rows, np.inf) if limit_upper is None else limit_upper)
-    reference = _f(np.zeros((rows, 3)) if reference_a is None else reference_a, 3)
+    damper, speed, cap = (frozen_floats(zeros if v is None else v) for v in (damping, motor_speed, motor_cap))
+    lower = frozen_floats(np.full(rows, -np.inf) if limit_lower is None else limit_lower)
+    upper = frozen_floats(np.full(rows, np.inf) if limit_upper is None else limit_upper)
+    reference = frozen_floats(np.zeros((rows, 3)) if reference_a is None else reference_a, 3)
     return JointTable(
-        kinds, a, b, _f(anchor_a, 3), _f(anchor_b, 3), _f(axis_a, 3), _f(normal_b, 2, 3), _f(relative_q, 4),
-        _f(length), damper, speed, cap, lower, upper, reference, _f(zeros if travel0 is None else travel0),
-        start, count, ground, joint_graph(a, b, ground, count),
-    )  # fmt: skip
+        kinds,
+        a,
+        b,
+        frozen_floats(anchor_a, 3),
+        frozen_floats(anchor_b, 3),
+        frozen_floats(axis_a, 3),
+        frozen_floats(normal_b, 2, 3),
+        frozen_floats(relative_q, 4),
+        frozen_floats(length),
+        damper,
+        speed,
+        cap,
+        lower,
+        upper,
+        reference,
+        frozen_floats(zeros if travel0 is None else travel0),
+        start,
+        count,
+        ground,
+        joint_graph(a, b, ground, count),
+    )
 
 
 def joint_row_total(table: JointTable) -> int:

@@ -1,0 +1,198 @@
+"""The tree table (read-only: the links of articulated trees in joint coordinates) and its work arrays.
+
+A tree is a loop-free set of links, each joined to its parent (or to the world, parent -1) by one joint
+(docs/trees.md). Links are numbered in topological order, parent[i] < i, so one sweep up the array
+visits every parent before its children and one sweep down every child before its parent. Several trees
+may share one table (several roots).
+
+Frames. Link i's frame is its body frame: origin at its centre of mass, axes its principal axes (as
+physics/model.py), so its spatial inertia there is diag(I1, I2, I3, m, m, m). Joint i joins parent p and
+link i at one point, `anchor_parent` in p's frame (a world point for the world) and `anchor_child` in i's;
+`rest_q` is the rotation p-from-i when the joint's coordinate is zero, and `axis` a unit vector in i's
+frame. The joint's coordinate (in `coord`, at coord_start[i]) and rate (in `rate`, at dof_start[i]):
+
+    fixed   none              R_rel = R(rest_q)
+    hinge   angle [rad]       R_rel = R(rest_q) Rot(axis, angle); rate: d angle / dt
+    slider  travel [m]        R_rel = R(rest_q), link i's anchor moved by travel along axis; d travel / dt
+    ball    unit quaternion   R_rel = R(rest_q) R(u), u (w, x, y, z); rate: link i's angular velocity
+                              relative to p, in i's frame (3), du/dt = u (0, omega) / 2
+    free    x (3), q (4)      a root only: link i's world centre of mass and orientation (its body pose);
+                              rate (omega, v) (6): its angular velocity and centre-of-mass velocity in its
+                              own frame (anchors and rest_q unused)
+
+R_rel is p-from-i; link i's origin lies at r = anchor_parent + R_rel (travel axis - anchor_child) in p's
+frame (travel 0 but for the slider). Spatial vectors are Featherstone's, angular part first, at the link's
+origin in the link's coordinates; the joint's motion subspace S (motion, (dof_count, 6), one row per
+rate) is then constant: hinge (a, c x a), slider (0, a), ball (e_k, c x e_k), free the identity, with a the
+axis and c the anchor in i's frame.
+
+Joint kinds share physics/joints/tables.py's codes (a scene's JointTable compiles to a tree table), and
+TREE_FREE is the free root's. This module imports numpy only.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from rbcli.physics.joints.tables import JOINT_BALL, JOINT_FIXED, JOINT_HINGE, JOINT_SLIDER
+from rbcli.physics.table_arrays import frozen_floats, frozen_ints
+
+TREE_FREE = 5
+TREE_KINDS = {"fixed": JOINT_FIXED, "hinge": JOINT_HINGE, "slider": JOINT_SLIDER, "ball": JOINT_BALL, "free": TREE_FREE}
+TREE_COORDS = {JOINT_FIXED: 0, JOINT_HINGE: 1, JOINT_SLIDER: 1, JOINT_BALL: 4, TREE_FREE: 7}
+TREE_DOFS = {JOINT_FIXED: 0, JOINT_HINGE: 1, JOINT_SLIDER: 1, JOINT_BALL: 3, TREE_FREE: 6}
+SYM6 = 21  # entries of a symmetric 6 x 6 matrix stored packed (upper triangle, row by row)
+
+
+def sym6_index(r: int, c: int) -> int:
+    """Position of entry (r, c) of a symmetric 6 x 6 matrix in its packed upper triangle."""
+    r, c = min(r, c), max(r, c)
+    return r * 6 - r * (r - 1) // 2 + c - r
+
+
+# (6, 6) -> packed index, for the kernels' general (ball, free) paths
+SYM6_INDEX = np.array([[sym6_index(r, c) for c in range(6)] for r in range(6)], dtype=np.int64)
+SYM6_INDEX.setflags(write=False)
+
+
+class TreeTable(NamedTuple):
+    """The links of articulated trees (see the module docstring); read-only arrays over links n, joint
+    coordinates C and rates (degrees of freedom) D."""
+
+    parent: np.ndarray  # int64 (n,): parent link, -1 for the world; parent[i] < i
+    kind: np.ndarray  # int64 (n,): JOINT_FIXED, JOINT_HINGE, JOINT_SLIDER, JOINT_BALL or TREE_FREE
+    body: np.ndarray  # int64 (n,): the link's row in the state arrays (x, q, P, L, F, tau)
+    anchor_parent: np.ndarray  # [m] (n, 3): the joint point in the parent's frame (world for -1)
+    anchor_child: np.ndarray  # [m] (n, 3): the joint point in the link's frame
+    axis: np.ndarray  # [1] (n, 3): unit hinge / slider axis, link frame
+    rest_q: np.ndarray  # (n, 4) wxyz: parent-from-link rotation at coordinate 0
+    rest_axis_q: np.ndarray  # (n, 4) wxyz: rest_q (0, axis), so a hinge's R_rel = cos(t/2) rest_q + sin(t/2) this
+    mass: np.ndarray  # [kg] (n,)
+    inertia: np.ndarray  # [kg m^2] (n, 3): principal moments
+    coord_start: np.ndarray  # int64 (n + 1,): link i's coordinates are coord[coord_start[i]:coord_start[i + 1]]
+    dof_start: np.ndarray  # int64 (n + 1,): link i's rates are rate[dof_start[i]:dof_start[i + 1]]
+    dinv_start: np.ndarray  # int64 (n + 1,): link i's D^-1 (k x k, k its rates) in TreeWork.dinv
+    motion: np.ndarray  # (D, 6): each rate's column of S, link frame (angular, linear): the reference's
+
+
+class TreeWork(NamedTuple):
+    """The tree kernels' mutable arrays, allocated once per run (`make_tree_work`). Spatial quantities are
+    link-centred and world-aligned (aba.py): at the link's centre of mass, world axes."""
+
+    rotation: np.ndarray  # (n, 3, 3): world-from-link rotation R
+    xpos: np.ndarray  # [m] (n, 3): r, the link's centre of mass from its parent's (world axes; a root's: itself)
+    motion: np.ndarray  # (D, 6): each rate's column of S, world-aligned (angular, linear)
+    velocity: np.ndarray  # (n, 6): the link's spatial velocity (omega, v_com)
+    bias_acc: np.ndarray  # (n, 6): c = v x (S rate), the velocity-product acceleration
+    inertia_world: np.ndarray  # [kg m^2] (n, 6): R diag(I) R^T packed (xx, xy, xz, yy, yz, zz)
+    inertia_art: np.ndarray  # (n, 21): articulated inertia, packed (SYM6)
+    bias_force: np.ndarray  # (n, 6): articulated bias force
+    acc: np.ndarray  # (n, 6): the link's spatial acceleration
+    U: np.ndarray  # (D, 6): I^A S, one row per rate
+    u: np.ndarray  # (D,): tau - S^T p^A
+    dinv: np.ndarray  # (dinv_start[n],): (S^T I^A S)^-1 per link, k x k row-major
+
+
+def tree_table(
+    parent,
+    kind,
+    anchor_parent,
+    anchor_child,
+    axis,
+    rest_q,
+    mass,
+    inertia,
+    body=None,
+) -> TreeTable:  # noqa: ANN001
+    """A TreeTable from per-link sequences (body defaults to the link's index). Checks the order (parent
+    before child), the free joint's place (roots only) and normalises axes and rest rotations."""
+    parent, kind = frozen_ints(parent), frozen_ints(kind)
+    n = parent.shape[0]
+    if np.any(parent >= np.arange(n)) or np.any(parent < -1):
+        raise ValueError("links must be in topological order: -1 <= parent[i] < i")
+    if not set(kind.tolist()) <= set(TREE_COORDS):
+        raise ValueError(f"unknown joint kinds {sorted(set(kind.tolist()) - set(TREE_COORDS))}")
+    if np.any((kind == TREE_FREE) & (parent != -1)):
+        raise ValueError("a free joint joins a root to the world only")
+    axis = np.asarray(axis, dtype=np.float64).reshape(n, 3)
+    norm = np.linalg.norm(axis, axis=1)
+    moving = np.isin(kind, (JOINT_HINGE, JOINT_SLIDER))
+    if np.any(norm[moving] == 0.0):
+        raise ValueError("a hinge or slider needs a non-zero axis")
+    axis = np.where(norm[:, None] > 0.0, axis / np.where(norm > 0.0, norm, 1.0)[:, None], 0.0)
+    rest = np.asarray(rest_q, dtype=np.float64).reshape(n, 4)
+    rest = rest / np.linalg.norm(rest, axis=1, keepdims=True)
+    anchor_child = np.asarray(anchor_child, dtype=np.float64).reshape(n, 3)
+    coords = np.array([TREE_COORDS[k] for k in kind.tolist()], dtype=np.int64)
+    dofs = np.array([TREE_DOFS[k] for k in kind.tolist()], dtype=np.int64)
+    motion = np.zeros((int(dofs.sum()), 6))
+    row = 0
+    for i, k in enumerate(kind.tolist()):  # once per link at build time
+        a, c = axis[i], anchor_child[i]
+        if k == JOINT_HINGE:
+            motion[row] = np.concatenate([a, np.cross(c, a)])
+        elif k == JOINT_SLIDER:
+            motion[row, 3:] = a
+        elif k == JOINT_BALL:
+            eye = np.eye(3)
+            motion[row : row + 3] = np.concatenate([eye, np.cross(c, eye)], axis=1)
+        elif k == TREE_FREE:
+            motion[row : row + 6] = np.eye(6)
+        row += dofs[i]
+    w, v = rest[:, :1], rest[:, 1:]  # rest (0, a) = (-v . a, w a + v x a)
+    rest_axis = np.concatenate([-np.sum(v * axis, axis=1, keepdims=True), w * axis + np.cross(v, axis)], axis=1)
+    coord_start, dof_start, dinv_start = (
+        frozen_ints(np.concatenate([[0], np.cumsum(c)])) for c in (coords, dofs, dofs * dofs)
+    )
+    return TreeTable(
+        parent,
+        kind,
+        frozen_ints(np.arange(n) if body is None else body),
+        frozen_floats(anchor_parent, 3),
+        frozen_floats(anchor_child, 3),
+        frozen_floats(axis, 3),
+        frozen_floats(rest, 4),
+        frozen_floats(rest_axis, 4),
+        frozen_floats(mass),
+        frozen_floats(inertia, 3),
+        coord_start,
+        dof_start,
+        dinv_start,
+        frozen_floats(motion, 6),
+    )
+
+
+def tree_link_count(tree: TreeTable) -> int:
+    return int(tree.parent.shape[0])
+
+
+def tree_dof_count(tree: TreeTable) -> int:
+    return int(tree.dof_start[-1])
+
+
+def tree_coord_count(tree: TreeTable) -> int:
+    return int(tree.coord_start[-1])
+
+
+def make_tree_work(tree: TreeTable) -> TreeWork:
+    """Zeroed work arrays for `tree`'s links and rates."""
+    n, dofs = tree_link_count(tree), tree_dof_count(tree)
+    return TreeWork(
+        np.zeros((n, 3, 3)), np.zeros((n, 3)), np.zeros((dofs, 6)), np.zeros((n, 6)), np.zeros((n, 6)),
+        np.zeros((n, 6)), np.zeros((n, SYM6)), np.zeros((n, 6)), np.zeros((n, 6)), np.zeros((dofs, 6)),
+        np.zeros(dofs), np.zeros(int(tree.dinv_start[-1])),
+    )  # fmt: skip
+
+
+def zero_coords(tree: TreeTable) -> np.ndarray:
+    """The coordinates of the rest configuration: angles and travels 0, ball quaternions 1, a free root at
+    the world origin unrotated. Shape (C,)."""
+    coord = np.zeros(tree_coord_count(tree))
+    for i, k in enumerate(tree.kind.tolist()):
+        if k == JOINT_BALL:
+            coord[tree.coord_start[i]] = 1.0
+        elif k == TREE_FREE:
+            coord[tree.coord_start[i] + 3] = 1.0
+    return coord
