@@ -4,14 +4,14 @@ wall clock says is faster now, re-chosen between slices of a chunk.
 Any thread count gives the same bits (the threaded passes sum nothing across bodies), so the choice can
 change between any two steps without changing a result. The governor runs its current choice in slices
 of ~SLICE_SECONDS and keeps a running mean of its wall seconds per step. Now and then it probes the
-other choice: first a short run (PROBE_FRACTION of a slice), rejected at once when it is slower by
-EARLY_REJECT, then a whole slice, taken when it beats the current choice (by SWITCH_GAIN). A rejected
-probe doubles the slices until the next one (up to MAX_WAIT), and probes are sized in wall time from
-the other choice's last cost, so a choice that keeps losing costs little however much slower it is: a
-short probe (PROBE_FRACTION of a slice's time) every MAX_WAIT slices is < 1 %.
-A switch, or the current choice's cost moving by CHANGE since the last comparison (load came or went),
-brings the next probe forward. It starts on one thread, the safe choice while nothing is known, and
-the first run of each choice (which launches or wakes its threads) is not measured.
+other choice: first a short run (PROBE_FRACTION of a slice's time), rejected at once when slower by
+EARLY_REJECT, then a whole slice's time, taken when it beats the current choice (by SWITCH_GAIN).
+Probes are sized in steps from the other choice's last cost, so a probe of a much slower choice stays
+short in wall time; a rejected probe doubles the slices until the next one (up to MAX_WAIT), so a
+choice that keeps losing costs < 1 %. A switch, or the current choice's cost moving by CHANGE since the
+last comparison (load came or went), brings the next probe forward. It starts on one thread, the safe
+choice while nothing is known, and the first run of each choice (which launches or wakes its threads)
+is not measured.
 
 It only decides: `plan` says what to run next, `record` is told what that took. The caller times (the
 Simulation, with time.perf_counter), so tests drive the rule with made-up timings.
