@@ -33,6 +33,7 @@ MIN_WAIT = 2  # slices of the current choice before the first probe, and after a
 MAX_WAIT = 32
 CHANGE = 1.3  # the current choice's cost moved by this factor since the last comparison: probe soon
 SMOOTHING = 0.3  # weight of a new slice in the current choice's running mean
+RECENT = 4  # one thread's cost a probe of more threads must beat: the least of its last RECENT slices
 
 
 class ThreadGovernor:
@@ -53,6 +54,7 @@ class ThreadGovernor:
         self.warm: set[int] = set()  # choices run once (their first run is not measured)
         self.steps_on = {1: 0, threads: 0}  # steps run on each choice, for the run's report
         self.switches = 0
+        self.recent: list[float] = []  # the current choice's last RECENT slice costs per step
 
     @property
     def other(self) -> int:
@@ -86,20 +88,30 @@ class ThreadGovernor:
             return
         self.cost[threads] = per_step  # the other choice's latest cost sizes its next probe
         if self.probe == "short":
-            if per_step > EARLY_REJECT * self.cost[self.current]:
+            if per_step > EARLY_REJECT * self._beat():
                 self._reject()
             else:
                 self.probe = "full"
         elif self.probe == "full":
-            if SWITCH_GAIN[threads > self.current] * per_step < self.cost[self.current]:
+            if SWITCH_GAIN[threads > self.current] * per_step < self._beat():
                 self._switch(per_step)
             else:
                 self._reject()
+
+    def _beat(self) -> float:
+        """The cost per step a probe must beat. On one thread, the least of its recent slices: a probe
+        that comes when a burst of other work slowed the last slices (the change that brought the probe
+        forward) would otherwise win against the burst, not against one thread; on more threads, their
+        running mean, so that doubt leans to one thread."""
+        if self.current == 1 and self.recent:
+            return min(self.recent)
+        return self.cost[self.current]
 
     def _current_ran(self, per_step: float) -> None:
         old = self.cost.get(self.current)
         cost = per_step if old is None else old + SMOOTHING * (per_step - old)
         self.cost[self.current] = cost
+        self.recent = [*self.recent[1 - RECENT :], per_step]
         self._size_slices(cost)
         self.until_probe -= 1
         if self.reference is None:
@@ -123,6 +135,7 @@ class ThreadGovernor:
         self.probe = None
         self.current = self.other
         self.cost[self.current] = per_step
+        self.recent = [per_step]
         self._size_slices(per_step)
         self.wait = self.until_probe = MIN_WAIT
         self.reference = per_step

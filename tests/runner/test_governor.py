@@ -144,3 +144,19 @@ def test_probes_of_a_much_slower_choice_stay_short():
     steps = 5_000
     wall, _ = drive(ThreadGovernor(2), much_slower, steps)
     assert steps * ONE / wall > 0.9
+
+
+def test_a_burst_of_other_work_does_not_switch_to_slower_threads():
+    """Threads 4x slower throughout; every 20th slice starts a burst of 3 slices at 5x one thread's cost
+    (another job's busy moment). The burst moves the running mean and brings a probe forward, but the
+    probe must beat one thread's recent best, not the burst: threads stay rare."""
+
+    def bursty(threads: int, index: int) -> float:
+        if threads > 1:
+            return 4.0 * ONE
+        return ONE * (5.0 if index % 20 < 3 else 1.0)
+
+    governor = ThreadGovernor(2)
+    wall, _ = drive(governor, bursty, 100_000)
+    assert governor.switches <= 2  # the first slices are a burst: threads do win there
+    assert wall < 1.03 * 100_000 * ONE * (1 + 4 * 3 / 20)  # >= 0.97x one thread all along (bursts included)
