@@ -104,7 +104,7 @@ def idle_table(quick: bool, repeats: int) -> None:
     except ImportError:
         have_mujoco = False
     print(f"\nIdle (no load made by the benchmark): body-steps/s, median of {repeats}; load average {load_average()}")
-    print("| scene | 1 thread | auto (default) | all cores | auto / 1 | all / 1 | bitwise | auto's choice | MuJoCo Euler |")
+    print("| scene | 1 thread | auto (default) | all cores | auto / 1 | all / 1 | bitwise | auto's choice | MuJoCo |")
     print("|---|---|---|---|---|---|---|---|---|")
     rows = [f"free bodies N = {n:,}" for n in (100, 300, 1_000, 10_000)]
     rows += ["spring chain N = 1,000", "sphere pile N = 1,000"]
