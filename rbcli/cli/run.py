@@ -17,8 +17,8 @@ import typer
 
 from rbcli.cli import messages
 from rbcli.cli.exit_codes import ExitCode, signal_exit
+from rbcli.runner.threads import AUTO, PARALLEL_MIN_BODIES, parse_threads
 from rbcli.runner.threads import ENV as THREADS_ENV
-from rbcli.runner.threads import PARALLEL_MIN_BODIES, parse_threads
 
 if TYPE_CHECKING:
     from rbcli.runner.compile_progress import CompileProgress
@@ -90,9 +90,9 @@ def run(
         None,
         "--threads",
         metavar="N",
-        help="Threads for the step (a positive integer or 'all'); scenes under "
-        f"{PARALLEL_MIN_BODIES} bodies and integrators other than split2 run on one "
-        "[default: $RBSIM_THREADS, else every core]",
+        help="Threads for the step (a positive integer, 'all', or 'auto': one or every core, re-chosen "
+        f"as the run goes by measured speed); scenes under {PARALLEL_MIN_BODIES} bodies and integrators "
+        "other than split2 run on one [default: $RBSIM_THREADS, else auto]",
     ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar and no summary line"),
     resume: Path | None = typer.Option(
@@ -108,10 +108,10 @@ def run(
 
     if threads is not None:  # checked first, then this process's RBSIM_THREADS: every run path reads it there
         try:
-            count = parse_threads(threads, "--threads")
+            value = AUTO if threads.strip().lower() == AUTO else str(parse_threads(threads, "--threads"))
         except ValueError as exc:
             raise messages.fail(str(exc), code=ExitCode.USAGE) from None
-        os.environ[THREADS_ENV] = str(count)
+        os.environ[THREADS_ENV] = value
     options = RunOptions(dt=dt, duration=duration, integrator=integrator, record_every=record_every,
                          tolerance=tolerance, compression=compression)  # fmt: skip
     if resume is not None:
@@ -122,7 +122,7 @@ def run(
                 f"--resume continues the run as its log recorded it; drop {', '.join(extra + fixed)}",
                 code=ExitCode.USAGE,
             )
-        _resume(resume, output, compression, quiet)
+        _resume(resume, output, compression, quiet, threads)
         return
     if scene is None:
         raise messages.fail("no scene to run", expected="a SCENE, or --resume LOG to continue a stopped run",
@@ -149,7 +149,7 @@ def run(
         for warning in compiled.warnings:
             messages.issue(warning, scene)
         _end_if_stopped(stops, "before the run started")
-        sim = Simulation(compiled)  # the one that runs: its kernels are loaded first
+        sim = Simulation(compiled, threads=threads)  # the one that runs: its kernels are loaded first
         _load_kernels(sim, quiet, stops)
         _run_and_report(sim, target, quiet, stops)
 
@@ -185,7 +185,7 @@ def _prepare_run(
     return compiled, target
 
 
-def _resume(log: Path, output: Path | None, compression: str | None, quiet: bool) -> None:
+def _resume(log: Path, output: Path | None, compression: str | None, quiet: bool, threads: str | None) -> None:
     """`run --resume LOG`: plan from the log alone, check the output, then run as `run` does."""
     from rbcli.api import Simulation, resume_to_file
     from rbcli.record.output_file import OutputError, check_output, expected_run_bytes
@@ -210,7 +210,7 @@ def _resume(log: Path, output: Path | None, compression: str | None, quiet: bool
             t = plan.checkpoint.t
             messages.status(f"resuming {log} ({plan.log_status}) at step {plan.checkpoint.step} (t = {t:.6g} s)")
         _end_if_stopped(stops, "before the run started")
-        sim = Simulation(plan.compiled)  # the one that runs: resume_to_file restores the checkpoint into it
+        sim = Simulation(plan.compiled, threads=threads)  # resume_to_file restores the checkpoint into it
         _load_kernels(sim, quiet, stops)
         _run_and_report(
             sim, target, quiet, stops, start=plan.checkpoint.step,
@@ -257,6 +257,7 @@ def _run_and_report(sim: Simulation, target: Path, quiet: bool, stops: _Stops, r
                 else ""
             )
             + (f"; {compiled.contact.describe(settings.substeps)}" if compiled.contact is not None else "")
+            + f"; {sim.threads_report()}"
         )
     if summary.contact_history_overflow:
         messages.warning(

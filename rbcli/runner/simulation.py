@@ -31,7 +31,8 @@ from rbcli.physics.frames import body_angular_velocity, internal_orientation, us
 from rbcli.physics.integrators import get_integrator
 from rbcli.physics.rotation import quat_rotate, quat_rotate_inverse
 from rbcli.physics.state import State
-from rbcli.runner.threads import chunk_threads, contact_threads, resolve_threads
+from rbcli.runner.governor import ThreadGovernor
+from rbcli.runner.threads import chunk_threads, contact_threads, plan_threads, prepare_pool, serial_reason
 from rbcli.scene.compile import CompiledScene, RunOptions, RunOverrides
 from rbcli.scene.parts import merged_state, part_states
 
@@ -107,6 +108,9 @@ class Simulation:
         self.adaptive = tolerance is not None
         self.threads = 1  # the threads the chunk loop runs on (1: the serial loop)
         self.contact_threads = 1  # the threads of the contact stage's pair search (1: the serial search)
+        # with the default thread count: chooses 1 or all of them per slice of a chunk (runner/governor.py)
+        self.governor: ThreadGovernor | None = None
+        self.threads_why = "adaptive steps run on one thread" if tolerance is not None else ""
         # whether the joints' last (sub-)step impulses describe the step that led to the current state:
         # not before a step, nor after set_state or reset (restore: when the checkpoint carries them)
         self.reactions_known = False
@@ -119,17 +123,25 @@ class Simulation:
         else:
             # threads (runner/threads.py): the loop whose passes over the bodies run on threads, for a
             # scene large enough to gain; bitwise the serial loop's results at any thread count
-            count = resolve_threads(threads)
+            plan = plan_threads(threads)
             contact = compiled.contact is not None
-            self.threads = chunk_threads(count, info.parallel, compiled.model.body_count, contact)
+            self.threads = chunk_threads(plan.count, info.parallel, compiled.model.body_count, contact)
             if contact:
                 spheres = compiled.model.contact.sphere_radius.shape[0]
-                self.contact_threads = contact_threads(count, spheres)
+                self.contact_threads = contact_threads(plan.count, spheres)
+            self.threads_why = plan.why
             if max(self.threads, self.contact_threads) > 1:  # numba launches at most NUMBA_NUM_THREADS
                 import numba  # (sweep workers: 1)
 
                 cap = numba.config.NUMBA_NUM_THREADS  # type: ignore[attr-defined]
                 self.threads, self.contact_threads = min(self.threads, cap), min(self.contact_threads, cap)
+            most = max(self.threads, self.contact_threads)
+            if most > 1:
+                prepare_pool()  # before the threaded kernels load numba's threading layer
+                if plan.auto:
+                    self.governor = ThreadGovernor(most)
+            elif plan.count > 1:
+                self.threads_why = serial_reason(info.parallel, compiled.model.body_count, contact)
             chunk = info.parallel_chunk() if self.threads > 1 else info.chunk()
             self._chunk = chunk.run_chunk
             self.data = make_data(
@@ -202,8 +214,8 @@ class Simulation:
         before each recorded frame goes (x, q, P, L: the welds' reactions are read off that step)."""
         if frames is None:
             frames, record_every = self._no_frames, NEVER
-        if max(self.threads, self.contact_threads) > 1:  # per calling thread in numba; launches its pool
-            import numba  # on the first call
+        if self.governor is None and max(self.threads, self.contact_threads) > 1:  # per calling thread in numba;
+            import numba  # launches its pool on the first call (with a governor: per slice, _run_governed)
 
             numba.set_num_threads(max(self.threads, self.contact_threads))
         # adaptive runs land their steps on the chunk's ends: a stop one step early would change them (runs
@@ -217,9 +229,43 @@ class Simulation:
         return done, filled, status
 
     def _run_chunk(self, step0: int, n_steps: int, record_every: int, frames, filled: int) -> tuple[int, int, int]:  # noqa: ANN001
+        if self.governor is not None and n_steps > 0:
+            return self._run_governed(self.governor, step0, n_steps, record_every, frames, filled)
         return self._chunk(
             self._kmodel, self._kforces, self._kdata, self.settings.dt, step0, n_steps, record_every, frames, filled
         )
+
+    def _run_governed(
+        self,
+        governor: ThreadGovernor,
+        step0: int,
+        n_steps: int,
+        record_every: int,
+        frames,  # noqa: ANN001 - FrameBuffers
+        filled: int,
+    ) -> tuple[int, int, int]:
+        """`_run_chunk` in the governor's slices, each on the threads it chose (the threaded loop on one
+        thread is the serial loop's arithmetic: the same bits, ~the serial loop's speed)."""
+        import time
+
+        import numba
+
+        from rbcli.physics.step import STATUS_OK
+
+        done, status = 0, STATUS_OK
+        while done < n_steps:
+            threads, steps = governor.plan(n_steps - done)
+            numba.set_num_threads(threads)
+            started = time.perf_counter()
+            ran, filled, status = self._chunk(
+                self._kmodel, self._kforces, self._kdata, self.settings.dt, step0 + done, steps, record_every,
+                frames, filled,
+            )  # fmt: skip
+            governor.record(threads, ran, time.perf_counter() - started)
+            done += ran
+            if status != STATUS_OK or ran < steps:
+                break
+        return done, filled, status
 
     def _advance_welded(
         self,
@@ -254,6 +300,15 @@ class Simulation:
                 self._previous = before
             done += ran
         return done, filled, status
+
+    def threads_report(self) -> str:
+        """One line on the threads this Simulation's steps used and why (`rbsim run`'s summary)."""
+        most = max(self.threads, self.contact_threads)
+        if self.governor is not None:
+            return f"threads: {self.governor.describe()} ({self.threads_why})"
+        if most > 1:
+            return f"threads: {most} ({self.threads_why})"
+        return f"threads: 1 ({self.threads_why})"
 
     def load_kernels(self) -> None:
         """Load from numba's cache, or compile where it has none (a scene's first run), every kernel a

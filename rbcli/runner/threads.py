@@ -1,17 +1,22 @@
 """How many threads a run's kernels may use: `--threads N` / Simulation(threads=N), else the
-RBSIM_THREADS environment variable, else every core this process may run on.
+RBSIM_THREADS environment variable, else every core this process may run on, and whether the governor
+(runner/governor.py) chooses between one thread and all of them as the run goes.
 
-Issue 28 item 1 (docs/performance.md, "Threads"). This module resolves and validates the count and says
-whether a run uses it (`chunk_threads`); it imports neither numba nor numpy, so resolving it starts no
-thread pool (numba launches its threading layer at `numba.set_num_threads` or the first parallel
-region, which only a run on the threaded loop reaches). Sweeps' Dask
+Issue 28 item 1 and issue 45 (docs/performance.md, "Threads"). This module resolves and validates the
+count (`plan_threads`: the count, `auto`, and the reason a run reports) and says whether a run uses it
+(`chunk_threads`); it imports neither numba nor numpy, so resolving it starts no thread pool (numba
+launches its threading layer at `numba.set_num_threads` or the first parallel region, which only a run
+on the threaded loop reaches). An explicit count (a number or 'all', from the flag or RBSIM_THREADS) is
+obeyed as given; the default, or 'auto', lets the governor pick per slice of a chunk. Sweeps' Dask
 workers get RBSIM_THREADS=1 (`WORKER_ENV`): each worker process is single-threaded already
-(threads_per_worker=1), and a worker per core each running all cores would oversubscribe the machine.
+(threads_per_worker=1), and a worker per core each running all cores would oversubscribe the machine;
+pytest-xdist workers default to one thread for the same reason.
 """
 
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 
 ENV = "RBSIM_THREADS"
 # Below this many bodies a run keeps the serial chunk loop whatever the thread count: the threaded
@@ -31,6 +36,25 @@ THREADED_CONTACT = False
 # repaid from ~500 spheres on (docs/performance.md, "Threads")
 CONTACT_PARALLEL_MIN_SPHERES = 512
 WORKER_ENV = {ENV: "1"}  # what a sweep's worker processes get unless the caller set RBSIM_THREADS itself
+XDIST_ENV = "PYTEST_XDIST_WORKER"  # set in each pytest-xdist worker: one per core, so one thread each
+AUTO = "auto"
+# libgomp's idle threads spin GOMP_SPINCOUNT rounds (~20 ns each here) before they sleep; its default,
+# 300,000 (~5.5 ms), has a spinning thread take the core from the work another process (or this one's
+# other thread) would do there, and a descheduled spinner answers a fork only when its turn comes again
+# (~ms): 0.10-0.27x of one thread under load (benchmarks/bench_forkjoin.py). 2,000 (~40 us) still spans
+# the serial gap between a step's two passes, so an idle machine keeps its gain (docs/performance.md,
+# "Threads"). Set only when the user set neither variable, and only before libgomp loads.
+GOMP_SPINCOUNT = "2000"
+
+
+@dataclass(frozen=True)
+class ThreadPlan:
+    """The threads a run may use (count), whether the governor chooses between 1 and count as the run
+    goes (auto), and why (a few words for `rbsim run`'s summary)."""
+
+    count: int
+    auto: bool
+    why: str
 
 
 def available_cores() -> int:
@@ -56,16 +80,42 @@ def parse_threads(text: str, where: str) -> int:
 
 
 def resolve_threads(threads: int | str | None = None, environ: dict[str, str] | None = None) -> int:
-    """The thread count: `threads` when given, else RBSIM_THREADS, else every core; never more than the
-    cores available (extra threads on a busy machine only add fork/join waits)."""
+    """The most threads a run may use (`plan_threads(...).count`)."""
+    return plan_threads(threads, environ).count
+
+
+def plan_threads(threads: int | str | None = None, environ: dict[str, str] | None = None) -> ThreadPlan:
+    """`threads` when given, else RBSIM_THREADS, else every core (one in a pytest-xdist worker); never
+    more than the cores available (extra threads on a busy machine only add fork/join waits). A count
+    or 'all' is fixed; the default and 'auto' leave the choice between 1 and every core to the governor."""
     env = os.environ if environ is None else environ
-    if threads is not None:
-        count = parse_threads(str(threads), "--threads")
-    elif env.get(ENV, "").strip():
-        count = parse_threads(env[ENV], ENV)
-    else:
-        count = available_cores()
-    return min(count, available_cores())
+    cores = available_cores()
+    given, where = (str(threads), "--threads") if threads is not None else (env.get(ENV, "").strip(), ENV)
+    if given and given.strip().lower() != AUTO:
+        count = min(parse_threads(given, where), cores)
+        source = f"--threads {given.strip()}" if threads is not None else f"{ENV}={given}"
+        return ThreadPlan(count, False, source)
+    if not given and env.get(XDIST_ENV):
+        return ThreadPlan(1, False, "a pytest-xdist worker")
+    return ThreadPlan(cores, cores > 1, f"{AUTO}: 1 or {cores} by measured speed" if cores > 1 else "one core")
+
+
+def prepare_pool(environ: dict[str, str] | None = None) -> None:
+    """Before numba's threading layer loads: libgomp's spin before sleep cut to GOMP_SPINCOUNT, unless
+    the user chose a wait policy (OMP_WAIT_POLICY or GOMP_SPINCOUNT) or libgomp is loaded already."""
+    env = os.environ if environ is None else environ
+    if "OMP_WAIT_POLICY" in env or "GOMP_SPINCOUNT" in env or _libgomp_loaded():
+        return
+    env["GOMP_SPINCOUNT"] = GOMP_SPINCOUNT
+
+
+def _libgomp_loaded() -> bool:
+    """Whether this process has mapped libgomp (its settings were read when it loaded)."""
+    try:
+        with open("/proc/self/maps") as maps:
+            return "libgomp" in maps.read()
+    except OSError:  # pragma: no cover - no /proc: assume not, the variable is then merely unused
+        return False
 
 
 def chunk_threads(threads: int, has_parallel_loop: bool, body_count: int, contact: bool = False) -> int:
@@ -77,6 +127,17 @@ def chunk_threads(threads: int, has_parallel_loop: bool, body_count: int, contac
     if contact and not THREADED_CONTACT:
         return 1
     return threads
+
+
+def serial_reason(has_parallel_loop: bool, body_count: int, contact: bool) -> str:
+    """Why a run allowed several threads keeps to one (for its report)."""
+    if contact:
+        return f"a contact scene under {CONTACT_PARALLEL_MIN_SPHERES} contact spheres"
+    if not has_parallel_loop:
+        return "its integrator has no threaded loop"
+    if body_count < PARALLEL_MIN_BODIES:
+        return f"under {PARALLEL_MIN_BODIES} bodies"
+    return "NUMBA_NUM_THREADS=1"
 
 
 def contact_threads(threads: int, sphere_count: int) -> int:

@@ -122,3 +122,17 @@ def test_the_cli_compressions_are_the_schema_enum():
 
     schema = json.loads((ROOT / "schemas" / "scene.schema.json").read_text())
     assert tuple(schema["$defs"]["record"]["properties"]["compression"]["enum"]) == COMPRESSIONS
+
+
+def test_the_summary_says_the_threads_and_why(tmp_path, monkeypatch):
+    """One short part of the summary line: how many threads the steps used and why (issue 45)."""
+    from rbcli.runner.threads import ENV
+
+    monkeypatch.setenv(ENV, "1")  # restored after the test (the CLI writes --threads into it)
+    args = ["run", str(TUTORIAL), "-o", str(tmp_path / "t.mcap"), "--duration", "0.05"]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    assert f"threads: 1 ({ENV}=1)" in result.output
+    result = runner.invoke(app, [*args, "--threads", "auto"])
+    assert result.exit_code == 0, result.output
+    assert "threads: 1 (" in result.output  # the tutorial is too small for the threaded loop, whatever the count

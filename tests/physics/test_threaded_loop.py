@@ -10,6 +10,8 @@ scenes take the threaded loop (each scene kind compiles its threaded loop once: 
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -120,11 +122,52 @@ def test_small_scenes_contact_one_thread_and_other_integrators_keep_the_serial_l
     assert Simulation(small, threads=2).threads == 1
     large = make_scene(random_bodies(threads_module.PARALLEL_MIN_BODIES), integrator="split2")
     assert Simulation(large, threads=1).threads == 1
-    monkeypatch.setenv(threads_module.ENV, "1")
-    assert Simulation(large).threads == 1
+    monkeypatch.setenv(threads_module.ENV, threads_module.WORKER_ENV[threads_module.ENV])  # a sweep worker's
+    one = Simulation(large)
+    assert one.threads == 1 and one.governor is None
+    assert one.threads_report() == f"threads: 1 ({threads_module.ENV}=1)"
     assert Simulation(large, integrator="rk4", threads=2).threads == 1
     assert Simulation(large, integrator="dopri5", tolerance=1e-6, threads=2).threads == 1
     assert threads_module.chunk_threads(2, True, threads_module.PARALLEL_MIN_BODIES) == 2
     assert threads_module.chunk_threads(2, True, threads_module.PARALLEL_MIN_BODIES, contact=True) == 1
     pile = ROOT / "scenes/contact/sphere_pile.yaml"  # 1,000 balls: contact keeps the serial loop
     assert Simulation(pile, threads=2).threads == 1
+
+
+class _Alternating:
+    """A governor that switches between 1 and 2 threads every slice, slices of 1 to 5 steps."""
+
+    def __init__(self) -> None:
+        self.slices = 0
+
+    def plan(self, remaining: int) -> tuple[int, int]:
+        self.slices += 1
+        return 1 + self.slices % 2, min(remaining, 1 + self.slices % 5)
+
+    def record(self, threads: int, steps: int, seconds: float) -> None:
+        pass
+
+
+@two_threads
+@pytest.mark.parametrize("name", ["free bodies", "ball pile"])
+def test_bits_hold_under_a_competing_load_and_switches(name, tmp_path, small_threshold):
+    """With a busy process on the cores (whose time slices preempt the threads mid-pass), a fixed 2 threads,
+    the default governor, and a governor switching threads every slice all give the serial run's bits:
+    the thread count may change between any two steps (runner/governor.py)."""
+    scene = _scenes(tmp_path)[name]
+    busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    try:
+        serial = Simulation(scene, threads=1, integrator="split2")
+        fixed = Simulation(scene, threads=2, integrator="split2")
+        auto = Simulation(scene, threads="auto", integrator="split2")
+        switching = Simulation(scene, threads="auto", integrator="split2")
+        assert auto.governor is not None and fixed.governor is None
+        switching.governor = _Alternating()  # type: ignore[assignment]
+        for sim in (serial, fixed, auto, switching):
+            sim.step(150)
+        for sim in (fixed, auto, switching):
+            _assert_bitwise(serial, sim)
+        assert switching.governor.slices > 40
+    finally:
+        busy.kill()
+        busy.wait()

@@ -2,7 +2,16 @@
 
 import pytest
 
-from rbcli.runner.threads import ENV, WORKER_ENV, available_cores, resolve_threads
+import rbcli.runner.threads as threads_module
+from rbcli.runner.threads import (
+    ENV,
+    WORKER_ENV,
+    XDIST_ENV,
+    available_cores,
+    plan_threads,
+    prepare_pool,
+    resolve_threads,
+)
 
 
 def test_default_is_every_core() -> None:
@@ -39,3 +48,49 @@ def test_local_cluster_workers_get_one_kernel_thread(monkeypatch: pytest.MonkeyP
     assert _worker_env() == {ENV: "1", "NUMBA_NUM_THREADS": "1"}
     monkeypatch.setenv(ENV, "2")  # the caller's own choice is handed on, not overridden
     assert _worker_env()[ENV] == "2"
+
+
+@pytest.fixture
+def two_cores(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(threads_module, "available_cores", lambda: 2)
+
+
+def test_the_default_is_auto_and_an_explicit_count_is_obeyed(two_cores) -> None:  # noqa: ANN001
+    """The default (and 'auto') leaves 1 or every core to the governor; a number or 'all', from the flag
+    or RBSIM_THREADS, is fixed (no governor), and the reason says where it came from."""
+    default = plan_threads(None, {})
+    assert (default.count, default.auto) == (2, True) and default.why.startswith("auto")
+    assert plan_threads("auto", {ENV: "1"}).auto
+    assert plan_threads(None, {ENV: "auto"}).auto
+    assert plan_threads(2, {}) == threads_module.ThreadPlan(2, False, "--threads 2")
+    assert plan_threads("all", {}) == threads_module.ThreadPlan(2, False, "--threads all")
+    assert plan_threads(None, {ENV: "1"}) == threads_module.ThreadPlan(1, False, f"{ENV}=1")
+
+
+def test_sweep_and_xdist_workers_get_one_thread(two_cores) -> None:  # noqa: ANN001
+    assert plan_threads(None, dict(WORKER_ENV)) == threads_module.ThreadPlan(1, False, f"{ENV}=1")
+    xdist = plan_threads(None, {XDIST_ENV: "gw0"})
+    assert (xdist.count, xdist.auto, xdist.why) == (1, False, "a pytest-xdist worker")
+    assert plan_threads(2, {XDIST_ENV: "gw0"}).count == 2  # asked for: obeyed
+    assert plan_threads(None, {XDIST_ENV: "gw0", ENV: "auto"}).auto
+
+
+def test_one_core_has_no_governor(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(threads_module, "available_cores", lambda: 1)
+    assert plan_threads(None, {}) == threads_module.ThreadPlan(1, False, "one core")
+
+
+def test_the_wait_policy_is_set_only_where_the_user_set_none(monkeypatch: pytest.MonkeyPatch) -> None:
+    """libgomp reads its wait policy when it loads: GOMP_SPINCOUNT is set before, unless the user chose one."""
+    monkeypatch.setattr(threads_module, "_libgomp_loaded", lambda: False)
+    env: dict[str, str] = {}
+    prepare_pool(env)
+    assert env == {"GOMP_SPINCOUNT": threads_module.GOMP_SPINCOUNT}
+    for chosen in ({"OMP_WAIT_POLICY": "ACTIVE"}, {"GOMP_SPINCOUNT": "300000"}):
+        env = dict(chosen)
+        prepare_pool(env)
+        assert env == chosen
+    monkeypatch.setattr(threads_module, "_libgomp_loaded", lambda: True)  # too late: nothing is set
+    env = {}
+    prepare_pool(env)
+    assert env == {}
