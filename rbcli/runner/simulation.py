@@ -124,8 +124,8 @@ class Simulation:
             # threads (runner/threads.py): the loop whose passes over the bodies run on threads, for a
             # scene large enough to gain; bitwise the serial loop's results at any thread count
             plan = plan_threads(threads)
-            contact = compiled.contact is not None
-            self.threads = chunk_threads(plan.count, info.parallel, compiled.model.body_count, contact)
+            contact, joints = compiled.contact is not None, compiled.model.joint is not None
+            self.threads = chunk_threads(plan.count, info.parallel, compiled.model.body_count, contact, joints)
             if contact:
                 spheres = compiled.model.contact.sphere_radius.shape[0]
                 self.contact_threads = contact_threads(plan.count, spheres)
@@ -141,7 +141,7 @@ class Simulation:
                 if plan.auto:
                     self.governor = ThreadGovernor(most)
             elif plan.count > 1:
-                self.threads_why = serial_reason(info.parallel, compiled.model.body_count, contact)
+                self.threads_why = serial_reason(info.parallel, compiled.model.body_count, contact, joints)
             chunk = info.parallel_chunk() if self.threads > 1 else info.chunk()
             self._chunk = chunk.run_chunk
             self.data = make_data(

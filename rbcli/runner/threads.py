@@ -118,19 +118,28 @@ def _libgomp_loaded() -> bool:
         return False
 
 
-def chunk_threads(threads: int, has_parallel_loop: bool, body_count: int, contact: bool = False) -> int:
+def chunk_threads(
+    threads: int, has_parallel_loop: bool, body_count: int, contact: bool = False, joints: bool = False
+) -> int:
     """The threads a run's chunk loop uses: `threads` for an integrator with a threaded loop and a scene
-    of at least PARALLEL_MIN_BODIES bodies without contact (THREADED_CONTACT), else 1 (the serial loop:
-    no thread pool is started)."""
-    if threads <= 1 or not has_parallel_loop or body_count < PARALLEL_MIN_BODIES:
+    of at least PARALLEL_MIN_BODIES bodies without contact (THREADED_CONTACT) or joints, else 1 (the
+    serial loop: no thread pool is started).
+
+    Jointed scenes keep the serial loop: the joint stages (the solver's factor and solves along the
+    tree) are serial and dominate their step, so the threaded body passes gain little, while the threaded
+    loop with the joint stages is a whole second compile (~80 CPU-s on a first run: the 1,000-bead rope
+    of scenes/joints/rope_1000.yaml met it, and ran 8x slower than one thread on a loaded machine)."""
+    if threads <= 1 or not has_parallel_loop or body_count < PARALLEL_MIN_BODIES or joints:
         return 1
     if contact and not THREADED_CONTACT:
         return 1
     return threads
 
 
-def serial_reason(has_parallel_loop: bool, body_count: int, contact: bool) -> str:
+def serial_reason(has_parallel_loop: bool, body_count: int, contact: bool, joints: bool = False) -> str:
     """Why a run allowed several threads keeps to one (for its report)."""
+    if joints:
+        return "a jointed scene (its joint stages are serial)"
     if contact:
         return f"a contact scene under {CONTACT_PARALLEL_MIN_SPHERES} contact spheres"
     if not has_parallel_loop:
