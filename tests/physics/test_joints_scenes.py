@@ -19,9 +19,9 @@ SCENES = Path(__file__).resolve().parents[2] / "scenes" / "joints"
 
 @pytest.mark.parametrize("name", sorted(p.stem for p in SCENES.glob("*.yaml")))
 def test_every_joint_scene_holds_its_joints_to_round_off(name):
-    """200 steps, then every row's residual from the state (numpy twin) <= 1e-12 m or rad. On one thread:
-    rope_1000 (1,000 bodies) would take the threaded loop, whose joint kernels no other test compiles
-    (~80 s of numba) and which gives the serial loop's bits (checked by hand: 200 steps, equal)."""
+    """200 steps, then every row's residual from the state (numpy twin) <= 1e-12 m or rad. On one thread,
+    as jointed scenes run by default since the serial-loop rule (runner/threads.py chunk_threads): the
+    threaded loop with joint stages is ~80 s of numba that no other test compiles."""
     sim = Simulation(SCENES / f"{name}.yaml", threads=1)
     sim.step(200)
     s = sim.data.state
