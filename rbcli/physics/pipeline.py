@@ -187,8 +187,9 @@ STEP_STAGES: tuple[Stage, ...] = (
     Stage(
         "contact_commit",
         "contact_commit: the (sub-)step is complete: its last evaluation's contacts become the history",
-        ("from rbcli.physics.stages import contact_commit_stage",),
-        "contact_commit_stage(model, contact, contact_work, x, q, P, L)",
+        ("from rbcli.physics.stages import contact_commit_due, contact_commit_stage",),
+        "if contact_commit_due(contact_work):  # else the quiet skin holds: nothing to commit\n"
+        "    contact_commit_stage(model, contact, contact_work, x, q, P, L)",
         substep=True,
     ),
     Stage(

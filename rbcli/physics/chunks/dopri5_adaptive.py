@@ -23,6 +23,7 @@ from rbcli.physics.adaptive import (
 from rbcli.physics.integrators.dopri5 import accept, advance, begin, error_norm, restore
 from rbcli.physics.stages import (
     contact_begin_stage,
+    contact_commit_due,
     contact_commit_stage,
     contact_record_stage,
     contact_step_limit,
@@ -109,7 +110,8 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
             # kinematic_end: kinematic bodies at their exact state at the end of the (sub-)step (closed form)
             kinematic_end_stage(model, kinematic, schedule, te, x, q, P, L)
             # contact_commit: the (sub-)step is complete: its last evaluation's contacts become the history
-            contact_commit_stage(model, contact, contact_work, x, q, P, L)
+            if contact_commit_due(contact_work):  # else the quiet skin holds: nothing to commit
+                contact_commit_stage(model, contact, contact_work, x, q, P, L)
             factor = FAC_MAX if err == 0.0 else min(FAC_MAX, max(FAC_MIN, SAFETY * err**-0.25))
             if rejected_last:
                 factor = min(factor, 1.0)

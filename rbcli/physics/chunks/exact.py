@@ -9,6 +9,7 @@ from rbcli.physics.integrators.exact import SCRATCH_WIDTH, materialise
 from rbcli.physics.integrators.exact import step as integrator_step
 from rbcli.physics.stages import (
     contact_begin_stage,
+    contact_commit_due,
     contact_commit_stage,
     contact_record_stage,
     impulse_stage,
@@ -54,7 +55,8 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
             # kinematic_end: kinematic bodies at their exact state at the end of the (sub-)step (closed form)
             kinematic_end_stage(model, kinematic, schedule, ts + h, x, q, P, L)
             # contact_commit: the (sub-)step is complete: its last evaluation's contacts become the history
-            contact_commit_stage(model, contact, contact_work, x, q, P, L)
+            if contact_commit_due(contact_work):  # else the quiet skin holds: nothing to commit
+                contact_commit_stage(model, contact, contact_work, x, q, P, L)
         # materialise: exact defers torque-free bodies under constant forces; write them when due
         due = (index + 1) % record_every == 0 or k + 1 == n_steps
         materialise(model, forces, contact, t, dt, x, q, P, L, scratch, due)

@@ -9,6 +9,7 @@ from rbcli.physics.integrators.semi_implicit import SCRATCH_WIDTH
 from rbcli.physics.integrators.semi_implicit import step as integrator_step
 from rbcli.physics.stages import (
     contact_begin_stage,
+    contact_commit_due,
     contact_commit_stage,
     contact_record_stage,
     impulse_stage,
@@ -54,7 +55,8 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
             # kinematic_end: kinematic bodies at their exact state at the end of the (sub-)step (closed form)
             kinematic_end_stage(model, kinematic, schedule, ts + h, x, q, P, L)
             # contact_commit: the (sub-)step is complete: its last evaluation's contacts become the history
-            contact_commit_stage(model, contact, contact_work, x, q, P, L)
+            if contact_commit_due(contact_work):  # else the quiet skin holds: nothing to commit
+                contact_commit_stage(model, contact, contact_work, x, q, P, L)
         # contact_record: on recording steps, the state's contact count, deepest overlap and energy
         contact_record_stage(contact, contact_work, x, q, frames, filled, (index + 1) % record_every == 0)
         # record: on recording steps, the divergence check and the state copied into the next frame

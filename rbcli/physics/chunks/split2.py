@@ -10,6 +10,7 @@ from rbcli.physics.integrators.split2 import step as integrator_step
 from rbcli.physics.joints.stages import joint_begin, joint_position, joint_record, joint_velocity
 from rbcli.physics.stages import (
     contact_begin_stage,
+    contact_commit_due,
     contact_commit_stage,
     contact_record_stage,
     impulse_stage,
@@ -61,7 +62,8 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
             # joint_velocity: the momenta projected so that the joints' rows have zero rate, G V = 0
             joint_velocity(model, joint, joint_work, h, x, q, P, L)
             # contact_commit: the (sub-)step is complete: its last evaluation's contacts become the history
-            contact_commit_stage(model, contact, contact_work, x, q, P, L)
+            if contact_commit_due(contact_work):  # else the quiet skin holds: nothing to commit
+                contact_commit_stage(model, contact, contact_work, x, q, P, L)
         # contact_record: on recording steps, the state's contact count, deepest overlap and energy
         contact_record_stage(contact, contact_work, x, q, frames, filled, (index + 1) % record_every == 0)
         # joint_record: on recording steps, each joint's reaction over the last (sub-)step into the next frame
