@@ -31,7 +31,7 @@ from rbcli.physics.frames import body_angular_velocity, internal_orientation, us
 from rbcli.physics.integrators import get_integrator
 from rbcli.physics.rotation import quat_rotate, quat_rotate_inverse
 from rbcli.physics.state import State
-from rbcli.runner.threads import chunk_threads, contact_threads, resolve_threads
+from rbcli.runner.threads import chunk_threads, contact_threads, resolve_threads, use_threads
 from rbcli.scene.compile import CompiledScene, RunOptions, RunOverrides
 from rbcli.scene.parts import merged_state, part_states
 
@@ -203,9 +203,7 @@ class Simulation:
         if frames is None:
             frames, record_every = self._no_frames, NEVER
         if max(self.threads, self.contact_threads) > 1:  # per calling thread in numba; launches its pool
-            import numba  # on the first call
-
-            numba.set_num_threads(max(self.threads, self.contact_threads))
+            use_threads(max(self.threads, self.contact_threads))  # on the first call
         # adaptive runs land their steps on the chunk's ends: a stop one step early would change them (runs
         # must not depend on chunking), so their welds' reactions stay unknown (NaN)
         if self.parts is not None and n_steps and not self.adaptive:
