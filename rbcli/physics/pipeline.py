@@ -241,8 +241,10 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
 
     status: STATUS_OK (ran n_steps), STATUS_FULL (the frame buffers are full: hand them over and call
     again), STATUS_DIVERGED (the last step left a non-finite or blown-up state, not recorded),
-    STATUS_NO_ROOM (called with full buffers: nothing was written).
+    STATUS_NO_ROOM (called with full buffers: nothing was written). model, forces, data and frames may
+    each come as a KernelHandle (the runner's calls: one pointer each instead of ~120 arrays to convert).
     """
+    model, forces, data, frames = opened(model), opened(forces), opened(data), opened(frames)
     # taken out of their tuples once: inside the loop each would be increfed and decrefed every step
     x, q, P, L, F, tau, scratch = data.x, data.q, data.P, data.L, data.F, data.tau, data.scratch
     force_data = data.force
@@ -280,8 +282,10 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
     into `frames` as the fixed-step run_chunk does), on each index a step-start stage lands at (the
     steps that hold impulses) and on step0 + n_steps, so the state always ends on the grid. Returns
     (grid steps done, frames filled, status): STATUS_OK, STATUS_FULL (flush and call again),
-    STATUS_DIVERGED or STATUS_STEP_TOO_SMALL (both end the run).
+    STATUS_DIVERGED or STATUS_STEP_TOO_SMALL (both end the run). model, forces, data and frames may each
+    come as a KernelHandle, as in the fixed-step loops.
     """
+    model, forces, data, frames = opened(model), opened(forces), opened(data), opened(frames)
     # taken out of their tuples once, as in the fixed-step loops
     x, q, P, L, F, tau = data.x, data.q, data.P, data.L, data.F, data.tau
     force_data = data.force
@@ -361,6 +365,7 @@ _ADAPTIVE_IMPORTS = {
         "CONTACT_STEP_FLOOR", "CONTROL_REJECTED_LAST", "CONTROL_STEP", "COUNT_ACCEPTED", "COUNT_REJECTED",
         "FAC_MAX", "FAC_MIN", "SAFETY", "STATUS_STEP_TOO_SMALL", "STEP_MIN_RELATIVE", "initial_step",
     },
+    "rbcli.physics.kernel_handle": {"opened"},
     "rbcli.physics.stages": {"contact_step_limit", "schedule_step_floor"},
     "rbcli.physics.step": {"CHUNK_KERNEL", "STATUS_OK", "chunk_status", "model_bodies"},
 }  # fmt: skip
@@ -464,7 +469,8 @@ def chunk_source(module: str, name: str, stages: tuple[Stage, ...] = STEP_STAGES
         body.append(_indent(f"# {stage.why}", depth))
         body.append(_indent(code, depth))
     own = f"rbcli.physics.integrators.{module}"
-    names = {"rbcli.physics.step": {"CHUNK_KERNEL", "chunk_status", "model_bodies"}, own: {"SCRATCH_WIDTH"}}
+    names = {"rbcli.physics.step": {"CHUNK_KERNEL", "chunk_status", "model_bodies"}, own: {"SCRATCH_WIDTH"},
+             "rbcli.physics.kernel_handle": {"opened"}}  # fmt: skip
     imports = _import_lines(names, stages, "".join(body), own, "step_parallel" if parallel else "step")
     title = f"`{name}` on threads" if parallel else f"`{name}`"
     head = _HEADER.format(name=title, imports=imports, tables=_taken("\n".join(codes)), bodies=_BODIES)

@@ -22,7 +22,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Unpack
+from typing import TYPE_CHECKING, Any, Unpack
 
 import numpy as np
 
@@ -36,6 +36,7 @@ from rbcli.scene.compile import CompiledScene, RunOptions, RunOverrides
 from rbcli.scene.parts import merged_state, part_states
 
 if TYPE_CHECKING:
+    from rbcli.physics.kernel_handle import KernelHandle
     from rbcli.record.frame import Checkpoint, RunSummary, Sink
     from rbcli.runner.loop import ProgressCallback
     from rbcli.scene.spec import SceneSpec
@@ -146,6 +147,7 @@ class Simulation:
         from rbcli.physics.step import empty_buffers
 
         self._no_frames = empty_buffers(1, self.model.body_count)  # never written: nothing is due
+        self._handles: list[KernelHandle | None] = [None] * 4  # model, forces, data, frames (_run_chunk)
 
     # ---- time -------------------------------------------------------------------------------------
 
@@ -215,9 +217,20 @@ class Simulation:
         return done, filled, status
 
     def _run_chunk(self, step0: int, n_steps: int, record_every: int, frames, filled: int) -> tuple[int, int, int]:  # noqa: ANN001
-        return self._chunk(
-            self._kmodel, self._kforces, self._kdata, self.settings.dt, step0, n_steps, record_every, frames, filled
-        )
+        # each table as a KernelHandle (physics/kernel_handle.py): converted once, not at every call
+        model, forces = self._handle(0, self._kmodel), self._handle(1, self._kforces)
+        data, frames = self._handle(2, self._kdata), self._handle(3, frames)
+        return self._chunk(model, forces, data, self.settings.dt, step0, n_steps, record_every, frames, filled)
+
+    def _handle(self, slot: int, value: Any) -> KernelHandle:  # noqa: ANN401 - a kernel table
+        """The KernelHandle of `value` kept in `slot`, made anew when the slot held another object (the
+        frame buffers of another block; a table a test replaced)."""
+        handle = self._handles[slot]
+        if handle is None or handle.value is not value:
+            from rbcli.physics.kernel_handle import KernelHandle  # numba: not at import
+
+            handle = self._handles[slot] = KernelHandle(value)
+        return handle
 
     def _advance_welded(
         self,
@@ -439,6 +452,9 @@ class Simulation:
         if self.data.adaptive_counters is not None:
             self.data.adaptive_counters[:] = 0
         self.data.force.term_evaluations[:] = 0
+        if self.data.force.contact is not None:  # the contact work's counters and statistics, as fresh
+            self.data.force.contact.counters[:] = 0
+            self.data.force.contact.stats[:] = 0.0
 
     # ---- runs -------------------------------------------------------------------------------------
 

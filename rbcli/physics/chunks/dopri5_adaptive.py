@@ -21,6 +21,7 @@ from rbcli.physics.adaptive import (
     initial_step,
 )
 from rbcli.physics.integrators.dopri5 import accept, advance, begin, error_norm, restore
+from rbcli.physics.kernel_handle import opened
 from rbcli.physics.stages import (
     contact_begin_stage,
     contact_commit_due,
@@ -48,8 +49,10 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
     into `frames` as the fixed-step run_chunk does), on each index a step-start stage lands at (the
     steps that hold impulses) and on step0 + n_steps, so the state always ends on the grid. Returns
     (grid steps done, frames filled, status): STATUS_OK, STATUS_FULL (flush and call again),
-    STATUS_DIVERGED or STATUS_STEP_TOO_SMALL (both end the run).
+    STATUS_DIVERGED or STATUS_STEP_TOO_SMALL (both end the run). model, forces, data and frames may each
+    come as a KernelHandle, as in the fixed-step loops.
     """
+    model, forces, data, frames = opened(model), opened(forces), opened(data), opened(frames)
     # taken out of their tuples once, as in the fixed-step loops
     x, q, P, L, F, tau = data.x, data.q, data.P, data.L, data.F, data.tau
     force_data = data.force

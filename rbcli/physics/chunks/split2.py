@@ -8,6 +8,7 @@ import numba
 from rbcli.physics.integrators.split2 import SCRATCH_WIDTH
 from rbcli.physics.integrators.split2 import step as integrator_step
 from rbcli.physics.joints.stages import joint_begin, joint_position, joint_record, joint_velocity
+from rbcli.physics.kernel_handle import opened
 from rbcli.physics.stages import (
     contact_begin_stage,
     contact_commit_due,
@@ -28,8 +29,10 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
 
     status: STATUS_OK (ran n_steps), STATUS_FULL (the frame buffers are full: hand them over and call
     again), STATUS_DIVERGED (the last step left a non-finite or blown-up state, not recorded),
-    STATUS_NO_ROOM (called with full buffers: nothing was written).
+    STATUS_NO_ROOM (called with full buffers: nothing was written). model, forces, data and frames may
+    each come as a KernelHandle (the runner's calls: one pointer each instead of ~120 arrays to convert).
     """
+    model, forces, data, frames = opened(model), opened(forces), opened(data), opened(frames)
     # taken out of their tuples once: inside the loop each would be increfed and decrefed every step
     x, q, P, L, F, tau, scratch = data.x, data.q, data.P, data.L, data.F, data.tau, data.scratch
     force_data = data.force
