@@ -12,7 +12,6 @@ from typing import NamedTuple
 
 import numba
 import numpy as np
-from numba.core import types
 
 import rbcli
 from rbcli.physics.kernel_handle import KernelHandle, KernelHandleType, opened
@@ -71,10 +70,9 @@ def far_boxes() -> rbcli.Simulation:
 def test_the_runner_passes_handles_and_renews_a_replaced_table():
     sim = far_boxes()
     sim.step()
-    (signature,) = sim._chunk.signatures
-    tables = [signature[i] for i in (0, 1, 2, 7)]  # model, forces, data, frames
-    assert all(isinstance(t, KernelHandleType) for t in tables), tables
-    assert not any(isinstance(t, types.BaseTuple) for t in signature)  # no array converted per call
+    passed = [numba.typeof(handle) for handle in sim._handles]  # model, forces, data, frames
+    assert all(isinstance(t, KernelHandleType) for t in passed), passed
+    assert any([signature[i] for i in (0, 1, 2, 7)] == passed for signature in sim._chunk.signatures)
     first = sim._handles[2]
     sim.step()
     assert sim._handles[2] is first  # converted once
