@@ -14,7 +14,9 @@ address (~0.5 us whatever the value holds); `opened(handle)` in the kernel loads
 buffer, and `opened(anything else)` is that value, so one kernel source serves both. The arrays are
 never reallocated (Data allocates them once; everything writes them in place), so the native form stays
 true while the handle lives; a kernel compiled without reference counting (STEP_KERNEL, CHUNK_KERNEL) is
-given arrays without a meminfo either way.
+given arrays without a meminfo either way. Handles hold rbcli's own tables only: numba's cache index of
+`_store` names the type of every value it was compiled for, and a process that loads the index must be
+able to import each (a test's own named tuple there broke `rbsim run` in the next process).
 """
 
 from __future__ import annotations
