@@ -1,6 +1,6 @@
 """The sphere pile of the collisions issue (18): rbsim's contact against MuJoCo, in one process.
 
-    python benchmarks/bench_contact.py [--quick] [--no-mujoco] [--big] [--sections pile,far,scenes]
+    python benchmarks/bench_contact.py [--quick] [--no-mujoco] [--big] [--sections pile,far,idle,scenes]
 
 Rows without "1 thread" run on rbsim's default threads (every core: the contact search on threads,
 physics/contact/threaded.py); "1 thread" rows are the serial search.
@@ -21,6 +21,10 @@ Sphere-steps per second = spheres x steps / wall seconds of the stepping alone (
 contact pairs per second counts the contacts evaluated. `bench_speed.py --sections contact` runs this.
 far: two bricks 5 m apart with a `contact:` section (nothing touches) against the same scene without
   one, ns per step, best of 5 interleaved blocks (target <= 1.2x).
+idle: issue 47 item 6's far-apart scenes (two tumbling 0.2 m boxes 5 m apart, no gravity, a ground
+  100 m below) and variants (per-step calls or one call after reset(), no reset, not spinning, the
+  plane near or far, nearer boxes, balls, other integrators), CPU ns per step with and without
+  `contact:` measured in the same run (target <= 1.2x each).
 scenes: steps/s of dominoes.yaml and container_mix.yaml (broad-phase work: sphere pairs tested).
 """
 
@@ -317,6 +321,81 @@ def far_section(quick: bool) -> list[str]:
     ]
 
 
+IDLE_BOX = (
+    "{{name: {name}, shape: {shape}, spacing: 0.02, density: 500, position: [{x}, 0, 0], "
+    "velocity: [{v}, 0, 0], angular_velocity: {w}}}"
+)
+IDLE_CUBE = "{type: box, size: [0.2, 0.2, 0.2]}"
+
+
+def idle_scene(contact: bool, *, integrator: str = "split2", gap: float = 5.0, ground: float = -100.0,
+               spin: bool = True, shape: str = IDLE_CUBE) -> str:  # fmt: skip
+    """Issue 47 item 6's scene: two tumbling 0.2 m boxes (spacing 0.02) `gap` m apart drifting apart at
+    0.1 m/s each, no gravity, and with `contact:` a ground `ground` m below their centres."""
+    w = "[1, 2, 3]" if spin else "[0, 0, 0]"
+    bodies = "".join(
+        "  - " + IDLE_BOX.format(name=f"b{i}", shape=shape, x=gap * i, v=0.1 * (2 * i - 1), w=w) + "\n"
+        for i in range(2)
+    )
+    return (f"simulation: {{dt: 0.001, steps: 3000, integrator: {integrator}}}\n"
+            + (f"contact: {{ground: {ground}}}\n" if contact else "") + "bodies:\n" + bodies)  # fmt: skip
+
+
+IDLE_ROWS = (  # label, idle_scene keywords, how it is stepped after each reset (or without one)
+    ("issue 47's scene: 3,000 calls of step() after reset()", {}, "calls"),
+    ("the same, one call of step(3000) after reset()", {}, "chunk"),
+    ("one call, no reset (the state runs on)", {}, "no-reset"),
+    ("one call, not spinning", {"spin": False}, "chunk"),
+    ("one call, ground 1 m below (0.83 m under the lowest corner)", {"ground": -1.0}, "chunk"),
+    ("one call, ground 10^6 m below", {"ground": -1.0e6}, "chunk"),
+    ("one call, boxes 0.5 m apart", {"gap": 0.5}, "chunk"),
+    ("one call, balls (shape: sphere, radius 0.1)", {"shape": "{type: sphere, radius: 0.1}"}, "chunk"),
+    ("3,000 calls of step(), balls", {"shape": "{type: sphere, radius: 0.1}"}, "calls"),
+) + tuple(
+    (f"one call, {name}", {"integrator": name}, "chunk")
+    for name in ("euler-matrix", "euler-quat", "semi-implicit", "semi-implicit-gyro", "rk4", "split4")
+)
+
+
+def idle_section(quick: bool) -> list[str]:
+    """Issue 47 item 6: far-apart scenes with and without `contact:`, CPU ns per step (process time),
+    the best of `blocks` blocks, with and without interleaved; each block resets (but 'no reset') and
+    steps 3,000 steps, ten times over for the one-call rows (0.5 ms is too short to time alone)."""
+    from rbcli.scene.load import load_scene_text
+
+    rows = IDLE_ROWS[:3] if quick else IDLE_ROWS
+    blocks, steps = 5, 3000
+    lines = ["### Contact when nothing touches: issue 47 item 6's scenes (CPU ns per step, best of 5)", "",
+             "| scene | without `contact:` | with it | ratio |", "|---|---:|---:|---:|"]  # fmt: skip
+    worst = 0.0
+    for label, keywords, how in rows:
+        print(f"idle: {label} ...", flush=True)
+        sims = {c: rbcli.Simulation(load_scene_text(idle_scene(c, **keywords))) for c in (False, True)}
+        for sim in sims.values():
+            sim.step(10)  # compile or load the kernels
+        best = {c: math.inf for c in sims}
+        for _ in range(blocks):
+            for c, sim in sims.items():
+                repeats = 1 if how == "calls" else 10
+                began = time.process_time()
+                for _ in range(repeats):
+                    if how != "no-reset":
+                        sim.reset()
+                    if how == "calls":
+                        for _ in range(steps):
+                            sim.step()
+                    else:
+                        sim.step(steps)
+                best[c] = min(best[c], (time.process_time() - began) / (repeats * steps))
+        ratio = best[True] / best[False]
+        worst = max(worst, ratio)
+        lines.append(f"| {label} | {best[False] * 1e9:,.0f} | {best[True] * 1e9:,.0f} | {ratio:.2f}x |")
+    load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
+    lines += ["", f"- worst {worst:.2f}x (target <= {TARGET_FAR}: {'met' if worst <= TARGET_FAR else '**missed**'}); "
+              f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} (1, 5, 15 min)"]  # fmt: skip
+    return lines
+
+
 def scenes_section(quick: bool) -> list[str]:
     """Steps/s of scenes/contact/dominoes.yaml and container_mix.yaml (their dt; sub-steps as main chose
     them, 2 and 1, so the broad phase is compared at the same work; and at `substeps: auto`)."""
@@ -350,12 +429,14 @@ def main() -> None:
     )
     parser.add_argument("--no-mujoco", action="store_true")
     parser.add_argument("--big", action="store_true", help="also the 10^5-sphere pile (200 steps)")
-    parser.add_argument("--sections", default="pile,far,scenes", help="comma-separated: pile, far, scenes")
+    parser.add_argument("--sections", default="pile,far,idle,scenes", help="comma-separated: pile, far, idle, scenes")
     args = parser.parse_args()
     sections = args.sections.split(",")
     lines = []
     if "far" in sections:
         lines += far_section(args.quick) + [""]
+    if "idle" in sections:
+        lines += idle_section(args.quick) + [""]
     if "scenes" in sections:
         lines += scenes_section(args.quick) + [""]
     if "pile" in sections:

@@ -30,8 +30,10 @@ from rbcli.physics.adaptive import (
     initial_step,
 )
 from rbcli.physics.integrators.dopri5 import accept, advance, begin, error_norm, restore
+from rbcli.physics.kernel_handle import opened
 from rbcli.physics.stages import (
     contact_begin_stage,
+    contact_commit_due,
     contact_commit_stage,
     contact_record_stage,
     contact_step_limit,
@@ -56,9 +58,11 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
     into `frames` as the fixed-step run_chunk does), on each index a step-start stage lands at (the
     steps that hold impulses) and on step0 + n_steps, so the state always ends on the grid. Returns
     (grid steps done, frames filled, status): STATUS_OK, STATUS_FULL (flush and call again),
-    STATUS_DIVERGED or STATUS_STEP_TOO_SMALL (both end the run).
+    STATUS_DIVERGED or STATUS_STEP_TOO_SMALL (both end the run). model, forces, data and frames may each
+    come as a KernelHandle, as in the fixed-step loops.
     """
-    # taken out of their tuples once, as in the fixed-step loop
+    model, forces, data, frames = opened(model), opened(forces), opened(data), opened(frames)
+    # taken out of their tuples once, as in the fixed-step loops
     x, q, P, L, F, tau = data.x, data.q, data.P, data.L, data.F, data.tau
     force_data = data.force
     contact, kinematic, schedule = model.contact, model.kinematic, forces.schedule
@@ -119,7 +123,8 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
             # kinematic_end: kinematic bodies at their exact state at the end of the (sub-)step (closed form)
             kinematic_end_stage(model, kinematic, schedule, te, x, q, P, L)
             # contact_commit: the (sub-)step is complete: its last evaluation's contacts become the history
-            contact_commit_stage(model, contact, contact_work, x, q, P, L)
+            if contact_commit_due(contact_work):  # else the quiet skin holds: nothing to commit
+                contact_commit_stage(model, contact, contact_work, x, q, P, L)
             factor = FAC_MAX if err == 0.0 else min(FAC_MAX, max(FAC_MIN, SAFETY * err**-0.25))
             if rejected_last:
                 factor = min(factor, 1.0)

@@ -34,8 +34,10 @@ from typing import Any, NamedTuple
 
 import numba
 
+from rbcli.physics.kernel_handle import opened
 from rbcli.physics.stages import (
     contact_begin_stage,
+    contact_commit_due,
     contact_commit_stage,
     contact_record_stage,
     impulse_stage,
@@ -69,8 +71,11 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
     model, forces: `Model.kernel()` and `ForceTables.kernel()` (None for the tables the scene lacks);
     data: `Data.kernel()`. status: STATUS_OK (ran n_steps), STATUS_FULL (the frame buffers are full: hand
     them over and call again), STATUS_DIVERGED (the last step left a non-finite or blown-up state, not
-    recorded), STATUS_NO_ROOM (called with full buffers: nothing was written).
+    recorded), STATUS_NO_ROOM (called with full buffers: nothing was written). model, forces, data and
+    frames may each come as a KernelHandle (the runner's calls: one pointer each instead of ~120 arrays to
+    convert: physics/kernel_handle.py).
     """
+    model, forces, data, frames = opened(model), opened(forces), opened(data), opened(frames)
     # taken out of their tuples once: inside the loop each would be increfed and decrefed every step
     x, q, P, L, F, tau, scratch = data.x, data.q, data.P, data.L, data.F, data.tau, data.scratch
     force_data = data.force
@@ -106,7 +111,8 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
                 # joint_velocity: the momenta projected so that the joints' rows have zero rate, G V = 0
                 joint_velocity(model, joint, joint_work, h, x, q, P, L)
             # contact_commit: the (sub-)step is complete: its last evaluation's contacts become the history
-            contact_commit_stage(model, contact, contact_work, x, q, P, L)
+            if contact_commit_due(contact_work):  # else the quiet skin holds: nothing to commit
+                contact_commit_stage(model, contact, contact_work, x, q, P, L)
         if DEFERS:
             # materialise: exact defers torque-free bodies under constant forces; write them when due: on
             # recording steps and at the chunk's end (the stages below read the state only when recording)

@@ -1,7 +1,8 @@
 """The optional stages of a step that the chunk loops call (physics/pipeline.py lists them), each through a
 dispatcher that compiles to nothing when the scene does not have it (physics/dispatch.py): impulses,
-contact_begin, kinematic_begin, kinematic_end, contact_commit, contact_record; and for adaptive stepping
-the contacts' step limit, the next step that holds an impulse and the schedules' step floor.
+contact_begin, kinematic_begin, kinematic_end, contact_commit (and its test contact_commit_due),
+contact_record; and for adaptive stepping the contacts' step limit, the next step that holds an impulse
+and the schedules' step floor.
 
 Each takes the table it needs by name: the model's contact or kinematic table (`model.contact`,
 `model.kinematic`: None in `Model.kernel()` where the scene lacks them) or the force tables (impulses,
@@ -97,6 +98,23 @@ def _contact_commit_stage(model, contact, work, x, q, P, L):  # noqa: ANN001, AN
             commit_contacts(model, contact, work, x, q, P, L)
 
     return run
+
+
+def contact_commit_due(work) -> bool:  # noqa: ANN001
+    """Whether the (sub-)step's contacts must be committed: the scene has contact and the quiet skin is
+    off (contact/quiet.py). A test of its own before contact_commit_stage, which takes the contact table
+    and work: where LLVM left that stage a call (split4's loop), the quiet steps passed them by value
+    every step (~180 ns); this one's body is one load, and is inlined. (numba's own inlining of the
+    stage, overload inline="always", changed contact trajectories' bits: not used.)"""
+    kernel_only()
+    return False
+
+
+@overload(contact_commit_due, jit_options=DISPATCH_OPTIONS)
+def _contact_commit_due(work):  # noqa: ANN001, ANN202
+    if absent(work):
+        return lambda work: False
+    return lambda work: work.quiet_state[QUIET_ON] == 0
 
 
 def contact_record_stage(contact, work, x, q, frames, filled, due) -> None:  # noqa: ANN001

@@ -22,7 +22,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Unpack
+from typing import TYPE_CHECKING, Any, Unpack
 
 import numpy as np
 
@@ -32,11 +32,19 @@ from rbcli.physics.integrators import get_integrator
 from rbcli.physics.rotation import quat_rotate, quat_rotate_inverse
 from rbcli.physics.state import State
 from rbcli.runner.governor import ThreadGovernor
-from rbcli.runner.threads import chunk_threads, contact_threads, plan_threads, prepare_pool, serial_reason
+from rbcli.runner.threads import (
+    chunk_threads,
+    contact_threads,
+    plan_threads,
+    prepare_pool,
+    serial_reason,
+    use_threads,
+)
 from rbcli.scene.compile import CompiledScene, RunOptions, RunOverrides
 from rbcli.scene.parts import merged_state, part_states
 
 if TYPE_CHECKING:
+    from rbcli.physics.kernel_handle import KernelHandle
     from rbcli.record.frame import Checkpoint, RunSummary, Sink
     from rbcli.runner.loop import ProgressCallback
     from rbcli.scene.spec import SceneSpec
@@ -158,6 +166,7 @@ class Simulation:
         from rbcli.physics.step import empty_buffers
 
         self._no_frames = empty_buffers(1, self.model.body_count)  # never written: nothing is due
+        self._handles: list[KernelHandle | None] = [None] * 4  # model, forces, data, frames (_run_chunk)
 
     # ---- time -------------------------------------------------------------------------------------
 
@@ -215,9 +224,8 @@ class Simulation:
         if frames is None:
             frames, record_every = self._no_frames, NEVER
         if self.governor is None and max(self.threads, self.contact_threads) > 1:  # per calling thread in numba;
-            import numba  # launches its pool on the first call (with a governor: per slice, _run_governed)
-
-            numba.set_num_threads(max(self.threads, self.contact_threads))
+            use_threads(max(self.threads, self.contact_threads))  # launches its pool on the first call (with a
+            # governor: per slice, _run_governed)
         # adaptive runs land their steps on the chunk's ends: a stop one step early would change them (runs
         # must not depend on chunking), so their welds' reactions stay unknown (NaN)
         if self.parts is not None and n_steps and not self.adaptive:
@@ -231,9 +239,24 @@ class Simulation:
     def _run_chunk(self, step0: int, n_steps: int, record_every: int, frames, filled: int) -> tuple[int, int, int]:  # noqa: ANN001
         if self.governor is not None and n_steps > 0:
             return self._run_governed(self.governor, step0, n_steps, record_every, frames, filled)
-        return self._chunk(
-            self._kmodel, self._kforces, self._kdata, self.settings.dt, step0, n_steps, record_every, frames, filled
-        )
+        model, forces, data, frames = self._handles_of(frames)
+        return self._chunk(model, forces, data, self.settings.dt, step0, n_steps, record_every, frames, filled)
+
+    def _handles_of(self, frames):  # noqa: ANN001, ANN202 - FrameBuffers -> four KernelHandles
+        """The model, force tables, data and `frames` as KernelHandles (physics/kernel_handle.py): each
+        table converted once, not at every call of the chunk loop (~120 arrays in a contact scene)."""
+        return (self._handle(0, self._kmodel), self._handle(1, self._kforces), self._handle(2, self._kdata),
+                self._handle(3, frames))  # fmt: skip
+
+    def _handle(self, slot: int, value: Any) -> KernelHandle:  # noqa: ANN401 - a kernel table
+        """The KernelHandle of `value` kept in `slot`, made anew when the slot held another object (the
+        frame buffers of another block; a table a test replaced)."""
+        handle = self._handles[slot]
+        if handle is None or handle.value is not value:
+            from rbcli.physics.kernel_handle import KernelHandle  # numba: not at import
+
+            handle = self._handles[slot] = KernelHandle(value)
+        return handle
 
     def _run_governed(
         self,
@@ -248,19 +271,17 @@ class Simulation:
         thread is the serial loop's arithmetic: the same bits, ~the serial loop's speed)."""
         import time
 
-        import numba
-
         from rbcli.physics.step import STATUS_OK
 
         done, status = 0, STATUS_OK
+        model, forces, data, frame_handle = self._handles_of(frames)
         while done < n_steps:
             threads, steps = governor.plan(n_steps - done)
-            numba.set_num_threads(threads)
+            use_threads(threads)
             started = time.perf_counter()
             ran, filled, status = self._chunk(
-                self._kmodel, self._kforces, self._kdata, self.settings.dt, step0 + done, steps, record_every,
-                frames, filled,
-            )  # fmt: skip
+                model, forces, data, self.settings.dt, step0 + done, steps, record_every, frame_handle, filled
+            )
             governor.record(threads, ran, time.perf_counter() - started)
             done += ran
             if status != STATUS_OK or ran < steps:
@@ -496,6 +517,9 @@ class Simulation:
         if self.data.adaptive_counters is not None:
             self.data.adaptive_counters[:] = 0
         self.data.force.term_evaluations[:] = 0
+        if self.data.force.contact is not None:  # the contact work's counters and statistics, as fresh
+            self.data.force.contact.counters[:] = 0
+            self.data.force.contact.stats[:] = 0.0
 
     # ---- runs -------------------------------------------------------------------------------------
 

@@ -16,6 +16,7 @@ pytest-xdist workers default to one thread for the same reason.
 from __future__ import annotations
 
 import os
+import threading
 from dataclasses import dataclass
 
 ENV = "RBSIM_THREADS"
@@ -154,3 +155,18 @@ def contact_threads(threads: int, sphere_count: int) -> int:
     CONTACT_PARALLEL_MIN_SPHERES contact spheres, else 1 (the serial search; no threaded kernel is
     compiled). Independent of the chunk loop's choice: contact scenes keep the serial loop."""
     return threads if threads > 1 and sphere_count >= CONTACT_PARALLEL_MIN_SPHERES else 1
+
+
+_numba_threads = threading.local()  # the count use_threads last gave numba in this thread
+
+
+def use_threads(count: int) -> None:
+    """numba.set_num_threads(count) for the calling thread (numba's count is per thread), unless this
+    thread's last call asked for the same count: the call costs ~1 us, as much as a step of a small scene
+    (a user stepping one step per Simulation.step). A count set by other code between two calls is not
+    seen; only speed depends on it (results are bitwise the same at any thread count)."""
+    if getattr(_numba_threads, "count", None) != count:
+        import numba
+
+        numba.set_num_threads(count)
+        _numba_threads.count = count
