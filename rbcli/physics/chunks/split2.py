@@ -7,7 +7,8 @@ import numba
 
 from rbcli.physics.integrators.split2 import SCRATCH_WIDTH
 from rbcli.physics.integrators.split2 import step as integrator_step
-from rbcli.physics.joints.stages import joint_begin, joint_position, joint_record, joint_velocity
+from rbcli.physics.joints.rattle import joint_update
+from rbcli.physics.joints.stages import joint_begin, joint_record, joint_velocity
 from rbcli.physics.stages import (
     contact_begin_stage,
     contact_commit_stage,
@@ -53,11 +54,12 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
             # kinematic_begin: kinematic bodies at their exact pose, moving at their mean velocity over the (sub-)step
             kinematic_begin_stage(model, kinematic, schedule, ts, h, x, q, P, L)
             # update: the integrator's maths, its force evaluations through forces.wrench.accumulate_wrench
-            integrator_step(model, forces, contact, force_data, ts, h, x, q, P, L, F, tau, scratch)
+            if not joint_update(
+                model, forces, contact, force_data, joint, joint_work, kinematic, schedule, ts, h, x, q, P, L, F, tau
+            ):
+                integrator_step(model, forces, contact, force_data, ts, h, x, q, P, L, F, tau, scratch)
             # kinematic_end: kinematic bodies at their exact state at the end of the (sub-)step (closed form)
             kinematic_end_stage(model, kinematic, schedule, ts + h, x, q, P, L)
-            # joint_position: the joints' impulse at the kick that puts the end configuration on g = 0 (RATTLE)
-            joint_position(model, joint, joint_work, h, x, q, P, L)
             # joint_velocity: the momenta projected so that the joints' rows have zero rate, G V = 0
             joint_velocity(model, joint, joint_work, h, x, q, P, L)
             # contact_commit: the (sub-)step is complete: its last evaluation's contacts become the history
