@@ -115,7 +115,8 @@ class Simulation:
             # scene large enough to gain; bitwise the serial loop's results at any thread count
             count = resolve_threads(threads)
             contact = compiled.contact is not None
-            self.threads = chunk_threads(count, info.parallel, compiled.model.body_count, contact)
+            joints = compiled.model.joint is not None
+            self.threads = chunk_threads(count, info.parallel, compiled.model.body_count, contact, joints)
             if contact:
                 spheres = compiled.model.contact.sphere_radius.shape[0]
                 self.contact_threads = contact_threads(count, spheres)

@@ -98,7 +98,7 @@ def joint_update(
     return True
 
 
-@numba.njit(cache=True)
+@numba.njit(**STEP_KERNEL)
 def _kick(has_torque, s, P, L, F, tau) -> None:  # noqa: ANN001
     """P += s F, and L += s tau when some force term has a torque (tau is otherwise never written)."""
     for b in range(P.shape[0]):
@@ -112,7 +112,7 @@ def _kick(has_torque, s, P, L, F, tau) -> None:  # noqa: ANN001
 
 
 @separately_compiled
-@numba.njit(cache=True)
+@numba.njit(**STEP_KERNEL)
 def joint_position(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
     """The joints' impulse at the start configuration (work.x_start, work.q_start) that puts the end of
     the drift on g = 0, then each limit beyond its bound pushed back the same way (drives.py); (x, q) is
@@ -139,7 +139,7 @@ def joint_position(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
     work.stats[STAT_REDUNDANT] = redundant
 
 
-@numba.njit(cache=True)
+@numba.njit(**STEP_KERNEL)
 def _newton(model, table, work, h, x, q, P, L):  # noqa: ANN001, ANN202
     """Simplified Newton on the end configuration's residual with the start factor; (max |g|, iterations)."""
     worst = joint_rows(table, x, q, work.jac_a, work.jac_b, work.residual, False)

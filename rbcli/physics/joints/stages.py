@@ -78,7 +78,7 @@ def joint_begin(model, table, work, x, q, P, L) -> None:  # noqa: ANN001
         _project(model, table, work, x, q, P, L)
 
 
-@numba.njit(cache=True)
+@numba.njit(**STEP_KERNEL)
 def _at_factor(work, x, q) -> bool:  # noqa: ANN001
     """Whether the factor in work is set and belongs to the configuration (x, q), bit for bit."""
     if work.factor_state[0] != 1.0:
@@ -94,7 +94,7 @@ def _at_factor(work, x, q) -> bool:  # noqa: ANN001
 
 
 @separately_compiled
-@numba.njit(cache=True)
+@numba.njit(**STEP_KERNEL)
 def factor_at(model, table, work, x, q) -> int:  # noqa: ANN001
     """The factor of A = G W G^T at (x, q) in work.solver, with G (work.jac_a, jac_b) and W (work.inv_mass,
     inv_inertia) there: the one already in work when it belongs to (x, q), else a new one (module
