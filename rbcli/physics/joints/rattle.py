@@ -139,6 +139,7 @@ def joint_position(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
     work.stats[STAT_REDUNDANT] = redundant
 
 
+@separately_compiled
 @numba.njit(**STEP_KERNEL)
 def _newton(model, table, work, h, x, q, P, L):  # noqa: ANN001, ANN202
     """Simplified Newton on the end configuration's residual with the start factor; (max |g|, iterations)."""
