@@ -1,7 +1,7 @@
 """A split2 step of a scene with joints: RATTLE with split2's exact drift, symmetric and symplectic.
 
 With H = T(P, L, q) + V(x, q) and the rows g(x, q) = 0 (G their Jacobian), the step from a state on the
-joints (g = 0, G V = 0) at t is (Hairer-Lubich-Wanner VII.1.4 RATTLE, Leimkuhler-Reich 7.2, with the
+joints (g = 0, G V = 0) at t is (Hairer-Lubich-Wanner VII.1.4 RATTLE, Leimkuhler-Reich ch. 7, with the
 free-body drift of split2 in place of the particles' x += h v):
 
     K(h/2)   P += h/2 F(t, x, q), L += h/2 tau                (forces at the step's start)
@@ -24,7 +24,7 @@ Lambda by simplified Newton: Lambda += -(1/h) A^-1 g(x', q'), A = G W G^T at the
 each iteration re-running the drift of every body the impulse moved from the start with its new
 momenta, until |g| is at round-off (ROUNDOFF_ULPS ulps of the largest body position) or stops falling
 (each iteration gains a factor ~ h |omega|). A is the factor the last velocity stage built at this very
-configuration (stages._factor_at reuses it when the state is bitwise that configuration), so a step
+configuration (stages.factor_at reuses it when the state is bitwise that configuration), so a step
 factors once. A limit beyond its bound at the end is pushed back by an impulse along its coordinate's
 row at the start, h k lambda = bound - c, alternating with the joints' Newton (drives.limit_positions).
 
@@ -47,7 +47,7 @@ from rbcli.physics.joints.rows import joint_rows
 from rbcli.physics.joints.solver import solve_rows
 from rbcli.physics.joints.stages import factor_at
 from rbcli.physics.joints.tables import STAT_FLOOR, STAT_ITERATIONS, STAT_POSITION, STAT_REDUNDANT
-from rbcli.physics.kernel_link import separately_compiled
+from rbcli.physics.kernel_link import empty_without, separately_compiled
 from rbcli.physics.stages import kinematic_end_stage
 from rbcli.physics.step import STEP_KERNEL
 
@@ -67,6 +67,7 @@ LIMIT_ROUNDS = 8
 LIMIT_ONTO_ROUNDS = 3
 
 
+@empty_without("table", "work")
 @separately_compiled
 @numba.njit(**STEP_KERNEL)
 def joint_update(
