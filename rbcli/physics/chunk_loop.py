@@ -4,7 +4,8 @@ for many steps. Written once; compiled once per integrator.
 Where the loops of two integrators differ, `run_chunk` names a module-level constant of this module:
 `integrator_step` (the integrator module's `step`, or `step_parallel` for the loop on threads),
 `HOLDS_JOINTS` (split2, the one integrator that holds joints: the joint stages `joint_begin` ...
-`joint_record` run, bound only into its loop) and `DEFERS` with `integrator_materialise` (exact, which
+`joint_record` run, bound only into its loop, and a scene with joints steps by `joint_update`, RATTLE,
+instead of the plain update) and `DEFERS` with `integrator_materialise` (exact, which
 defers the state of torque-free bodies: its `materialise` runs). `fixed_step_loop` compiles the
 function with its own copy of the module's globals, those names bound for one integrator, so numba sees
 constants: it prunes the other integrators' `if HOLDS_JOINTS:` and `if DEFERS:` branches before it
@@ -57,10 +58,10 @@ integrator_step: Any = _unbound  # the integrator module's `step`, or `step_para
 integrator_materialise: Any = _unbound  # its `materialise`, where DEFERS
 HOLDS_JOINTS = False  # the joint stages run (split2, the one integrator that holds joints)
 DEFERS = False  # the step defers bodies' states and integrator_materialise writes them (exact)
-# physics/joints/stages.py's stages, where HOLDS_JOINTS: imported only for the loops that run them (the
-# import is ~20 ms of every other integrator's start-up)
+# physics/joints/stages.py's stages and rattle.py's step, where HOLDS_JOINTS: imported only for the loops
+# that run them (the import is ~20 ms of every other integrator's start-up)
 joint_begin: Any = _unbound
-joint_position: Any = _unbound
+joint_update: Any = _unbound
 joint_velocity: Any = _unbound
 joint_record: Any = _unbound
 
@@ -101,13 +102,17 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
             contact_begin_stage(contact, contact_work, ts, h)
             # kinematic_begin: kinematic bodies at their exact pose, moving at their mean velocity over the (sub-)step
             kinematic_begin_stage(model, kinematic, schedule, ts, h, x, q, P, L)
-            # update: the integrator's maths, its force evaluations through forces.wrench.accumulate_wrench
-            integrator_step(model, forces, contact, force_data, ts, h, x, q, P, L, F, tau, scratch)
+            stepped = False
+            if HOLDS_JOINTS:
+                # joint_update: with joints the step is RATTLE, joints/rattle.py (else False: update runs)
+                stepped = joint_update(model, forces, contact, force_data, joint, joint_work, kinematic, schedule,
+                                       ts, h, x, q, P, L, F, tau)  # fmt: skip
+            if not stepped:
+                # update: the integrator's maths, its force evaluations through forces.wrench.accumulate_wrench
+                integrator_step(model, forces, contact, force_data, ts, h, x, q, P, L, F, tau, scratch)
             # kinematic_end: kinematic bodies at their exact state at the end of the (sub-)step (closed form)
             kinematic_end_stage(model, kinematic, schedule, ts + h, x, q, P, L)
             if HOLDS_JOINTS:
-                # joint_position: the joints' impulse at the kick that puts the end configuration on g = 0 (RATTLE)
-                joint_position(model, joint, joint_work, h, x, q, P, L)
                 # joint_velocity: the momenta projected so that the joints' rows have zero rate, G V = 0
                 joint_velocity(model, joint, joint_work, h, x, q, P, L)
             # contact_commit: the (sub-)step is complete: its last evaluation's contacts become the history
@@ -152,10 +157,10 @@ def fixed_step_loop(module: str, *, joints: bool = False, defers: bool = False, 
         "DEFERS": defers,
     }
     if joints:
-        from rbcli.physics.joints import stages
+        from rbcli.physics.joints import rattle, stages
 
-        names = ("joint_begin", "joint_position", "joint_velocity", "joint_record")
-        bound.update({name: getattr(stages, name) for name in names})
+        names = ("joint_begin", "joint_velocity", "joint_record")
+        bound.update({name: getattr(stages, name) for name in names}, joint_update=rattle.joint_update)
     function = types.FunctionType(run_chunk.__code__, {**run_chunk.__globals__, **bound}, run_chunk.__name__)
     function.__doc__ = run_chunk.__doc__
     # numba names each function's cache files and index after its qualified name (the code is the same)

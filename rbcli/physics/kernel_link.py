@@ -72,6 +72,25 @@ class KernelLoader:
 
 
 _SEPARATE: set[tuple[str, str]] = set()
+# (module, qualname) -> the positions of the arguments whose None alone makes the kernel empty (`empty_without`)
+_EMPTY_WITHOUT: dict[tuple[str, str], tuple[int, ...]] = {}
+
+
+def empty_without(*names: str) -> Any:  # noqa: ANN401 - a decorator
+    """Decorator (over `separately_compiled`) naming the arguments whose None alone prunes the kernel to
+    nothing; by default any None argument is taken to (`_prunes_to_nothing`). For a kernel that takes
+    other tables that may be None and still works without them: joints/rattle.py's `joint_update`, which
+    passes the contact and kinematic tables (None in most jointed scenes) to the force pass and
+    kinematic_end, and is empty only without the joint table. Linked as if empty, its code was compiled
+    again into each loop that called it."""
+
+    def mark(kernel: Any) -> Any:  # noqa: ANN401
+        function = kernel.py_func
+        arguments = function.__code__.co_varnames[: function.__code__.co_argcount]
+        _EMPTY_WITHOUT[(function.__module__, function.__qualname__)] = tuple(arguments.index(n) for n in names)
+        return kernel
+
+    return mark
 
 
 def separately_compiled(kernel: Any) -> Any:  # noqa: ANN401 - a numba dispatcher, returned as it is
@@ -96,13 +115,17 @@ def is_separate_kernel(dispatcher: Any) -> bool:  # noqa: ANN401 - a numba dispa
     return getattr(sys.modules.get(module), function.__qualname__, None) is dispatcher
 
 
-def _prunes_to_nothing(args: tuple[Any, ...]) -> bool:
+def _prunes_to_nothing(args: tuple[Any, ...], function: Any = None) -> bool:  # noqa: ANN401
     """A stage compiled for an absent table (a None argument: the joint stages of a scene without joints)
     is empty; linked, LLVM removes the call, where a call by symbol would pass every argument each step
-    (a free body's split2 step went 82 -> 160 ns with its four empty joint stages called)."""
+    (a free body's split2 step went 82 -> 160 ns with its four empty joint stages called). Only the
+    arguments `empty_without` names count, for a kernel that declares them."""
     from numba.core import types  # numba inside functions only: this module defines no kernel
 
-    return any(isinstance(arg, types.NoneType) for arg in args)
+    positions: Any = range(len(args))
+    if function is not None:
+        positions = _EMPTY_WITHOUT.get((function.__module__, function.__qualname__), positions)
+    return any(isinstance(args[i], types.NoneType) for i in positions)
 
 
 def active() -> bool:
@@ -138,7 +161,8 @@ def install() -> None:
             # (`finalize`), so without this its cache entry would lack the loaders of the separate kernels
             # this code calls, and a new process loading that caller alone would call unresolved symbols
             library._reload_init.update(cres.reload_init)
-        if library is not None and is_separate_kernel(self) and not _prunes_to_nothing(cres.signature.args):
+        if library is not None and is_separate_kernel(self) and not _prunes_to_nothing(cres.signature.args,
+                                                                                       self.py_func):  # fmt: skip
             function = self.py_func
             library._rbcli_loader = KernelLoader(function.__module__, function.__qualname__,
                                                  tuple(cres.signature.args))  # fmt: skip

@@ -14,13 +14,14 @@ A step from grid index n (t = n dt) to n + 1 runs, in this order:
     then data.substeps times (1 unless contact sub-stepping is on), over [ts, ts + h), h = dt / substeps:
       contact_begin   the contact springs' clock: the (sub-)step being taken            (contact/force.py)
       kinematic_begin kinematic bodies at their exact pose, at their mean velocity  (physics/kinematic.py)
+      joint_update    (split2, scenes with joints) the step is RATTLE instead of `update`: a half kick, the
+                      joints' impulse by Newton through split2's exact drift so the end configuration
+                      satisfies the joints to round-off, a half kick at the end        (joints/rattle.py)
       update          the integrator's maths (integrators/<name>.py `step`); every force evaluation it
                       needs is the force pass `forces/wrench.accumulate_wrench`, the stages of its own
                       list of force stages (forces/stage_list.py FORCE_STAGES: gravity, fields, point
                       forces, torques, springs, drag, contact), each present only when the scene has it
       kinematic_end   kinematic bodies at their exact state at the end of the (sub-)step
-      joint_position  (split2, scenes with joints) the joints' impulse at the kick, by Newton, so the
-                      end configuration satisfies the joints to round-off               (joints/stages.py)
       joint_velocity  (split2, scenes with joints) momenta projected onto the joints' velocity rows
       contact_commit  the last evaluation's contacts and tangential springs become the history
     materialise     (exact) the torque-free bodies it defers, written on recording steps and at the
@@ -80,12 +81,12 @@ STEP_STAGES: tuple[Stage, ...] = (
           "contact_begin_stage", "contact_begin_stage", substep=True),
     Stage("kinematic_begin", "kinematic bodies at their exact pose, moving at their mean velocity over the (sub-)step",
           "kinematic_begin_stage", "kinematic_begin_stage", substep=True),
+    Stage("joint_update", "with joints the step is RATTLE, joints/rattle.py (else False: update runs)",
+          "joint_update", None, substep=True, only="joints"),
     Stage("update", "the integrator's maths, its force evaluations through forces.wrench.accumulate_wrench",
           "integrator_step", "advance", substep=True),
     Stage("kinematic_end", "kinematic bodies at their exact state at the end of the (sub-)step (closed form)",
           "kinematic_end_stage", "kinematic_end_stage", substep=True),
-    Stage("joint_position", "the joints' impulse at the kick that puts the end configuration on g = 0 (RATTLE)",
-          "joint_position", None, substep=True, only="joints"),
     Stage("joint_velocity", "the momenta projected so that the joints' rows have zero rate, G V = 0",
           "joint_velocity", None, substep=True, only="joints"),
     Stage("contact_commit", "the (sub-)step is complete: its last evaluation's contacts become the history",

@@ -129,7 +129,9 @@ def chunk_threads(
     Jointed scenes keep the serial loop: the joint stages (the solver's factor and solves along the
     tree) are serial and dominate their step, so the threaded body passes gain little, while the threaded
     loop with the joint stages is a whole second compile (~80 CPU-s on a first run: the 1,000-bead rope
-    of scenes/joints/rope_1000.yaml met it, and ran 8x slower than one thread on a loaded machine)."""
+    of scenes/joints/rope_1000.yaml met it, and ran 8x slower than one thread on a loaded machine).
+    Since RATTLE (joints/rattle.py) a jointed scene steps by a serial step anyway, never split2's
+    threaded passes: the threaded loop would only start a pool."""
     if threads <= 1 or not has_parallel_loop or body_count < PARALLEL_MIN_BODIES or joints:
         return 1
     if contact and not THREADED_CONTACT:

@@ -79,8 +79,9 @@ def _hinge_angle(table, j: int, q: np.ndarray) -> float:  # noqa: ANN001
 
 
 def test_the_ragdoll_lands_folds_and_keeps_its_limits():
-    """Dropped and toppling, after 4 s every body lies on the ground (centres between 0.04 and 0.15 m:
-    the spheres' radii are 0.05-0.1 m), the legs' bodies have stopped (< 1 cm/s), every hinge angle
+    """Dropped and toppling, after 5 s every body lies on the ground (centres between 0.04 and 0.15 m:
+    the spheres' radii are 0.05-0.1 m), the legs' bodies have stopped (< 1 cm/s; they come to rest at
+    4.5 s, and by 4 s under the midpoint step before RATTLE: the fall is chaotic), every hinge angle
     stayed within its limits to 1e-9 rad (the knees reach their lower stop 0, measured -4e-16), and the
     joints held to round-off."""
     sim = Simulation(SCENES / "ragdoll.yaml")
@@ -88,13 +89,13 @@ def test_the_ragdoll_lands_folds_and_keeps_its_limits():
     hinges = [j for j in range(table.body_a.shape[0]) if np.isfinite(table.limit_lower[j])]
     assert len(hinges) == 4
     worst = beyond = 0.0
-    for _ in range(40):
+    for _ in range(50):
         sim.step(200)
         worst = max(worst, _rows(sim))
         for j in hinges:
             angle = _hinge_angle(table, j, sim.data.state.q)
             beyond = max(beyond, table.limit_lower[j] - angle, angle - table.limit_upper[j])
-    assert sim.time > 3.99
+    assert sim.time > 4.99
     z = sim.state.x[:, 2]
     assert np.all((z > 0.04) & (z < 0.15)), z
     assert np.linalg.norm(sim.state.v[4:], axis=1).max() < 0.01  # thighs and shins (measured 0)

@@ -10,11 +10,10 @@ import numpy as np
 from conftest import make_scene, random_bodies
 
 from rbcli.api import prepare
-from rbcli.physics.integrators import split2
 from rbcli.physics.joints.dense import factor_rows, solve_rows
 from rbcli.physics.joints.dense_layout import joint_graph as dense_graph
 from rbcli.physics.joints.dense_layout import make_solver_work as dense_work
-from rbcli.physics.joints.reference import joint_begin_numpy, joint_rows_numpy, joint_stages_numpy
+from rbcli.physics.joints.reference import joint_begin_numpy, joint_rows_numpy, rattle_step_numpy
 from rbcli.physics.joints.rows import joint_rows
 from rbcli.physics.joints.tables import JointTable, make_joint_work
 from rbcli.physics.rotation import quat_multiply, quat_to_matrix
@@ -155,8 +154,9 @@ def test_dense_solver_drops_redundant_rows_and_still_meets_a_consistent_right_ha
 
 
 def test_a_compiled_step_matches_the_numpy_step():
-    """20 split2 steps with the joint stages (compiled chunk) against split2.step_numpy between the numpy
-    stages, from random momenta that the first step's joint_begin projects onto the joints."""
+    """20 split2 steps of the jointed chain (compiled chunk: RATTLE, rattle.py) against the numpy step
+    (reference.rattle_step_numpy), from random momenta that the first step's joint_begin projects onto
+    the joints."""
     compiled = chain()
     sim = Simulation(compiled)
     sim.step(20)
@@ -164,8 +164,7 @@ def test_a_compiled_step_matches_the_numpy_step():
     model, forces = compiled.model.kernel(), compiled.forces
     for k in range(20):
         joint_begin_numpy(model, model.joint, s.x, s.q, s.P, s.L)
-        split2.step_numpy(model, forces, k * 1e-3, 1e-3, s.x, s.q, s.P, s.L)
-        joint_stages_numpy(model, model.joint, 1e-3, s.x, s.q, s.P, s.L)
+        rattle_step_numpy(model, forces, model.joint, k * 1e-3, 1e-3, s.x, s.q, s.P, s.L)
     got = sim.data.state
     for name in ("x", "q", "P", "L"):
         np.testing.assert_allclose(getattr(got, name), getattr(s, name), rtol=0, atol=1e-11, err_msg=name)

@@ -115,9 +115,10 @@ print(json.dumps(compiled))
 
 
 def test_a_scene_without_joints_compiles_no_joint_kernel(tmp_path):
-    """The split2 loop of a jointless scene calls the joint stages with None for the joint table and work,
-    and numba prunes each stage's body on `table is None` (joints/stages.py): the stages compile to empty
-    functions and none of the rows, solver, drive or impulse kernels is compiled. (This test fails when
+    """The split2 loop of a jointless scene calls the joint stages (and the RATTLE update, joints/rattle.py)
+    with None for the joint table and work, and numba prunes each one's body on `table is None`
+    (joints/stages.py): they compile to empty functions and none of the rows, solver, drive or impulse
+    kernels is compiled. (This test fails when
     the stages test the tables at run time, `if table.rows:`: numba then compiles both sides.)"""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT), *filter(None, [env.get("PYTHONPATH")])])
@@ -132,9 +133,10 @@ def test_a_scene_without_joints_compiles_no_joint_kernel(tmp_path):
     compiled = set(json.loads(out.stdout.strip().splitlines()[-1]))
     assert "rbcli.physics.chunk_loop.run_chunk[split2]" in compiled, sorted(compiled)  # it really compiled
     joint_kernels = {name for name in compiled if name.startswith("rbcli.physics.joints.")}
-    # only the four stages, pruned to nothing; none of the rows, solver, drive or impulse kernels
-    stages = {f"rbcli.physics.joints.stages.joint_{stage}" for stage in ("begin", "position", "velocity", "record")}
-    assert joint_kernels == stages, sorted(joint_kernels)
+    # only the three stages and split2's RATTLE update, pruned to nothing; none of the rows, solver,
+    # drive or impulse kernels
+    stages = {f"rbcli.physics.joints.stages.joint_{stage}" for stage in ("begin", "velocity", "record")}
+    assert joint_kernels == {*stages, "rbcli.physics.joints.rattle.joint_update"}, sorted(joint_kernels)
 
 
 def test_the_joint_stages_do_not_allocate_per_step():

@@ -50,8 +50,10 @@ SCENE_C = PENDULUM.format(
     forces="contact: {ground: -5}\n",
 )
 
-# the joint stages the split2 loop calls (physics/joints/stages.py), and what the pendulum's solve calls
-JOINT_STAGES = ("joint_begin", "joint_position", "joint_velocity", "joint_record")
+# the joint stages the split2 loop calls (physics/joints/stages.py) and the position stage its RATTLE
+# update calls (rattle.py; the update itself is compiled per kind of scene, as the loop is: it holds the
+# force pass), by module-qualified name
+JOINT_STAGES = ("stages.joint_begin", "rattle.joint_position", "stages.joint_velocity", "stages.joint_record")
 
 SCRIPT = """
 import json, sys
@@ -120,7 +122,7 @@ def test_a_second_kind_of_scene_compiles_none_of_the_first_ones_functions_and_li
     compiled_b = {tuple(item) for item in run_b["compiled"]}
     names_a = {name for name, _ in compiled_a}
     # the empty cache really compiled A's loop and joint stages, and B compiled a loop of its own types...
-    assert {f"rbcli.physics.joints.stages.{stage}" for stage in JOINT_STAGES} <= names_a, sorted(names_a)
+    assert {f"rbcli.physics.joints.{stage}" for stage in JOINT_STAGES} <= names_a, sorted(names_a)
     assert any(name == "rbcli.physics.chunk_loop.run_chunk[split2]" for name, _ in compiled_b)
     # ...but none of rbcli's functions with the types A already compiled it for (its stages are reused, not
     # recompiled; numba's own overload implementations, builtins min and max, are compiled again for each
@@ -128,11 +130,12 @@ def test_a_second_kind_of_scene_compiles_none_of_the_first_ones_functions_and_li
     # model has a contact table, and its joint stages A's types
     again_a = {(name, args) for name, args in compiled_a & compiled_b if name.startswith("rbcli.")}
     assert not again_a, sorted(again_a)
-    assert not {name for name, _ in compiled_b} & {f"rbcli.physics.joints.stages.{s}" for s in JOINT_STAGES}
+    assert not {name for name, _ in compiled_b} & {f"rbcli.physics.joints.{s}" for s in JOINT_STAGES}
     # and neither loop carries a copy of the joint stages' code: they are called by symbol
     assert len(first["loop_functions"]) == 2
     for functions in first["loop_functions"]:
-        copies = [name for name in functions if any(f"{len(stage)}{stage}" in name for stage in JOINT_STAGES)]
+        stages = [stage.split(".")[1] for stage in (*JOINT_STAGES, "rattle.joint_update")]
+        copies = [name for name in functions if any(f"{len(stage)}{stage}" in name for stage in stages)]
         assert not copies, copies
 
     # a new process on the same cache compiles nothing, loading each loop's callees before the loop
@@ -166,10 +169,10 @@ def test_stage_kernels_are_called_by_symbol_and_small_kernels_stay_linked():
     linked so LLVM can inline them into their loops, and numba-inlined ones are never linked at all."""
     from rbcli.physics.contact import search
     from rbcli.physics.integrators import kinematics
-    from rbcli.physics.joints import solver, stages
+    from rbcli.physics.joints import rattle, solver, stages
 
-    for kernel in (stages.joint_position, stages.joint_velocity, solver.factor_rows, solver.solve_rows,
-                   search.find_contacts):  # fmt: skip
+    for kernel in (rattle.joint_update, rattle.joint_position, stages.joint_velocity, solver.factor_rows,
+                   solver.solve_rows, search.find_contacts):  # fmt: skip
         assert kernel_link.is_separate_kernel(kernel), kernel
     assert not kernel_link.is_separate_kernel(kinematics.turn)
     inlined = [kernel for kernel in vars(solver).values()

@@ -15,7 +15,7 @@ from rbcli.physics import adaptive_loop, chunk_loop
 from rbcli.physics.forces import wrench_pass
 from rbcli.physics.forces.stage_list import FORCE_STAGES
 from rbcli.physics.integrators import INTEGRATORS, get_integrator
-from rbcli.physics.joints import stages as joint_stages
+from rbcli.physics.joints import rattle
 from rbcli.physics.pipeline import STEP_STAGES
 
 PHYSICS = Path(__file__).resolve().parents[2] / "rbcli" / "physics"
@@ -35,20 +35,33 @@ def _stage_calls(node: ast.AST) -> list[ast.Call]:
     return sorted(calls, key=lambda call: (call.lineno, call.col_offset))
 
 
+def _comment_above(lines: list[str], lineno: int) -> str:
+    """The comment block nearest above source line `lineno` (1-based), at most 3 code lines up (a stage's
+    call may sit under its test, `if contact_commit_due(...):`, or after a line preparing it)."""
+    index = lineno - 2
+    for _ in range(3):
+        if lines[index].strip().startswith("#"):
+            break
+        index -= 1
+    while lines[index - 1].strip().startswith("#"):
+        index -= 1
+    return lines[index].strip()
+
+
 def _names(calls: list[ast.Call]) -> list[str]:
     return [call.func.id for call in calls]  # type: ignore[union-attr]
 
 
 def test_stage_list_is_impulses_contact_update_record():
-    names = ["impulses", "joint_begin", "contact_begin", "kinematic_begin", "update", "kinematic_end",
-             "joint_position", "joint_velocity", "contact_commit", "materialise", "contact_record",
+    names = ["impulses", "joint_begin", "contact_begin", "kinematic_begin", "joint_update", "update",
+             "kinematic_end", "joint_velocity", "contact_commit", "materialise", "contact_record",
              "joint_record", "record"]  # fmt: skip
     assert [stage.name for stage in STEP_STAGES] == names
     assert [stage.name for stage in STEP_STAGES if stage.substep] == names[2:9]
     # materialise belongs to exact's loop alone (it writes the states exact defers), the joint stages to
     # split2's (the one integrator that holds joints: integrators.check_integrator); neither to the
     # adaptive loop (joints refuse a tolerance, dopri5 defers nothing)
-    joint_stages = ["joint_begin", "joint_position", "joint_velocity", "joint_record"]
+    joint_stages = ["joint_begin", "joint_update", "joint_velocity", "joint_record"]
     assert {stage.name: stage.only for stage in STEP_STAGES if stage.only} == {
         **dict.fromkeys(joint_stages, "joints"),
         "materialise": "defers",
@@ -77,7 +90,7 @@ def test_the_fixed_step_loop_calls_the_stages_in_the_list_order():
         assert inside == [stage.fixed for stage in STEP_STAGES if stage.only == flag], flag
     lines = inspect.getsource(chunk_loop).splitlines()
     for call, stage in zip(_stage_calls(loop), STEP_STAGES, strict=True):
-        above = lines[call.lineno - 2].strip() if stage.name != "materialise" else lines[call.lineno - 4].strip()
+        above = _comment_above(lines, call.lineno)
         assert above.startswith(f"# {stage.name}: {stage.why}"), (stage.name, above)
 
 
@@ -108,14 +121,14 @@ def test_each_integrator_s_loop_is_the_one_loop_bound_to_its_step(name):
         assert bound["integrator_step"] is step
         assert (bound["HOLDS_JOINTS"], bound["DEFERS"]) == (info.joints, info.defers)
         assert (bound["integrator_materialise"] is getattr(module, "materialise", None)) == info.defers
-        assert (bound["joint_position"] is joint_stages.joint_position) == info.joints
+        assert (bound["joint_update"] is rattle.joint_update) == info.joints
         assert loop.SCRATCH_WIDTH == module.SCRATCH_WIDTH
         assert info.chunk() is info.chunk()  # one dispatcher per integrator: compiled or loaded once
     names = {get_integrator(n).chunk().run_chunk.py_func.__qualname__ for n in INTEGRATORS}
     assert len(names) == len(INTEGRATORS)  # each loop has cache files of its own
     # the module's own names stand for no integrator: its function runs only as bound
     assert chunk_loop.integrator_step is chunk_loop._unbound and not chunk_loop.HOLDS_JOINTS
-    assert chunk_loop.joint_position is chunk_loop._unbound
+    assert chunk_loop.joint_update is chunk_loop._unbound
 
 
 def test_a_loop_runs_the_joint_stages_only_where_its_integrator_holds_joints():

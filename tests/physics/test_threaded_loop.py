@@ -130,6 +130,7 @@ def test_small_scenes_contact_one_thread_and_other_integrators_keep_the_serial_l
     assert Simulation(large, integrator="dopri5", tolerance=1e-6, threads=2).threads == 1
     assert threads_module.chunk_threads(2, True, threads_module.PARALLEL_MIN_BODIES) == 2
     assert threads_module.chunk_threads(2, True, threads_module.PARALLEL_MIN_BODIES, contact=True) == 1
+    # joints: the RATTLE step (joints/rattle.py) is serial, the threaded loop would only start a pool
     assert threads_module.chunk_threads(2, True, threads_module.PARALLEL_MIN_BODIES, joints=True) == 1
     pile = ROOT / "scenes/contact/sphere_pile.yaml"  # 1,000 balls: contact keeps the serial loop
     assert Simulation(pile, threads=2).threads == 1

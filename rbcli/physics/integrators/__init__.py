@@ -146,7 +146,7 @@ INTEGRATORS: dict[str, IntegratorInfo] = {
             f"{_PKG}.split2",
             order=2,
             symplectic=True,
-            conserves="L, P force-free; energy error bounded, no drift",
+            conserves="L, P force-free; energy error bounded, no drift (with joints too: RATTLE)",
             force_evals=1,
             summary="Symplectic splitting: leapfrog for the centre of mass, exact turns about the "
             "principal axes (McLachlan 1993, Reich 1994, Dullweber et al. 1997). The default choice.",
@@ -158,7 +158,7 @@ INTEGRATORS: dict[str, IntegratorInfo] = {
             f"{_PKG}.split4",
             order=4,
             symplectic=True,
-            conserves="L, P force-free; energy error bounded, no drift",
+            conserves="L, P force-free; energy error bounded, no drift (with joints too: RATTLE)",
             force_evals=5,
             summary="Suzuki's 5-stage fourth-order composition of split2 (Suzuki 1990).",
         ),
@@ -230,7 +230,7 @@ def closest_integrator(name: object) -> str | None:
 
 
 def joint_integrators() -> tuple[str, ...]:
-    """The integrators that hold joints (RATTLE-type stages in their loops: docs/joints.md)."""
+    """The integrators that hold joints (RATTLE in their loops, joints/rattle.py: docs/joints.md)."""
     return tuple(name for name, info in INTEGRATORS.items() if info.joints)
 
 

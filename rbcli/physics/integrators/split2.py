@@ -74,6 +74,7 @@ from rbcli.physics.integrators.kinematics import (
     sum_compensated,
     turn_numpy,
 )
+from rbcli.physics.integrators.kinematics import turn as turn_plain
 from rbcli.physics.integrators.kinematics import (
     turn_compensated as turn,
 )
@@ -330,6 +331,54 @@ def _turn_isotropic(q, L, b, s_over_i) -> None:  # noqa: ANN001
     q[b, 1] = c * qx + rx * w + ry * qz - rz * qy
     q[b, 2] = c * qy - rx * qz + ry * w + rz * qx
     q[b, 3] = c * qz + rx * qy - ry * qx + rz * w
+
+
+@numba.njit(cache=True, inline="always")
+def free_drift(model, b, h, x0, q0, P, L, x, q) -> None:  # noqa: ANN001
+    """Body b's free drift over h from (x0[b], q0[b]) with momenta (P[b], L[b]), into (x[b], q[b]):
+    D_x(h) and T_a(h/2) T_b(h/2) T_c(h) T_b(h/2) T_a(h/2) (the exact turn of an isotropic body), q
+    normalised. It is the step's two half drifts with no kick between them (T_c(h/2) T_c(h/2) = T_c(h)),
+    a palindrome of exact flows: symmetric, so free_drift(-h) undoes free_drift(h) to round-off. The
+    joints' RATTLE step (joints/rattle.py) runs it once per Newton iteration."""
+    inv0, inv1, inv2 = model.body_inertia_inv[b, 0], model.body_inertia_inv[b, 1], model.body_inertia_inv[b, 2]
+    move = h / model.body_mass[b]
+    x[b, 0] = x0[b, 0] + move * P[b, 0]
+    x[b, 1] = x0[b, 1] + move * P[b, 1]
+    x[b, 2] = x0[b, 2] + move * P[b, 2]
+    q[b, 0], q[b, 1], q[b, 2], q[b, 3] = q0[b, 0], q0[b, 1], q0[b, 2], q0[b, 3]
+    if inv0 == inv1 and inv1 == inv2:
+        _turn_isotropic(q, L, b, h * inv0)
+        w, qx, qy, qz = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
+    else:
+        ka, kb, kc = axis_order(model.body_inertia[b, 0], model.body_inertia[b, 1], model.body_inertia[b, 2])
+        w, qx, qy, qz = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
+        m0, m1, m2 = rotate_inverse(w, qx, qy, qz, L[b, 0], L[b, 1], L[b, 2])
+        c, s = half_turn(ka, 0.5 * h, m0, m1, m2, inv0, inv1, inv2)
+        m0, m1, m2, w, qx, qy, qz = turn_plain(ka, c, s, m0, m1, m2, w, qx, qy, qz)
+        c, s = half_turn(kb, 0.5 * h, m0, m1, m2, inv0, inv1, inv2)
+        m0, m1, m2, w, qx, qy, qz = turn_plain(kb, c, s, m0, m1, m2, w, qx, qy, qz)
+        c, s = half_turn(kc, h, m0, m1, m2, inv0, inv1, inv2)
+        m0, m1, m2, w, qx, qy, qz = turn_plain(kc, c, s, m0, m1, m2, w, qx, qy, qz)
+        c, s = half_turn(kb, 0.5 * h, m0, m1, m2, inv0, inv1, inv2)
+        m0, m1, m2, w, qx, qy, qz = turn_plain(kb, c, s, m0, m1, m2, w, qx, qy, qz)
+        c, s = half_turn(ka, 0.5 * h, m0, m1, m2, inv0, inv1, inv2)
+        m0, m1, m2, w, qx, qy, qz = turn_plain(ka, c, s, m0, m1, m2, w, qx, qy, qz)
+    norm = 1.0 / math.sqrt(w * w + qx * qx + qy * qy + qz * qz)
+    q[b, 0], q[b, 1], q[b, 2], q[b, 3] = w * norm, qx * norm, qy * norm, qz * norm
+
+
+def free_drift_numpy(model, h: float, x0: np.ndarray, q0: np.ndarray, P: np.ndarray, L: np.ndarray):  # noqa: ANN001, ANN201
+    """Numpy twin of `free_drift`, every body: (x, q) after the free drift over h."""
+    order = axis_order_numpy(model.body_inertia)
+    inv = model.body_inertia_inv
+    iso = (inv[:, 0] == inv[:, 1]) & (inv[:, 1] == inv[:, 2])
+    x = x0 + h * P / model.body_mass[:, None]
+    m, q = body_momentum_numpy(q0, L), q0.copy()
+    for axis, s in ((order[:, 0], 0.5 * h), (order[:, 1], 0.5 * h), (order[:, 2], h), (order[:, 1], 0.5 * h),
+                    (order[:, 0], 0.5 * h)):  # fmt: skip
+        m, q = turn_numpy(axis, s, m, q, inv)
+    q[iso] = _turn_isotropic_numpy(q0, L, h * inv[:, 0])[iso]
+    return x, q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
 def step_numpy(model, forces, t, dt, x, q, P, L) -> None:  # noqa: ANN001

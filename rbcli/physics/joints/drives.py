@@ -14,8 +14,8 @@ coordinate with the joints held (one solve with the stage's factor of A).
 - damper (velocity stage, after the motor): the exact flow of dr/dt = -c k r over the step,
   r <- r exp(-c k h), so a flywheel on a damped hinge decays at exp(-c t / I) to round-off;
 - limits, one-sided: in the position stage a coordinate beyond a bound at the end of the step is put
-  back onto it by an impulse at the kick (as the joints' rows: (h/2) k lambda = bound - c, simplified
-  Newton with the midpoint's factor, alternating with the joints' own Newton until both hold); in the
+  back onto it by an impulse at the step's start (as the joints' rows: h k lambda = bound - c, simplified
+  Newton with the start's factor, alternating with the joints' own Newton until both hold); in the
   velocity stage a coordinate pushed back in this step, or at a bound (within LIMIT_CONTACT) with its
   rate pointing out of the range, is stopped (r = 0: an inelastic stop; the position push alone would
   reflect it, a bounce). A limit only ever pushes into the range (lambda of one sign:
@@ -141,10 +141,10 @@ def effective_inverse(table, work, a, b, ja, jb) -> float:  # noqa: ANN001
 
 
 @numba.njit(cache=True)
-def _push(table, work, j, a, b, ja, jb, impulse, drift, x, q, P, L) -> None:  # noqa: ANN001
+def _push(table, work, j, a, b, ja, jb, impulse, P, L) -> None:  # noqa: ANN001
     """lambda J^T on joint j's bodies and -lambda G^T y on every row (so G V stays as it was), applied
-    to P, L (and with drift > 0 to x, q: the position stage); y from `effective_inverse`. The J^T part
-    is joint j's in work.joint_impulse (the rows' parts go to their joints: gather_impulses)."""
+    to P, L; y from `effective_inverse`. The J^T part is joint j's in work.joint_impulse (the rows'
+    parts go to their joints: gather_impulses)."""
     for r in range(work.delta.shape[0]):
         work.delta[r] = -work.delta[r] * impulse
         work.impulse[r] += work.delta[r]
@@ -155,7 +155,7 @@ def _push(table, work, j, a, b, ja, jb, impulse, drift, x, q, P, L) -> None:  # 
         if b >= 0:
             work.impulse_body[b, c] += jb[c] * impulse
             work.joint_impulse[j, 6 + c] += jb[c] * impulse
-    apply_body_impulses(table, work, drift, x, q, P, L)
+    apply_body_impulses(table, work, P, L)
 
 
 @numba.njit(cache=True, inline="always")
@@ -194,7 +194,7 @@ def drive_velocities(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
                     rate += k_inv * impulse
                 if damper:
                     impulse += rate * (math.exp(-table.damping[j] * k_inv * h) - 1.0) / k_inv
-                _push(table, work, j, a, b, ja, jb, impulse, 0.0, x, q, P, L)
+                _push(table, work, j, a, b, ja, jb, impulse, P, L)
         if bounded:
             at_upper = c >= table.limit_upper[j] - LIMIT_CONTACT
             at_lower = c <= table.limit_lower[j] + LIMIT_CONTACT
@@ -204,32 +204,39 @@ def drive_velocities(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
                 if work.limit_hit[j] or (at_upper and rate > 0.0) or (at_lower and rate < 0.0):
                     k_inv = effective_inverse(table, work, a, b, ja, jb)
                     if k_inv > 0.0:
-                        _push(table, work, j, a, b, ja, jb, -rate / k_inv, 0.0, x, q, P, L)
+                        _push(table, work, j, a, b, ja, jb, -rate / k_inv, P, L)
 
 
 @separately_compiled
 @numba.njit(cache=True)
-def limit_positions(table, work, h, x, q, P, L) -> bool:  # noqa: ANN001
+def limit_positions(table, work, h, x, q, P, L, onto) -> bool:  # noqa: ANN001
     """The position stage's limits: each coordinate beyond a bound at the end of the step is put back by
-    an impulse at the kick along J at the midpoint (one simplified Newton step with the midpoint's W, G
-    and factor); True when any was beyond (the caller then restores the joints and calls again)."""
+    an impulse along J at the start configuration (one simplified Newton step with the start's W, G and
+    factor, h k lambda = bound - c) applied to P and L; True when any was moved (the caller then drifts
+    the bodies again, restores the joints and calls again). With `onto`, a coordinate pushed in this
+    step is also put onto its bound from inside: the start's k is off the true response by ~ h |omega|,
+    so one push lands that fraction short (3.6e-9 rad for a rod hitting its limit at 3.6 rad/s), and a
+    round or two more land it to round-off. Not in every round: limits that push each other (a hip and
+    a knee stopped in the same step) would then converge as a Gauss-Seidel sweep on their coupling,
+    measured up to 128 iterations a step; past the first rounds an overshoot into the range stays."""
     moved = False
     for j in range(table.kind.shape[0]):
         lower, upper = table.limit_lower[j], table.limit_upper[j]
         if lower == -math.inf and upper == math.inf:
             continue
         c = coordinate_row(table, j, x, q)[0]
-        # beyond by more than a few ulps of the bound: below that the correction would be round-off
-        slack = 4e-16 * max(1.0, abs(lower) if c < lower else abs(upper))
-        if lower - slack <= c <= upper + slack:
+        hit = work.limit_hit[j]  # +1 / -1: pushed onto the upper / lower bound in this step
+        bound = upper if hit > 0.0 or (hit == 0.0 and c > upper) else lower
+        # off by more than a few ulps of the bound: below that the correction would be round-off
+        slack = 4e-16 * max(1.0, abs(bound))
+        if lower - slack <= c <= upper + slack and (hit == 0.0 or not onto or abs(c - bound) <= slack):
             continue
-        bound = upper if c > upper else lower
         a, b = table.body_a[j], table.body_b[j]
-        _, ja, jb = coordinate_row(table, j, work.x_mid, work.q_mid)
+        _, ja, jb = coordinate_row(table, j, work.x_start, work.q_start)
         k_inv = effective_inverse(table, work, a, b, ja, jb)
         if not k_inv > 0.0:
             continue
-        _push(table, work, j, a, b, ja, jb, -2.0 / h * (c - bound) / k_inv, 0.5 * h, x, q, P, L)
-        work.limit_hit[j] = 1.0
+        _push(table, work, j, a, b, ja, jb, -(c - bound) / (h * k_inv), P, L)
+        work.limit_hit[j] = 1.0 if bound == upper else -1.0
         moved = True
     return moved

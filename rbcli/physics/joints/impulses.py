@@ -1,14 +1,11 @@
 """Shared pieces of the joint stages: body weights W at a configuration, the rows' momentum changes per
-body, and how an impulse at the kick moves a body in the step's second half drift.
+body, and the rows' rates G V.
 
 W_b = blockdiag(I3 / M_b, R_b I0_b^-1 R_b^T) (0 for ground bodies, which act as the world); an impulse
-(dP, dL) at the kick changes P and L by it and, through the half drift after the kick, x by h/2 dP / M and
-q by the turn exp(h/2 I_w^-1 dL) (physics/joints/stages.py says why that is the method's order).
+(dP, dL) changes P and L by it (the position stage then drifts the body again: joints/rattle.py).
 """
 
 from __future__ import annotations
-
-import math
 
 import numba
 
@@ -41,25 +38,6 @@ def body_weights(model, table, work, q) -> None:  # noqa: ANN001
 
 
 @numba.njit(cache=True, inline="always")
-def turn(q, b, t0, t1, t2) -> None:  # noqa: ANN001
-    """q_b <- exp(theta / 2) q_b for the world rotation vector theta, renormalised."""
-    angle = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
-    if angle == 0.0:
-        return
-    c, s = math.cos(0.5 * angle), math.sin(0.5 * angle) / angle
-    rx, ry, rz = s * t0, s * t1, s * t2
-    w, qx, qy, qz = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
-    w, qx, qy, qz = (
-        c * w - rx * qx - ry * qy - rz * qz,
-        c * qx + rx * w + ry * qz - rz * qy,
-        c * qy - rx * qz + ry * w + rz * qx,
-        c * qz + rx * qy - ry * qx + rz * w,
-    )
-    norm = 1.0 / math.sqrt(w * w + qx * qx + qy * qy + qz * qz)
-    q[b, 0], q[b, 1], q[b, 2], q[b, 3] = w * norm, qx * norm, qy * norm, qz * norm
-
-
-@numba.njit(cache=True, inline="always")
 def body_omega(model, q, L, b):  # noqa: ANN001, ANN202
     """omega = R I0^-1 R^T L [rad/s], world."""
     w, x, y, z = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
@@ -87,31 +65,18 @@ def gather_impulses(table, work, multipliers) -> None:  # noqa: ANN001
 
 
 @numba.njit(cache=True)
-def apply_body_impulses(table, work, drift, x, q, P, L) -> None:  # noqa: ANN001
-    """P, L += work.impulse_body of every moving body; with drift > 0 also x += drift dP / M and
-    q <- exp(drift I_w^-1 dL) q (the position stage's second half drift, drift = h/2, W in work)."""
-    for b in range(x.shape[0]):
+def apply_body_impulses(table, work, P, L) -> None:  # noqa: ANN001
+    """P, L += work.impulse_body of every moving body."""
+    for b in range(P.shape[0]):
         if table.body_ground[b]:
             continue
         d = work.impulse_body[b]
-        if d[0] == 0.0 and d[1] == 0.0 and d[2] == 0.0 and d[3] == 0.0 and d[4] == 0.0 and d[5] == 0.0:
-            continue  # a body no row touched
         P[b, 0] += d[0]
         P[b, 1] += d[1]
         P[b, 2] += d[2]
         L[b, 0] += d[3]
         L[b, 1] += d[4]
         L[b, 2] += d[5]
-        if drift > 0.0:
-            move = drift * work.inv_mass[b]
-            x[b, 0] += move * d[0]
-            x[b, 1] += move * d[1]
-            x[b, 2] += move * d[2]
-            W = work.inv_inertia[b]
-            t0 = drift * (W[0, 0] * d[3] + W[0, 1] * d[4] + W[0, 2] * d[5])
-            t1 = drift * (W[1, 0] * d[3] + W[1, 1] * d[4] + W[1, 2] * d[5])
-            t2 = drift * (W[2, 0] * d[3] + W[2, 1] * d[4] + W[2, 2] * d[5])
-            turn(q, b, t0, t1, t2)
 
 
 @numba.njit(cache=True)

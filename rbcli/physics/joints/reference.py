@@ -1,11 +1,10 @@
-"""Plain numpy twins of the joint kernels: the rows (rows.py) and a whole split2 step with its joint
-stages (stages.py), with a choice of where the position impulse's direction G is taken. Tests compare
-the kernels with them; scene/compile_joints.py uses the rows and matrices once, at compile time, to find
-redundant rows (a loop that constrains a direction twice) and warn about them.
+"""Plain numpy twins of the joint kernels: the rows (rows.py) and a whole split2 step of a scene with
+joints (rattle.py and the velocity stage, stages.py). Tests compare the kernels with them;
+scene/compile_joints.py uses the rows and matrices once, at compile time, to find redundant rows (a
+loop that constrains a direction twice) and warn about them.
 
 Written for clarity, one joint at a time, with a dense numpy solve; the compiled stages must agree with
-them to round-off. `direction="end"` is the plain post-projection (G at the end of the step), kept to
-measure against the midpoint choice the kernels make (docs/joints.md).
+them to round-off.
 """
 
 from __future__ import annotations
@@ -107,45 +106,51 @@ def weight_matrix_numpy(inv_mass: np.ndarray, inv_inertia: np.ndarray) -> np.nda
     return W
 
 
-def _turn(q: np.ndarray, theta: np.ndarray) -> np.ndarray:
-    angle = np.linalg.norm(theta, axis=1)
-    safe = np.where(angle > 0.0, angle, 1.0)
-    r = np.concatenate([np.cos(0.5 * angle)[:, None], (np.sin(0.5 * angle) / safe)[:, None] * theta], axis=1)
-    out = quat_multiply(r, q)
-    return out / np.linalg.norm(out, axis=1, keepdims=True)
+def rattle_step_numpy(model, forces, table: JointTable, t: float, h: float, x, q, P, L) -> np.ndarray:  # noqa: ANN001
+    """rattle.joint_update and the velocity stage without drives or limits, in place: K(h/2), the joints'
+    impulse along G at the start found by Newton through split2's free drift, K(h/2) with the end's
+    forces, the velocity projection; returns the step's multipliers (R,)."""
+    # here, not at the top: scene/compile_joints.py imports this module for the rows alone
+    from rbcli.physics.forces.damping import dissipation_flow_numpy
+    from rbcli.physics.forces.wrench import wrench_numpy
+    from rbcli.physics.integrators.split2 import free_drift_numpy
 
-
-def joint_stages_numpy(model, table: JointTable, h: float, x, q, P, L, direction: str = "mid") -> np.ndarray:  # noqa: ANN001
-    """The position and velocity stages after an unconstrained split2 step, in place; returns the step's
-    multipliers (R,). direction: "mid" (the kernels' choice) or "end" (G of the position impulse at the
-    end configuration: the plain post-projection)."""
     n = x.shape[0]
     moving = ~table.body_ground
-    omega = np.einsum("bij,bj->bi", body_weights_numpy(model, table._replace(body_ground=np.zeros(n, bool)), q)[1], L)
-    if direction == "mid":
-        x_dir, q_dir = x - 0.5 * h * P / model.body_mass[:, None], _turn(q, -0.5 * h * omega)
-    else:
-        x_dir, q_dir = x.copy(), q.copy()
-    inv_mass, inv_inertia = body_weights_numpy(model, table, q_dir)
-    _, ga, gb = joint_rows_numpy(table, x_dir, q_dir)
+    drag = forces.drag
+    coefficients = np.concatenate([drag.linear, drag.quadratic, drag.angular_linear, drag.angular_quadratic])
+    dissipative = bool(np.any(forces.spring.damping != 0.0) or np.any(coefficients != 0.0))
+    F, tau = wrench_numpy(model, forces, t, x, q, P, L, dissipative=not dissipative)
+    P += 0.5 * h * F
+    L += 0.5 * h * tau
+    if dissipative:
+        dissipation_flow_numpy(model, forces.spring, forces.drag, 0.5 * h, x, q, P, L)
+    x0, q0 = x.copy(), q.copy()
+    inv_mass, inv_inertia = body_weights_numpy(model, table, q0)
+    _, ga, gb = joint_rows_numpy(table, x0, q0)
     G = rows_matrix_numpy(table, ga, gb, n)
-    W = weight_matrix_numpy(inv_mass, inv_inertia)
-    A = G @ W @ G.T
+    A = G @ weight_matrix_numpy(inv_mass, inv_inertia) @ G.T
     total = np.zeros(G.shape[0])
+    x[:], q[:] = free_drift_numpy(model, h, x0, q0, P, L)
     g = joint_rows_numpy(table, x, q)[0]
     for _ in range(50):
         if not np.abs(g).max() > 0.0:
             break
-        delta = np.linalg.solve(A, -2.0 / h * g)
+        delta = np.linalg.solve(A, -g / h)
         total += delta
         d = (G.T @ delta).reshape(n, 6) * moving[:, None]
         P += d[:, :3]
         L += d[:, 3:]
-        x += 0.5 * h * inv_mass[:, None] * d[:, :3]
-        q[:] = _turn(q, 0.5 * h * np.einsum("bij,bj->bi", inv_inertia, d[:, 3:]))
+        drifted = free_drift_numpy(model, h, x0, q0, P, L)
+        x[moving], q[moving] = drifted[0][moving], drifted[1][moving]
         previous, g = np.abs(g).max(), joint_rows_numpy(table, x, q)[0]
         if np.abs(g).max() > 0.5 * previous:
             break
+    F, tau = wrench_numpy(model, forces, t + h, x, q, P, L, dissipative=not dissipative)
+    if dissipative:
+        dissipation_flow_numpy(model, forces.spring, forces.drag, 0.5 * h, x, q, P, L)
+    P += 0.5 * h * F
+    L += 0.5 * h * tau
     return total - project_velocities_numpy(model, table, x, q, P, L)
 
 

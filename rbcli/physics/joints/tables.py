@@ -86,8 +86,8 @@ class JointWork(NamedTuple):
     rhs: np.ndarray  # (R,)
     delta: np.ndarray  # (R,): the solve's output
     impulse: np.ndarray  # [N s or N m s] (R,): the last step's multipliers: position + velocity stage
-    x_mid: np.ndarray  # [m] (N, 3): the step's midpoint configuration, where the position impulse acts
-    q_mid: np.ndarray  # (N, 4)
+    x_start: np.ndarray  # [m] (N, 3): the step's start configuration, where the position impulse acts
+    q_start: np.ndarray  # (N, 4)
     inv_mass: np.ndarray  # [1/kg] (N,): 0 for ground bodies
     inv_inertia: np.ndarray  # [1/(kg m^2)] (N, 3, 3), world frame: R I0^-1 R^T, 0 for ground bodies
     impulse_body: np.ndarray  # [N s, N m s] (N, 6): one solve's momentum change per body
@@ -99,6 +99,12 @@ class JointWork(NamedTuple):
     joint_impulse: np.ndarray
     stats: np.ndarray  # (STAT_COUNT,): see STAT_*
     solver: SolverWork
+    # the configuration the solver's factor (and jac_a, jac_b, inv_mass, inv_inertia) belongs to, and
+    # [1 when it is set, the rows it dropped]: a stage finding the state bitwise there reuses the factor
+    # (stages.py `_factor_at`), which is then bitwise what a new factor would be
+    x_factor: np.ndarray  # [m] (N, 3)
+    q_factor: np.ndarray  # (N, 4)
+    factor_state: np.ndarray  # (2,)
 
 
 def joint_table(
@@ -169,5 +175,5 @@ def make_joint_work(table: JointTable) -> JointWork:
         np.zeros((rows, 6)), np.zeros((rows, 6)), np.zeros(rows), np.zeros(rows), np.zeros(rows), np.zeros(rows),
         np.zeros((bodies, 3)), np.zeros((bodies, 4)), np.zeros(bodies), np.zeros((bodies, 3, 3)),
         np.zeros((bodies, 6)), np.zeros(table.kind.shape[0]), np.zeros((table.kind.shape[0], 12)),
-        np.zeros(STAT_COUNT), make_solver_work(table.graph),
+        np.zeros(STAT_COUNT), make_solver_work(table.graph), np.zeros((bodies, 3)), np.zeros((bodies, 4)), np.zeros(2),
     )  # fmt: skip

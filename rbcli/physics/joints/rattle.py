@@ -1,0 +1,177 @@
+"""A split2 step of a scene with joints: RATTLE with split2's exact drift, symmetric and symplectic.
+
+With H = T(P, L, q) + V(x, q) and the rows g(x, q) = 0 (G their Jacobian), the step from a state on the
+joints (g = 0, G V = 0) at t is (Hairer-Lubich-Wanner VII.1.4 RATTLE, Leimkuhler-Reich ch. 7, with the
+free-body drift of split2 in place of the particles' x += h v):
+
+    K(h/2)   P += h/2 F(t, x, q), L += h/2 tau                (forces at the step's start)
+    I        (P, L) += G(x, q)^T Lambda                       (the joints' impulse, at the start configuration)
+    D(h)     the free drift of split2 over h                  (split2.free_drift: D_x, T_a T_b T_c T_b T_a)
+    K(h/2)   P += h/2 F(t + h, x', q'), L += h/2 tau'         (forces at the end)
+    Pi       (P, L) -= G(x', q')^T mu, G(x', q') V' = 0       (the velocity stage, stages.joint_velocity)
+
+with Lambda such that g(x', q') = 0 where the drift really ends. Psi = K D K is split2's own splitting
+in velocity-Verlet order (symmetric, symplectic on T*SO(3) x R^3 per body), and for any symmetric
+symplectic Psi the map Pi Psi I is symmetric and symplectic on the joints' manifold: run at -h from the
+end it retraces the same two impulses in reverse (each multiplier is fixed by the same condition), and
+each impulse along G^T changes the symplectic form only by d lambda ^ dg, zero on g = 0 (Reich 1996,
+SIAM J. Numer. Anal. 33; Leimkuhler & Skeel 1994). So the energy error is bounded, without drift, for
+any bodies; the method is second order. Forces are evaluated at the start and at the end of the step
+(two evaluations; the one at the end is not reused by the next step, which may follow an impulse, a
+kinematic update or a checkpoint).
+
+Lambda by simplified Newton: Lambda += -(1/h) A^-1 g(x', q'), A = G W G^T at the start configuration,
+each iteration re-running the drift of every body the impulse moved from the start with its new
+momenta, until |g| is at round-off (ROUNDOFF_ULPS ulps of the largest body position) or stops falling
+(each iteration gains a factor ~ h |omega|). A is the factor the last velocity stage built at this very
+configuration (stages.factor_at reuses it when the state is bitwise that configuration), so a step
+factors once. A limit beyond its bound at the end is pushed back by an impulse along its coordinate's
+row at the start, h k lambda = bound - c, alternating with the joints' Newton (drives.limit_positions).
+
+Kinematic bodies are put at their exact end pose (kinematic_end) before the Newton, so the rows close
+on the prescribed pose; static and kinematic bodies take no impulse (W = 0). Dampers and drag (the
+dissipative terms) act as their own flow at both ends, K_c(h/2) D_diss(h/2) I D(h) D_diss(h/2) K_c(h/2),
+a palindrome: second order (symplectic only in the conservative part, as split2).
+"""
+
+from __future__ import annotations
+
+import numba
+
+from rbcli.physics.forces.damping import dissipation_flow, dissipation_present
+from rbcli.physics.forces.wrench import accumulate_wrench
+from rbcli.physics.integrators.split2 import free_drift
+from rbcli.physics.joints.drives import limit_positions
+from rbcli.physics.joints.impulses import gather_impulses
+from rbcli.physics.joints.rows import joint_rows
+from rbcli.physics.joints.solver import solve_rows
+from rbcli.physics.joints.stages import factor_at
+from rbcli.physics.joints.tables import STAT_FLOOR, STAT_ITERATIONS, STAT_POSITION, STAT_REDUNDANT
+from rbcli.physics.kernel_link import empty_without, separately_compiled
+from rbcli.physics.stages import kinematic_end_stage
+from rbcli.physics.step import STEP_KERNEL
+
+# the Newton iteration stops when |g| falls by less than this factor in one iteration (round-off
+# reached), or after NEWTON_ITERATIONS (a step far too long for its joints: the stats show it)
+NEWTON_STALL = 0.5
+NEWTON_ITERATIONS = 50
+# ... or when |g| is at round-off: ROUNDOFF_ULPS ulps of the largest body position, the scale of the
+# anchors' world positions whose differences the rows are (below it |g| comes in multiples of 2^-54
+# that halve by chance, and iterating on costs ~15 % of a chain's step for nothing)
+ROUNDOFF_ULPS = 16.0
+EPS = 2.220446049250313e-16
+# rounds of (limits onto their bounds, joints again) in one position stage: each round gains the
+# simplified Newton's factor ~ h |omega| on both, so a few reach round-off; in the first
+# LIMIT_ONTO_ROUNDS a limit pushed in this step is put onto its bound from either side (drives.py)
+LIMIT_ROUNDS = 8
+LIMIT_ONTO_ROUNDS = 3
+
+
+@empty_without("table", "work")
+@separately_compiled
+@numba.njit(**STEP_KERNEL)
+def joint_update(
+    model, forces, contact, force_data, table, work, kinematic, schedule, t, h, x, q, P, L, F, tau
+) -> bool:  # noqa: ANN001
+    """The split2 step over [t, t + h) of a scene with joints, up to the velocity stage (module
+    docstring); False, doing nothing, without joints (numba prunes the rest: the caller then runs the
+    plain split2 step)."""
+    if table is None or work is None:
+        return False
+    dissipative = dissipation_present(forces.spring, forces.drag)
+    accumulate_wrench(model, forces, contact, force_data, t, x, q, P, L, F, tau, not dissipative)
+    _kick(forces.has_torque, 0.5 * h, P, L, F, tau)
+    if dissipative:
+        dissipation_flow(model, forces.spring, forces.drag, 0.5 * h, x, q, P, L)
+    for b in range(x.shape[0]):
+        for c in range(3):
+            work.x_start[b, c] = x[b, c]
+        for c in range(4):
+            work.q_start[b, c] = q[b, c]
+    for b in range(x.shape[0]):
+        free_drift(model, b, h, work.x_start, work.q_start, P, L, x, q)
+    kinematic_end_stage(model, kinematic, schedule, t + h, x, q, P, L)
+    joint_position(model, table, work, h, x, q, P, L)
+    accumulate_wrench(model, forces, contact, force_data, t + h, x, q, P, L, F, tau, not dissipative)
+    if dissipative:
+        dissipation_flow(model, forces.spring, forces.drag, 0.5 * h, x, q, P, L)
+    _kick(forces.has_torque, 0.5 * h, P, L, F, tau)
+    return True
+
+
+@numba.njit(**STEP_KERNEL)
+def _kick(has_torque, s, P, L, F, tau) -> None:  # noqa: ANN001
+    """P += s F, and L += s tau when some force term has a torque (tau is otherwise never written)."""
+    for b in range(P.shape[0]):
+        P[b, 0] += s * F[b, 0]
+        P[b, 1] += s * F[b, 1]
+        P[b, 2] += s * F[b, 2]
+        if has_torque:
+            L[b, 0] += s * tau[b, 0]
+            L[b, 1] += s * tau[b, 1]
+            L[b, 2] += s * tau[b, 2]
+
+
+@separately_compiled
+@numba.njit(**STEP_KERNEL)
+def joint_position(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
+    """The joints' impulse at the start configuration (work.x_start, work.q_start) that puts the end of
+    the drift on g = 0, then each limit beyond its bound pushed back the same way (drives.py); (x, q) is
+    the drift's end without it, (P, L) the momenta after the start kick."""
+    redundant = factor_at(model, table, work, work.x_start, work.q_start)
+    work.impulse[:] = 0.0
+    work.joint_impulse[:, :] = 0.0
+    work.limit_hit[:] = 0.0
+    scale = 0.0
+    for b in range(x.shape[0]):
+        scale = max(scale, abs(x[b, 0]), abs(x[b, 1]), abs(x[b, 2]))
+    work.stats[STAT_FLOOR] = ROUNDOFF_ULPS * EPS * scale
+    worst, iterations = _newton(model, table, work, h, x, q, P, L)
+    for sweep in range(LIMIT_ROUNDS):  # limits reached in this step: onto the bound, then the joints again
+        if not limit_positions(table, work, h, x, q, P, L, sweep < LIMIT_ONTO_ROUNDS):
+            break
+        for b in range(x.shape[0]):
+            if not table.body_ground[b]:
+                free_drift(model, b, h, work.x_start, work.q_start, P, L, x, q)
+        worst, more = _newton(model, table, work, h, x, q, P, L)
+        iterations += more
+    work.stats[STAT_ITERATIONS] = iterations
+    work.stats[STAT_POSITION] = worst
+    work.stats[STAT_REDUNDANT] = redundant
+
+
+@separately_compiled
+@numba.njit(**STEP_KERNEL)
+def _newton(model, table, work, h, x, q, P, L):  # noqa: ANN001, ANN202
+    """Simplified Newton on the end configuration's residual with the start factor; (max |g|, iterations)."""
+    worst = joint_rows(table, x, q, work.jac_a, work.jac_b, work.residual, False)
+    iterations = 0
+    scale = -1.0 / h
+    floor = work.stats[STAT_FLOOR]
+    while worst > floor and iterations < NEWTON_ITERATIONS:
+        for r in range(work.rhs.shape[0]):
+            work.rhs[r] = scale * work.residual[r]
+        solve_rows(table.graph, work.solver, table.row_start, table.row_count, table.body_a, table.body_b,
+                   work.rhs, work.delta)  # fmt: skip
+        for r in range(work.delta.shape[0]):
+            work.impulse[r] += work.delta[r]
+        gather_impulses(table, work, work.delta)
+        for b in range(x.shape[0]):  # each body the impulse moved: its new momenta, its drift again
+            if table.body_ground[b]:
+                continue
+            d = work.impulse_body[b]
+            if d[0] == 0.0 and d[1] == 0.0 and d[2] == 0.0 and d[3] == 0.0 and d[4] == 0.0 and d[5] == 0.0:
+                continue
+            P[b, 0] += d[0]
+            P[b, 1] += d[1]
+            P[b, 2] += d[2]
+            L[b, 0] += d[3]
+            L[b, 1] += d[4]
+            L[b, 2] += d[5]
+            free_drift(model, b, h, work.x_start, work.q_start, P, L, x, q)
+        iterations += 1
+        previous = worst
+        worst = joint_rows(table, x, q, work.jac_a, work.jac_b, work.residual, False)
+        if worst > NEWTON_STALL * previous:
+            break
+    return worst, iterations
