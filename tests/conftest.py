@@ -59,6 +59,62 @@ def pytest_sessionfinish(session):  # noqa: ANN001, ANN201
         signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
+# Where the suite's compile time goes: RBSIM_COMPILE_LOG=DIR makes each process (each xdist worker) write
+# DIR/<worker>.jsonl, one line per test: its node id and the CPU seconds numba spent compiling while it
+# ran (setup, call and teardown; only the outermost compiles: a compile inside another counts once),
+# with the functions compiled. `python benchmarks/suite_compiles.py DIR` sums them up.
+_COMPILE_LOG = os.environ.get("RBSIM_COMPILE_LOG")
+_compiling = {"depth": 0, "start": 0.0, "test": "", "seconds": {}, "functions": {}}
+
+
+def _install_compile_log() -> None:
+    import time
+
+    from numba.core import event
+
+    class CompileLog(event.Listener):
+        def on_start(self, ev):  # noqa: ANN001, ANN202
+            if _compiling["depth"] == 0:
+                _compiling["start"] = time.process_time()
+            _compiling["depth"] += 1
+            f = ev.data["dispatcher"].py_func
+            _compiling["functions"].setdefault(_compiling["test"], []).append(f"{f.__module__}.{f.__qualname__}")
+
+        def on_end(self, ev):  # noqa: ANN001, ANN202
+            _compiling["depth"] -= 1
+            if _compiling["depth"] == 0:
+                seconds = _compiling["seconds"]
+                seconds[_compiling["test"]] = (
+                    seconds.get(_compiling["test"], 0.0) + time.process_time() - _compiling["start"]
+                )
+
+    event.install_listener("numba:compile", CompileLog())
+
+
+if _COMPILE_LOG:
+
+    def pytest_configure(config):  # noqa: ANN001, ANN201
+        _install_compile_log()
+
+    @pytest.hookimpl(hookwrapper=True)
+    def pytest_runtest_protocol(item, nextitem):  # noqa: ANN001, ANN201
+        _compiling["test"] = item.nodeid
+        yield
+        _compiling["test"] = "(between tests)"
+
+    def pytest_unconfigure(config):  # noqa: ANN001, ANN201
+        import json
+        from pathlib import Path
+
+        worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
+        path = Path(_COMPILE_LOG) / f"{worker}.jsonl"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with path.open("a") as out:
+            for test, seconds in _compiling["seconds"].items():
+                functions = _compiling["functions"].get(test, [])
+                out.write(json.dumps({"test": test, "compile_cpu_s": seconds, "functions": functions}) + "\n")
+
+
 def make_body(name: str = "b", **overrides) -> BodySpec:
     fields = dict(
         name=name,

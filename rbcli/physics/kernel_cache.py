@@ -47,6 +47,8 @@ import hashlib
 import os
 from typing import Any
 
+from rbcli.physics.kernel_link import StaleKernelSymbol
+
 # (major, minor) releases of numba whose cache loads were checked to work without the registry build
 # (tests/physics/test_compile_only_what_is_used.py, the whole suite, NUMBA_BOUNDSCHECK runs)
 VERIFIED_NUMBA = ((0, 68),)
@@ -134,7 +136,10 @@ def _install_guard(Cache: Any) -> None:  # noqa: ANN401, N803 - numba's Cache cl
 
     def load_overload(self: Any, sig: Any, target_context: Any) -> Any:  # noqa: ANN401
         stamped(self)
-        return load(self, sig, target_context)
+        try:
+            return load(self, sig, target_context)
+        except StaleKernelSymbol:  # compiled against a callee this process compiled anew: a cache miss
+            return None
 
     def save_overload(self: Any, sig: Any, data: Any) -> Any:  # noqa: ANN401
         stamped(self)
@@ -192,6 +197,8 @@ def install() -> None:
         try:
             rtsys.initialize(target_context)  # the kernels' reference counting calls NRT_* helpers
             return self._load_overload(sig, target_context)
+        except StaleKernelSymbol:  # kernel_link.py: compiled against another copy of a callee: a miss
+            return None
         except Exception:  # noqa: BLE001 - whatever failed, numba's own path decides (and reports)
             return ordinary(self, sig, target_context)
 

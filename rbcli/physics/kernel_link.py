@@ -15,7 +15,13 @@ kernel is optimised and compiled once per signature, and cached on its own. The 
 records a loader per separate callee in numba's `reload_init` (which numba pickles into the caller's
 cache entry and runs before mapping the caller's machine code into the JIT), so a process that loads the
 caller from the cache first loads (or compiles) every callee its code refers to: a symbol is never left
-unresolved.
+unresolved. numba's symbol for a function holds a number given in the process that compiled it (the
+`v<uid>` of its mangled name: the order in which that process met functions), so a callee this process
+compiled itself has another symbol than the one a caller compiled elsewhere refers to: two processes
+compiling on one empty cache (two test workers, `rbsim warm`, a sweep's workers) would crash the one that
+then loads the other's caller. Each loader knows the symbol its caller refers to and refuses a callee
+whose symbol differs (`StaleKernelSymbol`): the caller is then compiled here, as on a cache miss
+(kernel_cache's loads turn the refusal into one), and links the callee this process has.
 
 Separate kernels: the stage-sized kernels marked `@separately_compiled` (a joint stage, the joint
 solver's factor and solve, a contact search, the contact force and commit), bound to their own name in
@@ -40,25 +46,34 @@ from typing import Any
 _installed = False
 
 
+class StaleKernelSymbol(Exception):  # noqa: N818 - a cache miss, not an error: the caller is compiled anew
+    """A cached caller refers to a separate kernel by a symbol this process's copy of that kernel lacks."""
+
+
 class KernelLoader:
     """A `reload_init` entry: compile (or load from numba's cache) one kernel for one signature, so that
-    the symbol a caller's machine code refers to is in the JIT before that code is mapped."""
+    the symbol a caller's machine code refers to is in the JIT before that code is mapped; raises
+    StaleKernelSymbol when this process's kernel has another symbol than `symbol`, the one the caller
+    was compiled against (the module's docstring says when)."""
 
-    __slots__ = ("module", "qualname", "args")
+    __slots__ = ("module", "qualname", "args", "symbol")
 
-    def __init__(self, module: str, qualname: str, args: tuple[Any, ...]) -> None:
-        self.module, self.qualname, self.args = module, qualname, args
+    def __init__(self, module: str, qualname: str, args: tuple[Any, ...], symbol: str) -> None:
+        self.module, self.qualname, self.args, self.symbol = module, qualname, args, symbol
 
     def __call__(self) -> None:
         kernel: Any = importlib.import_module(self.module)
         for part in self.qualname.split("."):
             kernel = getattr(kernel, part)
         kernel.compile(self.args)
+        compiled = kernel.overloads.get(tuple(self.args))
+        if compiled is None or compiled.fndesc.mangled_name != self.symbol:
+            raise StaleKernelSymbol(f"{self.module}.{self.qualname}: {self.symbol} is not this process's")
 
-    def _key(self) -> tuple[str, str, tuple[Any, ...]]:
-        return (self.module, self.qualname, self.args)
+    def _key(self) -> tuple[str, str, tuple[Any, ...], str]:
+        return (self.module, self.qualname, self.args, self.symbol)
 
-    def __reduce__(self) -> tuple[type, tuple[str, str, tuple[Any, ...]]]:
+    def __reduce__(self) -> tuple[type, tuple[str, str, tuple[Any, ...], str]]:
         return (KernelLoader, self._key())
 
     def __eq__(self, other: object) -> bool:
@@ -165,7 +180,7 @@ def install() -> None:
                                                                                        self.py_func):  # fmt: skip
             function = self.py_func
             library._rbcli_loader = KernelLoader(function.__module__, function.__qualname__,
-                                                 tuple(cres.signature.args))  # fmt: skip
+                                                 tuple(cres.signature.args), cres.fndesc.mangled_name)  # fmt: skip
         return add_overload(self, cres)
 
     def add_linking_library(self: Any, library: Any) -> Any:  # noqa: ANN401

@@ -247,3 +247,69 @@ def test_a_caller_compiled_over_a_cached_kernel_loads_the_separate_kernels_that_
     assert run("direct") == 3
     assert run("probe") == 3  # compiles probe over the cached contact_points
     assert run("probe") == 3  # loads probe alone: its callees' separate kernels must come with it
+
+
+# a separate kernel and its caller in a module of their own (cheap to compile: each process here costs
+# its imports and a second or two)
+PAIR = """\
+import numba
+from rbcli.physics import kernel_cache
+from rbcli.physics.kernel_link import separately_compiled
+
+kernel_cache.install()
+
+
+@separately_compiled
+@numba.njit(cache=True)
+def callee(x):
+    total = 0.0
+    for i in range(x.shape[0]):
+        total += x[i] * x[i]
+    return total
+
+
+@numba.njit(cache=True)
+def caller(x):
+    return callee(x) + 1.0
+"""
+
+PAIR_SCRIPT = """\
+import sys
+import numba
+import numpy as np
+
+for i in range(int(sys.argv[1])):  # functions compiled first: this process's symbols get other numbers
+    numba.njit(lambda x, i=i: x + i)(1.0)
+import pair
+
+print(pair.caller(np.arange(3.0)))
+"""
+
+
+@pytest.mark.skipif(not _verified(), reason="kernel_link is installed only on the numba versions it was verified on")
+def test_a_cached_caller_whose_callee_this_process_compiled_anew_is_compiled_again_not_run(tmp_path):
+    """numba's symbol for a function holds a number given by the process that compiled it. Process 1
+    compiles `caller` and its separate kernel `callee` and caches both; the callee's cache entry is then
+    lost (as when a second process compiling at the same time overwrites it: two test workers on one empty
+    cache). Process 2, having compiled other functions first, loads `caller` from the cache; its loader
+    compiles `callee` anew, under another symbol than the one the cached caller calls: mapped, the caller
+    would call an unresolved symbol (a segmentation fault, seen in the suite's workers). The loader
+    refuses it and the caller is compiled again: the right answer, exit 0."""
+    (tmp_path / "pair.py").write_text(PAIR)
+    cache = tmp_path / "numba_cache"
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(tmp_path), str(ROOT), env.get("PYTHONPATH")]))
+
+    def run(shift: int) -> str:
+        done = subprocess.run([sys.executable, "-c", PAIR_SCRIPT, str(shift)], env=env, cwd=tmp_path,
+                              capture_output=True, text=True, timeout=300)  # fmt: skip
+        assert done.returncode == 0, (shift, done.returncode, done.stderr[-2000:])
+        return done.stdout.strip().splitlines()[-1]
+
+    assert run(0) == "6.0"
+    callee_entries = [path for path in cache.rglob("pair.callee-*") if path.suffix in (".nbi", ".nbc")]
+    assert callee_entries and any(cache.rglob("pair.caller-*.nbi"))
+    for path in callee_entries:
+        path.unlink()
+    assert run(7) == "6.0"
+    assert run(3) == "6.0"  # and the caller compiled again in process 2 loads with its callee

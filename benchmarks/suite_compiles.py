@@ -1,0 +1,40 @@
+"""Where the test suite's compile time goes: read the per-test logs that RBSIM_COMPILE_LOG=DIR makes the
+suite write (tests/conftest.py) and print the tests and the files that compiled the most.
+
+    RBSIM_COMPILE_LOG=/tmp/compiles NUMBA_CACHE_DIR=$(mktemp -d) python -m pytest -q
+    python benchmarks/suite_compiles.py /tmp/compiles [--top 30]
+
+CPU seconds of numba's outermost compiles (a compile inside another counts once), per test and summed
+per test file; with an empty cache this is most of a cold suite's time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import json
+from pathlib import Path
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("directory", type=Path)
+    parser.add_argument("--top", type=int, default=30)
+    args = parser.parse_args()
+    rows = [json.loads(line) for path in sorted(args.directory.glob("*.jsonl")) for line in path.open()]
+    per_file: collections.Counter[str] = collections.Counter()
+    for row in rows:
+        per_file[row["test"].split("::", 1)[0]] += row["compile_cpu_s"]
+    total = sum(row["compile_cpu_s"] for row in rows)
+    print(f"compile CPU s in all: {total:.1f} over {len(rows)} tests that compiled")
+    print("\nby file:")
+    for name, seconds in per_file.most_common(args.top):
+        print(f"  {seconds:7.1f}  {name}")
+    print("\nby test:")
+    for row in sorted(rows, key=lambda r: -r["compile_cpu_s"])[: args.top]:
+        top = collections.Counter(f.rsplit(".", 1)[-1] for f in row["functions"]).most_common(4)
+        print(f"  {row['compile_cpu_s']:7.1f}  {row['test']}  ({len(row['functions'])} functions; {top})")
+
+
+if __name__ == "__main__":
+    main()
