@@ -60,7 +60,7 @@ def pytest_sessionfinish(session):  # noqa: ANN001, ANN201
 
 
 # Where the suite's compile time goes: RBSIM_COMPILE_LOG=DIR makes each process (each xdist worker) write
-# DIR/<worker>.jsonl, one line per test: its node id and the CPU seconds numba spent compiling while it
+# DIR/<worker>-<pid>.jsonl, one line per test, written as it ends: its node id and the CPU seconds numba spent compiling while it
 # ran (setup, call and teardown; only the outermost compiles: a compile inside another counts once),
 # with the functions compiled. `python benchmarks/suite_compiles.py DIR` sums them up.
 _COMPILE_LOG = os.environ.get("RBSIM_COMPILE_LOG")
@@ -101,18 +101,21 @@ if _COMPILE_LOG:
         _compiling["test"] = item.nodeid
         yield
         _compiling["test"] = "(between tests)"
+        _write_compile_log(item.nodeid)  # at once: a worker that crashes later loses nothing
 
-    def pytest_unconfigure(config):  # noqa: ANN001, ANN201
-        import json
-        from pathlib import Path
 
-        worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
-        path = Path(_COMPILE_LOG) / f"{worker}.jsonl"
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with path.open("a") as out:
-            for test, seconds in _compiling["seconds"].items():
-                functions = _compiling["functions"].get(test, [])
-                out.write(json.dumps({"test": test, "compile_cpu_s": seconds, "functions": functions}) + "\n")
+def _write_compile_log(test: str) -> None:
+    import json
+    from pathlib import Path
+
+    seconds = _compiling["seconds"].pop(test, 0.0)
+    functions = _compiling["functions"].pop(test, [])
+    if not seconds:
+        return
+    path = Path(str(_COMPILE_LOG)) / f"{os.environ.get('PYTEST_XDIST_WORKER', 'main')}-{os.getpid()}.jsonl"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("a") as out:
+        out.write(json.dumps({"test": test, "compile_cpu_s": seconds, "functions": functions}) + "\n")
 
 
 def make_body(name: str = "b", **overrides) -> BodySpec:
