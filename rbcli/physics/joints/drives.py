@@ -30,9 +30,10 @@ import math
 import numba
 
 from rbcli.physics.integrators.kinematics import rotate
+from rbcli.physics.joints.cone import cone_row
 from rbcli.physics.joints.impulses import apply_body_impulses, body_omega, gather_impulses
 from rbcli.physics.joints.solver import solve_rows
-from rbcli.physics.joints.tables import JOINT_HINGE
+from rbcli.physics.joints.tables import JOINT_BALL, JOINT_HINGE
 from rbcli.physics.kernel_link import separately_compiled
 
 # a coordinate within this of a bound [rad or m] is at it (the velocity stage stops outward motion):
@@ -171,6 +172,42 @@ def _rate(model, q, P, L, a, b, ja, jb) -> float:  # noqa: ANN001
     return rate
 
 
+@numba.njit(cache=True)
+def limit_row(table, j, swing, x, q):  # noqa: ANN001, ANN202
+    """(c, J_a, J_b) of the coordinate joint j's limits act on: a ball joint's swing measure (swing True) or
+    twist (joints/cone.py), else the hinge's or slider's coordinate (coordinate_row)."""
+    if swing or table.kind[j] == JOINT_BALL:
+        qa, qb, _, _, _ = _ends(table, j, x, q)
+        return cone_row(table, j, swing, qa, qb)
+    return coordinate_row(table, j, x, q)
+
+
+@numba.njit(cache=True, inline="always")
+def _bounds(table, j, slot):  # noqa: ANN001, ANN202
+    """(lower, upper) of joint j's limit `slot`: 0 its coordinate's, 1 a ball joint's cone (c <= 1)."""
+    if slot == 0:
+        return table.limit_lower[j], table.limit_upper[j]
+    if table.swing_limit[j, 0] > 0.0:
+        return -math.inf, 1.0
+    return -math.inf, math.inf
+
+
+@numba.njit(cache=True)
+def _stop(model, table, work, j, slot, c, a, b, ja, jb, q, P, L) -> None:  # noqa: ANN001
+    """The velocity stage's inelastic stop of joint j's limit `slot` (module docstring)."""
+    lower, upper = _bounds(table, j, slot)
+    at_upper = c >= upper - LIMIT_CONTACT
+    at_lower = c <= lower + LIMIT_CONTACT
+    hit = work.limit_hit[j, slot]
+    if at_upper or at_lower or hit:
+        rate = _rate(model, q, P, L, a, b, ja, jb)
+        # pushed back in this step: stop it (the push alone would reflect it, a bounce)
+        if hit or (at_upper and rate > 0.0) or (at_lower and rate < 0.0):
+            k_inv = effective_inverse(table, work, a, b, ja, jb)
+            if k_inv > 0.0:
+                _push(table, work, j, a, b, ja, jb, -rate / k_inv, P, L)
+
+
 @separately_compiled
 @numba.njit(cache=True)
 def drive_velocities(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
@@ -179,32 +216,29 @@ def drive_velocities(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
     for j in range(table.kind.shape[0]):
         motor, damper = table.motor_cap[j] > 0.0, table.damping[j] > 0.0
         bounded = table.limit_lower[j] > -math.inf or table.limit_upper[j] < math.inf
-        if not (motor or damper or bounded):
+        swing = table.swing_limit[j, 0] > 0.0
+        if not (motor or damper or bounded or swing):
             continue
         a, b = table.body_a[j], table.body_b[j]
-        c, ja, jb = coordinate_row(table, j, x, q)
-        if motor or damper:
-            k_inv = effective_inverse(table, work, a, b, ja, jb)
-            if k_inv > 0.0:  # 0: the coordinate cannot move (both ends fixed, or the joints forbid it)
-                rate = _rate(model, q, P, L, a, b, ja, jb)
-                impulse = 0.0
-                if motor:
-                    cap = table.motor_cap[j] * h
-                    impulse = min(max((table.motor_speed[j] - rate) / k_inv, -cap), cap)
-                    rate += k_inv * impulse
-                if damper:
-                    impulse += rate * (math.exp(-table.damping[j] * k_inv * h) - 1.0) / k_inv
-                _push(table, work, j, a, b, ja, jb, impulse, P, L)
-        if bounded:
-            at_upper = c >= table.limit_upper[j] - LIMIT_CONTACT
-            at_lower = c <= table.limit_lower[j] + LIMIT_CONTACT
-            if at_upper or at_lower or work.limit_hit[j]:
-                rate = _rate(model, q, P, L, a, b, ja, jb)
-                # pushed back in this step: stop it (the push alone would reflect it, a bounce)
-                if work.limit_hit[j] or (at_upper and rate > 0.0) or (at_lower and rate < 0.0):
-                    k_inv = effective_inverse(table, work, a, b, ja, jb)
-                    if k_inv > 0.0:
-                        _push(table, work, j, a, b, ja, jb, -rate / k_inv, P, L)
+        if motor or damper or bounded:
+            c, ja, jb = limit_row(table, j, False, x, q)
+            if motor or damper:
+                k_inv = effective_inverse(table, work, a, b, ja, jb)
+                if k_inv > 0.0:  # 0: the coordinate cannot move (both ends fixed, or the joints forbid it)
+                    rate = _rate(model, q, P, L, a, b, ja, jb)
+                    impulse = 0.0
+                    if motor:
+                        cap = table.motor_cap[j] * h
+                        impulse = min(max((table.motor_speed[j] - rate) / k_inv, -cap), cap)
+                        rate += k_inv * impulse
+                    if damper:
+                        impulse += rate * (math.exp(-table.damping[j] * k_inv * h) - 1.0) / k_inv
+                    _push(table, work, j, a, b, ja, jb, impulse, P, L)
+            if bounded:
+                _stop(model, table, work, j, 0, c, a, b, ja, jb, q, P, L)
+        if swing:
+            c, ja, jb = limit_row(table, j, True, x, q)
+            _stop(model, table, work, j, 1, c, a, b, ja, jb, q, P, L)
 
 
 @separately_compiled
@@ -218,25 +252,28 @@ def limit_positions(table, work, h, x, q, P, L, onto) -> bool:  # noqa: ANN001
     so one push lands that fraction short (3.6e-9 rad for a rod hitting its limit at 3.6 rad/s), and a
     round or two more land it to round-off. Not in every round: limits that push each other (a hip and
     a knee stopped in the same step) would then converge as a Gauss-Seidel sweep on their coupling,
-    measured up to 128 iterations a step; past the first rounds an overshoot into the range stays."""
+    measured up to 128 iterations a step; past the first rounds an overshoot into the range stays.
+    A ball joint has two limits, its twist (slot 0) and its cone (slot 1), each as a hinge's."""
     moved = False
     for j in range(table.kind.shape[0]):
-        lower, upper = table.limit_lower[j], table.limit_upper[j]
-        if lower == -math.inf and upper == math.inf:
-            continue
-        c = coordinate_row(table, j, x, q)[0]
-        hit = work.limit_hit[j]  # +1 / -1: pushed onto the upper / lower bound in this step
-        bound = upper if hit > 0.0 or (hit == 0.0 and c > upper) else lower
-        # off by more than a few ulps of the bound: below that the correction would be round-off
-        slack = 4e-16 * max(1.0, abs(bound))
-        if lower - slack <= c <= upper + slack and (hit == 0.0 or not onto or abs(c - bound) <= slack):
-            continue
-        a, b = table.body_a[j], table.body_b[j]
-        _, ja, jb = coordinate_row(table, j, work.x_start, work.q_start)
-        k_inv = effective_inverse(table, work, a, b, ja, jb)
-        if not k_inv > 0.0:
-            continue
-        _push(table, work, j, a, b, ja, jb, -(c - bound) / (h * k_inv), P, L)
-        work.limit_hit[j] = 1.0 if bound == upper else -1.0
-        moved = True
+        for slot in range(2):
+            lower, upper = _bounds(table, j, slot)
+            if lower == -math.inf and upper == math.inf:
+                continue
+            swing = slot == 1
+            c = limit_row(table, j, swing, x, q)[0]
+            hit = work.limit_hit[j, slot]  # +1 / -1: pushed onto the upper / lower bound in this step
+            bound = upper if hit > 0.0 or (hit == 0.0 and c > upper) else lower
+            # off by more than a few ulps of the bound: below that the correction would be round-off
+            slack = 4e-16 * max(1.0, abs(bound))
+            if lower - slack <= c <= upper + slack and (hit == 0.0 or not onto or abs(c - bound) <= slack):
+                continue
+            a, b = table.body_a[j], table.body_b[j]
+            _, ja, jb = limit_row(table, j, swing, work.x_start, work.q_start)
+            k_inv = effective_inverse(table, work, a, b, ja, jb)
+            if not k_inv > 0.0:
+                continue
+            _push(table, work, j, a, b, ja, jb, -(c - bound) / (h * k_inv), P, L)
+            work.limit_hit[j, slot] = 1.0 if bound == upper else -1.0
+            moved = True
     return moved
