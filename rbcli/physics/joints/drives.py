@@ -1,4 +1,5 @@
-"""What acts on a hinge's or slider's own coordinate: velocity motors, dampers and limits.
+"""What acts on a hinge's or slider's own coordinate: velocity motors, dampers and limits; and on a ball
+joint's swing and twist (joints/cone.py): its cone and twist limits, and its damper.
 
 The coordinate c of joint j: a hinge's angle of body a relative to b about the axis u = R_a u_a,
 c = atan2(u . (n_b x m_a), n_b . m_a) with n_b = R_b n_b1 and m_a = R_a m (the same world vector at the
@@ -12,7 +13,8 @@ coordinate with the joints held (one solve with the stage's factor of A).
 
 - motor (velocity stage): the impulse that brings r to its speed, capped at |lambda| <= cap h;
 - damper (velocity stage, after the motor): the exact flow of dr/dt = -c k r over the step,
-  r <- r exp(-c k h), so a flywheel on a damped hinge decays at exp(-c t / I) to round-off;
+  r <- r exp(-c k h), so a flywheel on a damped hinge decays at exp(-c t / I) to round-off; a ball
+  joint's damper acts so on the relative angular velocity about the world's x, y and z in turn;
 - limits, one-sided: in the position stage a coordinate beyond a bound at the end of the step is put
   back onto it by an impulse at the step's start (as the joints' rows: h k lambda = bound - c, simplified
   Newton with the start's factor, alternating with the joints' own Newton until both hold); in the
@@ -208,6 +210,21 @@ def _stop(model, table, work, j, slot, c, a, b, ja, jb, q, P, L) -> None:  # noq
                 _push(table, work, j, a, b, ja, jb, -rate / k_inv, P, L)
 
 
+@numba.njit(cache=True)
+def _ball_damper(model, table, work, j, a, b, h, q, P, L) -> None:  # noqa: ANN001
+    """A ball joint's damper: the hinge's exact one-coordinate damper, r <- r exp(-c k h), on the relative
+    angular velocity about the world's x, y and z in turn (a Gauss-Seidel sweep: exact for each axis
+    alone, dissipative always; the three together are the flow of -c K omega_rel only where K is
+    diagonal in the world axes)."""
+    for axis in range(3):
+        e0, e1, e2 = (1.0 if axis == 0 else 0.0), (1.0 if axis == 1 else 0.0), (1.0 if axis == 2 else 0.0)
+        ja, jb = (0.0, 0.0, 0.0, e0, e1, e2), (0.0, 0.0, 0.0, -e0, -e1, -e2)
+        k_inv = effective_inverse(table, work, a, b, ja, jb)
+        if k_inv > 0.0:
+            rate = _rate(model, q, P, L, a, b, ja, jb)
+            _push(table, work, j, a, b, ja, jb, rate * (math.exp(-table.damping[j] * k_inv * h) - 1.0) / k_inv, P, L)
+
+
 @separately_compiled
 @numba.njit(cache=True)
 def drive_velocities(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
@@ -220,7 +237,13 @@ def drive_velocities(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
         if not (motor or damper or bounded or swing):
             continue
         a, b = table.body_a[j], table.body_b[j]
-        if motor or damper or bounded:
+        if table.kind[j] == JOINT_BALL:
+            if damper:
+                _ball_damper(model, table, work, j, a, b, h, q, P, L)
+            if bounded:
+                c, ja, jb = limit_row(table, j, False, x, q)
+                _stop(model, table, work, j, 0, c, a, b, ja, jb, q, P, L)
+        elif motor or damper or bounded:
             c, ja, jb = limit_row(table, j, False, x, q)
             if motor or damper:
                 k_inv = effective_inverse(table, work, a, b, ja, jb)
