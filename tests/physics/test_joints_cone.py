@@ -18,6 +18,7 @@ from rbcli.physics.joints.cone import (
     twist_angle_row,
 )
 from rbcli.physics.joints.drives import limit_row
+from rbcli.physics.joints.tables import CONE_FRAME_A, CONE_FRAME_B, CONE_SWING
 from rbcli.physics.rotation import quat_conjugate, quat_from_axis_angle, quat_multiply, quat_normalize
 from rbcli.runner.simulation import Simulation
 from rbcli.scene.load import analyse_scene_text, load_scene_text
@@ -131,8 +132,8 @@ def test_the_limit_rows_are_the_coordinates_jacobians_on_two_bodies():
             rate = np.dot(ja[3:], omega[0]) + np.dot(jb[3:], omega[1])
             assert abs(numeric - rate) <= 1e-8 * max(1.0, abs(numeric)), (swing, numeric, rate)
             Q = relative_rotation(table, 0, tuple(q[0]), tuple(q[1]))[0]
-            pa = quat_multiply(q[0], table.cone_frame_a[0])
-            pb = quat_multiply(q[1], table.cone_frame_b[0])
+            pa = quat_multiply(q[0], table.cone[0, CONE_FRAME_A : CONE_FRAME_A + 4])
+            pb = quat_multiply(q[1], table.cone[0, CONE_FRAME_B : CONE_FRAME_B + 4])
             expected = quat_multiply(quat_conjugate(pb), pa)
             assert min(np.abs(np.array(Q) - expected).max(), np.abs(np.array(Q) + expected).max()) <= 1e-15
 
@@ -144,9 +145,9 @@ def _energy(sim: Simulation) -> float:
 
 def _measures(table, q: np.ndarray) -> tuple[float, float]:  # noqa: ANN001
     """(c, tau) of joint 0 (body 0 on the world) by numpy: the cone measure and the twist."""
-    pa = quat_multiply(q[0], table.cone_frame_a[0])
-    Q = quat_multiply(quat_conjugate(table.cone_frame_b[0]), pa)
-    a1, a2 = table.swing_limit[0]
+    pa = quat_multiply(q[0], table.cone[0, CONE_FRAME_A : CONE_FRAME_A + 4])
+    Q = quat_multiply(quat_conjugate(table.cone[0, CONE_FRAME_B : CONE_FRAME_B + 4]), pa)
+    a1, a2 = table.cone[0, CONE_SWING : CONE_SWING + 2]
     return swing_measure_numpy(Q, a1, a2), swing_twist_numpy(Q)[0]
 
 
@@ -257,10 +258,10 @@ def test_a_cone_on_a_hinge_is_an_unknown_key_and_a_good_cone_reaches_the_table()
     assert "unknown key 'cone'" in issues[0].message
     good = "  - {type: ball, bodies: [world, arm], anchor: [0, 0, 1], cone: {axis: [0, 0, -2], swing: [0.5, 0.25], "
     table = load_scene_text(SCENE + good + "reference: [0, 3, 1], twist: [-0.1, 0.2]}}\n").compiled_model.model.joint
-    assert table.swing_limit.tolist() == [[0.5, 0.25]]
+    assert table.cone[:, CONE_SWING:].tolist() == [[0.5, 0.25]]
     assert table.limit_lower.tolist() == [-0.1] and table.limit_upper.tolist() == [0.2]
     # the joint frame in the world at the initial poses: x the axis, y the reference's part across it
-    frame = table.cone_frame_b[0]  # the world end carries the cone
+    frame = table.cone[0, CONE_FRAME_B : CONE_FRAME_B + 4]  # the world end carries the cone
     x_axis = quat_multiply(quat_multiply(frame, [0, 1.0, 0, 0]), quat_conjugate(frame))[1:]
     y_axis = quat_multiply(quat_multiply(frame, [0, 0, 1.0, 0]), quat_conjugate(frame))[1:]
     np.testing.assert_allclose(x_axis, [0, 0, -1], atol=1e-15)

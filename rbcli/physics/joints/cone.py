@@ -1,7 +1,7 @@
 """A ball joint's swing and twist (the coordinates its cone and twist limits act on, drives.py).
 
-The joint frame: x the cone axis, y the reference, z = x cross y; f_a and f_b (JointTable.cone_frame_a,
-cone_frame_b) are its orientation in each end's principal frame (the world's for the world end), equal in
+The joint frame: x the cone axis, y the reference, z = x cross y; f_a and f_b (JointTable.cone[:, 0:4],
+[:, 4:8]) are its orientation in each end's principal frame (the world's for the world end), equal in
 the world at the initial poses. The relative rotation of a's joint frame in b's,
 
     Q = (q_b f_b)^* (q_a f_a),   Q = 1 at the initial poses,
@@ -52,9 +52,9 @@ def _multiply(aw, ax, ay, az, bw, bx, by, bz):  # noqa: ANN001, ANN202
 def relative_rotation(table, j, qa, qb):  # noqa: ANN001, ANN202
     """(Q, p_b): Q = (q_b f_b)^* (q_a f_a) of joint j with w >= 0, and p_b = q_b f_b (world-from-b's joint
     frame); qa, qb 4-tuples (qb = 1 for the world)."""
-    fa, fb = table.cone_frame_a[j], table.cone_frame_b[j]
-    pa = _multiply(qa[0], qa[1], qa[2], qa[3], fa[0], fa[1], fa[2], fa[3])
-    pb = _multiply(qb[0], qb[1], qb[2], qb[3], fb[0], fb[1], fb[2], fb[3])
+    f = table.cone[j]  # [0:4] f_a, [4:8] f_b (tables.CONE_FRAME_A, CONE_FRAME_B)
+    pa = _multiply(qa[0], qa[1], qa[2], qa[3], f[0], f[1], f[2], f[3])
+    pb = _multiply(qb[0], qb[1], qb[2], qb[3], f[4], f[5], f[6], f[7])
     Q = _multiply(pb[0], -pb[1], -pb[2], -pb[3], pa[0], pa[1], pa[2], pa[3])
     if Q[0] < 0.0:
         Q = (-Q[0], -Q[1], -Q[2], -Q[3])
@@ -132,7 +132,7 @@ def cone_row(table, j, swing, qa, qb):  # noqa: ANN001, ANN202
     (6-tuples, world), at the ends' orientations qa, qb (4-tuples)."""
     Q, pb = relative_rotation(table, j, qa, qb)
     if swing:
-        c, k = swing_measure_row(Q, table.swing_limit[j, 0], table.swing_limit[j, 1])
+        c, k = swing_measure_row(Q, table.cone[j, 8], table.cone[j, 9])
     else:
         c, k = twist_angle_row(Q)
     u = rotate(pb[0], pb[1], pb[2], pb[3], k[0], k[1], k[2])

@@ -189,7 +189,7 @@ def _bounds(table, j, slot):  # noqa: ANN001, ANN202
     """(lower, upper) of joint j's limit `slot`: 0 its coordinate's, 1 a ball joint's cone (c <= 1)."""
     if slot == 0:
         return table.limit_lower[j], table.limit_upper[j]
-    if table.swing_limit[j, 0] > 0.0:
+    if table.cone[j, 8] > 0.0:  # tables.CONE_SWING: a swing limit
         return -math.inf, 1.0
     return -math.inf, math.inf
 
@@ -233,7 +233,7 @@ def drive_velocities(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
     for j in range(table.kind.shape[0]):
         motor, damper = table.motor_cap[j] > 0.0, table.damping[j] > 0.0
         bounded = table.limit_lower[j] > -math.inf or table.limit_upper[j] < math.inf
-        swing = table.swing_limit[j, 0] > 0.0
+        swing = table.cone[j, 8] > 0.0
         if not (motor or damper or bounded or swing):
             continue
         a, b = table.body_a[j], table.body_b[j]

@@ -49,6 +49,8 @@ JOINT_ROWS = {JOINT_BALL: 3, JOINT_HINGE: 5, JOINT_FIXED: 6, JOINT_SLIDER: 5, JO
 # and the round-off level at which the position stage's Newton iteration stopped [m] (stages.py)
 STAT_ITERATIONS, STAT_POSITION, STAT_VELOCITY, STAT_REDUNDANT, STAT_FLOOR = range(5)
 STAT_COUNT = 5
+# columns of JointTable.cone
+CONE_FRAME_A, CONE_FRAME_B, CONE_SWING = 0, 4, 8
 
 
 class JointTable(NamedTuple):
@@ -71,13 +73,12 @@ class JointTable(NamedTuple):
     limit_upper: np.ndarray  # (J,): +inf: none
     reference_a: np.ndarray  # [1] (J, 3), principal frame of body_a: n_b1 at the initial poses (hinge angle 0)
     travel0: np.ndarray  # [m] (J,): a slider's initial (p_a - p_b) . u (its travel is measured from it)
-    # a ball joint's cone frame (joints/cone.py): wxyz quaternions f_a, f_b (J, 4), principal-from-joint frame
-    # of each end (world-from-joint for the world), the joint frame's x the cone axis, y its reference, the
-    # same world frame at the initial poses; and the swing half-angles [rad] (J, 2) toward the reference
-    # and toward axis x reference, 0: no swing limit. Twist limits are limit_lower / limit_upper.
-    cone_frame_a: np.ndarray
-    cone_frame_b: np.ndarray
-    swing_limit: np.ndarray
+    # (J, 10) a ball joint's cone (joints/cone.py), one array (each array of the table costs every kernel
+    # call that takes it): [0:4] f_a, [4:8] f_b, the wxyz principal-from-joint frame of each end (world-
+    # from-joint for the world), the joint frame's x the cone axis, y its reference, the same world frame
+    # at the initial poses; [8:10] the swing half-angles [rad] toward the reference and toward axis x
+    # reference, 0: no swing limit (CONE_FRAME_A, CONE_FRAME_B, CONE_SWING). Twist: limit_lower / upper.
+    cone: np.ndarray
     row_start: np.ndarray  # int64 (J,)
     row_count: np.ndarray  # int64 (J,)
     body_ground: np.ndarray  # bool (N,): static or kinematic bodies, which act as the world
@@ -153,8 +154,9 @@ def joint_table(
     upper = frozen_floats(np.full(rows, np.inf) if limit_upper is None else limit_upper)
     reference = frozen_floats(np.zeros((rows, 3)) if reference_a is None else reference_a, 3)
     identity = np.tile([1.0, 0.0, 0.0, 0.0], (rows, 1))
-    frame_a, frame_b = (frozen_floats(identity if f is None else f, 4) for f in (cone_frame_a, cone_frame_b))
-    swing = frozen_floats(np.zeros((rows, 2)) if swing_limit is None else swing_limit, 2)
+    frame_a, frame_b = (identity if f is None else np.reshape(f, (-1, 4)) for f in (cone_frame_a, cone_frame_b))
+    swing = np.zeros((rows, 2)) if swing_limit is None else np.reshape(swing_limit, (-1, 2))
+    cone = frozen_floats(np.hstack([frame_a, frame_b, swing]) if rows else np.zeros((0, 10)), 10)
     return JointTable(
         kinds,
         a,
@@ -172,9 +174,7 @@ def joint_table(
         upper,
         reference,
         frozen_floats(zeros if travel0 is None else travel0),
-        frame_a,
-        frame_b,
-        swing,
+        cone,
         start,
         count,
         ground,
