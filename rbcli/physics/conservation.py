@@ -63,6 +63,7 @@ def conserved_invariants(model: Model, forces: ForceTables, names: tuple[str, ..
     driven = joint is not None and bool(
         np.any(joint.damping > 0.0) or np.any(joint.motor_cap > 0.0)
         or np.any(np.isfinite(joint.limit_lower)) or np.any(np.isfinite(joint.limit_upper))
+        or np.any(joint.cone[:, 8:] > 0.0)
     )  # fmt: skip
     kept["energy_total"] = _conservative(forces, terms) and not driven
     kept["energy_kinetic"] = not terms and not driven

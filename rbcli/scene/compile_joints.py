@@ -18,7 +18,7 @@ import numpy as np
 
 from rbcli.physics.joints.tables import JOINT_KINDS, WORLD, JointTable, joint_table
 from rbcli.physics.model import Model
-from rbcli.physics.rotation import quat_conjugate, quat_multiply, quat_to_matrix
+from rbcli.physics.rotation import matrix_to_quat, quat_conjugate, quat_multiply, quat_to_matrix
 from rbcli.physics.state import State
 from rbcli.scene.joint_spec import WORLD_NAME, JointSpec
 from rbcli.scene.spec import BodySpec, SceneError, SceneIssue, SourceLocation
@@ -63,7 +63,8 @@ def compile_joints(
     rows: dict[str, list] = {
         k: []
         for k in ("kind", "body_a", "body_b", "anchor_a", "anchor_b", "axis_a", "normal_b", "end_q", "length",
-                  "damping", "motor_speed", "motor_cap", "limit_lower", "limit_upper", "reference_a", "travel0")
+                  "damping", "motor_speed", "motor_cap", "limit_lower", "limit_upper", "reference_a", "travel0",
+                  "cone_frame_a", "cone_frame_b", "swing_limit")
     }  # fmt: skip
     # the joints refused, by (place, reason): a generated chain's joints share their place in the file, and
     # one reason refusing all 5,000 of them is one issue that says how many
@@ -199,7 +200,19 @@ def _joint_row(
     if joint.kind == "slider":
         travel0 = float((p_a - p_b) @ world_vector(b, _cross(normals[0], normals[1])))
     lower, upper = joint.limits if joint.limits is not None else (-np.inf, np.inf)
+    frame_a = frame_b = np.array([1.0, 0.0, 0.0, 0.0])
+    swing = (0.0, 0.0)
+    if joint.cone is not None:  # the joint frame (axis, reference, axis x reference) in each end's frame
+        cone = joint.cone
+        F = matrix_to_quat(np.column_stack([cone.axis, cone.reference, _cross(cone.axis, cone.reference)]))
+        frame_a = quat_multiply(quat_conjugate(state.q[a]), F)
+        frame_b = F if b == WORLD else quat_multiply(quat_conjugate(state.q[b]), F)
+        swing = cone.swing if cone.swing is not None else swing
+        lower, upper = cone.twist if cone.twist is not None else (lower, upper)
     return dict(
+        cone_frame_a=frame_a,
+        cone_frame_b=frame_b,
+        swing_limit=swing,
         limit_lower=lower,
         limit_upper=upper,
         reference_a=reference,

@@ -2,7 +2,9 @@
 
 The schema has checked the keys each type takes, the types and the ranges; this adds what it cannot
 say: a body name that is not a body, a joint from a body to itself or between two `world` ends, a zero
-axis, limits with lower > upper, duplicate joint names. What needs the compiled bodies (anchors that
+axis, limits with lower > upper, duplicate joint names, a ball joint's cone whose half-angles are not in
+(0, pi), whose twist range is not ordered within (-pi, pi), whose reference has no direction across its axis
+or that limits nothing. What needs the compiled bodies (anchors that
 disagree with the initial poses, a joint whose both ends are static) is checked by
 scene/compile_joints.py. Every problem is located at the key at fault.
 """
@@ -38,6 +40,19 @@ class JointMotor:
 
 
 @dataclass(frozen=True)
+class JointCone:
+    """A ball joint's swing cone and twist range (physics/joints/cone.py), carried by the second body (the
+    world where a joint names it): axis and reference are world directions at the initial poses (unit,
+    reference across the axis); swing the half-angles [rad] toward the reference and toward axis x
+    reference (None: the swing is free); twist (lower, upper) [rad] about the axis (None: free)."""
+
+    axis: np.ndarray
+    reference: np.ndarray
+    swing: tuple[float, float] | None = None
+    twist: tuple[float, float] | None = None
+
+
+@dataclass(frozen=True)
 class JointSpec:
     """One joint between bodies[0] and bodies[1] (either may be WORLD_NAME, not both).
 
@@ -46,7 +61,8 @@ class JointSpec:
     axis: hinge / slider axis, world frame at the initial poses [1] (unit), or None when `axes` gives one
     per end's frame, shape (2, 3), unit rows. length: distance joint's rod [m] (None: the anchors'
     initial distance). limits [rad or m] (lower, upper) from the initial configuration; damping
-    [N m s/rad or N s/m]; motor. locations: where each given key is, for compile's located errors.
+    [N m s/rad or N s/m]; motor; cone: a ball joint's swing and twist limits. locations: where each given
+    key is, for compile's located errors.
     """
 
     name: str
@@ -60,6 +76,7 @@ class JointSpec:
     limits: tuple[float, float] | None = None
     damping: float = 0.0
     motor: JointMotor | None = None
+    cone: JointCone | None = None
     collide: bool = False
     location: SourceLocation | None = None
     locations: dict[str, SourceLocation] = field(default_factory=dict, compare=False, repr=False)
@@ -156,9 +173,9 @@ def _joint(
 
 
 def joint_options(entry: dict[str, Any], path: YamlPath, issues: IssueCollector) -> dict[str, Any] | None:
-    """JointSpec's axis, axes, limits, damping, motor and collide from a schema-valid joint mapping at `path`
+    """JointSpec's axis, axes, limits, damping, motor, cone and collide from a schema-valid joint mapping at `path`
     (a `joints:` entry, or a chain's `joint:`, whose options every joint of the chain takes); None with a
-    located error for a zero axis or limits with lower > upper."""
+    located error for a zero axis, limits with lower > upper or a cone that cannot be (`_cone`)."""
     before = issues.error_count
     axis = axes = None
     if "axis" in entry:
@@ -181,9 +198,11 @@ def joint_options(entry: dict[str, Any], path: YamlPath, issues: IssueCollector)
         value = entry["motor"]
         cap = value.get("max_torque", value.get("max_force"))
         motor = JointMotor(float(value["speed"]), float(cap))
+    cone = _cone(entry["cone"], (*path, "cone"), issues) if "cone" in entry else None
     if issues.error_count > before:
         return None
     return dict(
+        cone=cone,
         axis=None if axis is None else _frozen(axis, (3,)),
         axes=None if axes is None else _frozen(axes, (2, 3)),
         limits=limits,
@@ -191,3 +210,68 @@ def joint_options(entry: dict[str, Any], path: YamlPath, issues: IssueCollector)
         motor=motor,
         collide=bool(entry.get("collide", False)),
     )
+
+
+def _reference(axis: np.ndarray) -> np.ndarray:
+    """The default reference of a cone about `axis` (unit): the first of the world's x, y, z least parallel
+    to the axis, made perpendicular to it (Gram-Schmidt)."""
+    e = np.eye(3)[int(np.argmin(np.abs(axis)))]
+    across = e - (e @ axis) * axis
+    return across / np.linalg.norm(across)
+
+
+def _cone(value: dict[str, Any], path: YamlPath, issues: IssueCollector) -> JointCone | None:
+    """A ball joint's `cone:` mapping (schema-valid) as a JointCone; None with located errors for a zero
+    axis, a reference along the axis, half-angles outside (0, pi), a twist range not ordered within
+    (-pi, pi), or a cone that gives neither swing nor twist."""
+    before = issues.error_count
+    axis = _unit(value["axis"], (*path, "axis"), issues)
+    reference = None
+    if axis is not None:
+        reference = _reference(axis)
+        if "reference" in value:
+            given = np.asarray(value["reference"], dtype=np.float64)
+            across = given - (given @ axis) * axis
+            size = float(np.linalg.norm(given))
+            if not float(np.linalg.norm(across)) > 1e-9 * size or not size > MIN_AXIS_LENGTH:
+                issues.error(
+                    (*path, "reference"),
+                    "the reference has no direction across the axis",
+                    "a non-zero vector not parallel to the axis (its part across the axis is used)",
+                )
+            else:
+                reference = across / np.linalg.norm(across)
+    swing = None
+    if "swing" in value:
+        raw = value["swing"]
+        angles = [float(raw)] * 2 if isinstance(raw, int | float) else [float(v) for v in raw]
+        for k, angle in enumerate(angles):
+            if not 0.0 < angle < np.pi:
+                where = (*path, "swing") if isinstance(raw, int | float) else (*path, "swing", k)
+                issues.error(where, f"swing half-angle {angle:g} rad is not in (0, pi)",
+                             "a half-angle between 0 and pi (exclusive): a cone that closes neither to its axis "
+                             "nor past a half-space")  # fmt: skip
+        swing = (angles[0], angles[1])
+    twist = None
+    if "twist" in value:
+        lower, upper = (float(v) for v in value["twist"])
+        for k, angle in enumerate((lower, upper)):
+            if not -np.pi < angle < np.pi:
+                issues.error(
+                    (*path, "twist", k),
+                    f"twist limit {angle:g} rad is not in (-pi, pi)",
+                    "twist limits strictly between -pi and pi (the twist angle is measured in [-pi, pi])",
+                )
+        if lower > upper:
+            issues.error((*path, "twist"), f"lower twist limit {lower:g} is above upper twist limit {upper:g}",
+                         "twist: [lower, upper] with lower <= upper")  # fmt: skip
+        twist = (lower, upper)
+    if swing is None and twist is None:
+        issues.error(
+            path,
+            "the cone gives neither `swing` nor `twist`: it limits nothing",
+            "swing: a half-angle or [toward the reference, across it], and/or twist: [lower, upper]",
+        )
+    if issues.error_count > before or axis is None or reference is None:
+        return None
+    return JointCone(_frozen(axis, (3,)), _frozen(reference, (3,)), swing, twist)

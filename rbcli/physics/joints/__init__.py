@@ -6,7 +6,8 @@ multipliers, Baraff 1996: docs/joint_solver.md), dense.py + dense_layout.py (a d
 same solver interface: factor_rows, solve_rows, joint_graph, make_solver_work), rattle.py (split2's step of
 a scene with joints: RATTLE, the joints' impulse by Newton through split2's drift), stages.py (the velocity
 stage and the kick check of split2's loop, and the factor they share), impulses.py (what the stages share),
-drives.py (motors, dampers and limits on a hinge's or slider's coordinate), violation.py (the per-frame
+drives.py (motors, dampers and limits on a hinge's or slider's coordinate), cone.py (a ball joint's swing and
+twist, which its cone and twist limits act on), violation.py (the per-frame
 joint invariants), reference.py (numpy twins: tests and the compile-time redundancy check).
 docs/joints.md has the scene format, the rows and the integration scheme.
 """

@@ -1,4 +1,5 @@
-"""What acts on a hinge's or slider's own coordinate: velocity motors, dampers and limits.
+"""What acts on a hinge's or slider's own coordinate: velocity motors, dampers and limits; and on a ball
+joint's swing and twist (joints/cone.py): its cone and twist limits, and its damper.
 
 The coordinate c of joint j: a hinge's angle of body a relative to b about the axis u = R_a u_a,
 c = atan2(u . (n_b x m_a), n_b . m_a) with n_b = R_b n_b1 and m_a = R_a m (the same world vector at the
@@ -12,7 +13,8 @@ coordinate with the joints held (one solve with the stage's factor of A).
 
 - motor (velocity stage): the impulse that brings r to its speed, capped at |lambda| <= cap h;
 - damper (velocity stage, after the motor): the exact flow of dr/dt = -c k r over the step,
-  r <- r exp(-c k h), so a flywheel on a damped hinge decays at exp(-c t / I) to round-off;
+  r <- r exp(-c k h), so a flywheel on a damped hinge decays at exp(-c t / I) to round-off; a ball
+  joint's damper acts so on the relative angular velocity about the world's x, y and z in turn;
 - limits, one-sided: in the position stage a coordinate beyond a bound at the end of the step is put
   back onto it by an impulse at the step's start (as the joints' rows: h k lambda = bound - c, simplified
   Newton with the start's factor, alternating with the joints' own Newton until both hold); in the
@@ -30,9 +32,10 @@ import math
 import numba
 
 from rbcli.physics.integrators.kinematics import rotate
+from rbcli.physics.joints.cone import cone_row
 from rbcli.physics.joints.impulses import apply_body_impulses, body_omega, gather_impulses
 from rbcli.physics.joints.solver import solve_rows
-from rbcli.physics.joints.tables import JOINT_HINGE
+from rbcli.physics.joints.tables import JOINT_BALL, JOINT_HINGE
 from rbcli.physics.kernel_link import separately_compiled
 
 # a coordinate within this of a bound [rad or m] is at it (the velocity stage stops outward motion):
@@ -171,6 +174,57 @@ def _rate(model, q, P, L, a, b, ja, jb) -> float:  # noqa: ANN001
     return rate
 
 
+@numba.njit(cache=True)
+def limit_row(table, j, swing, x, q):  # noqa: ANN001, ANN202
+    """(c, J_a, J_b) of the coordinate joint j's limits act on: a ball joint's swing measure (swing True) or
+    twist (joints/cone.py), else the hinge's or slider's coordinate (coordinate_row)."""
+    if swing or table.kind[j] == JOINT_BALL:
+        qa, qb, _, _, _ = _ends(table, j, x, q)
+        return cone_row(table, j, swing, qa, qb)
+    return coordinate_row(table, j, x, q)
+
+
+@numba.njit(cache=True, inline="always")
+def _bounds(table, j, slot):  # noqa: ANN001, ANN202
+    """(lower, upper) of joint j's limit `slot`: 0 its coordinate's, 1 a ball joint's cone (c <= 1)."""
+    if slot == 0:
+        return table.limit_lower[j], table.limit_upper[j]
+    if table.cone[j, 8] > 0.0:  # tables.CONE_SWING: a swing limit
+        return -math.inf, 1.0
+    return -math.inf, math.inf
+
+
+@numba.njit(cache=True)
+def _stop(model, table, work, j, slot, c, a, b, ja, jb, q, P, L) -> None:  # noqa: ANN001
+    """The velocity stage's inelastic stop of joint j's limit `slot` (module docstring)."""
+    lower, upper = _bounds(table, j, slot)
+    at_upper = c >= upper - LIMIT_CONTACT
+    at_lower = c <= lower + LIMIT_CONTACT
+    hit = work.limit_hit[j, slot]
+    if at_upper or at_lower or hit:
+        rate = _rate(model, q, P, L, a, b, ja, jb)
+        # pushed back in this step: stop it (the push alone would reflect it, a bounce)
+        if hit or (at_upper and rate > 0.0) or (at_lower and rate < 0.0):
+            k_inv = effective_inverse(table, work, a, b, ja, jb)
+            if k_inv > 0.0:
+                _push(table, work, j, a, b, ja, jb, -rate / k_inv, P, L)
+
+
+@numba.njit(cache=True)
+def _ball_damper(model, table, work, j, a, b, h, q, P, L) -> None:  # noqa: ANN001
+    """A ball joint's damper: the hinge's exact one-coordinate damper, r <- r exp(-c k h), on the relative
+    angular velocity about the world's x, y and z in turn (a Gauss-Seidel sweep: exact for each axis
+    alone, dissipative always; the three together are the flow of -c K omega_rel only where K is
+    diagonal in the world axes)."""
+    for axis in range(3):
+        e0, e1, e2 = (1.0 if axis == 0 else 0.0), (1.0 if axis == 1 else 0.0), (1.0 if axis == 2 else 0.0)
+        ja, jb = (0.0, 0.0, 0.0, e0, e1, e2), (0.0, 0.0, 0.0, -e0, -e1, -e2)
+        k_inv = effective_inverse(table, work, a, b, ja, jb)
+        if k_inv > 0.0:
+            rate = _rate(model, q, P, L, a, b, ja, jb)
+            _push(table, work, j, a, b, ja, jb, rate * (math.exp(-table.damping[j] * k_inv * h) - 1.0) / k_inv, P, L)
+
+
 @separately_compiled
 @numba.njit(cache=True)
 def drive_velocities(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
@@ -179,32 +233,35 @@ def drive_velocities(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
     for j in range(table.kind.shape[0]):
         motor, damper = table.motor_cap[j] > 0.0, table.damping[j] > 0.0
         bounded = table.limit_lower[j] > -math.inf or table.limit_upper[j] < math.inf
-        if not (motor or damper or bounded):
+        swing = table.cone[j, 8] > 0.0
+        if not (motor or damper or bounded or swing):
             continue
         a, b = table.body_a[j], table.body_b[j]
-        c, ja, jb = coordinate_row(table, j, x, q)
-        if motor or damper:
-            k_inv = effective_inverse(table, work, a, b, ja, jb)
-            if k_inv > 0.0:  # 0: the coordinate cannot move (both ends fixed, or the joints forbid it)
-                rate = _rate(model, q, P, L, a, b, ja, jb)
-                impulse = 0.0
-                if motor:
-                    cap = table.motor_cap[j] * h
-                    impulse = min(max((table.motor_speed[j] - rate) / k_inv, -cap), cap)
-                    rate += k_inv * impulse
-                if damper:
-                    impulse += rate * (math.exp(-table.damping[j] * k_inv * h) - 1.0) / k_inv
-                _push(table, work, j, a, b, ja, jb, impulse, P, L)
-        if bounded:
-            at_upper = c >= table.limit_upper[j] - LIMIT_CONTACT
-            at_lower = c <= table.limit_lower[j] + LIMIT_CONTACT
-            if at_upper or at_lower or work.limit_hit[j]:
-                rate = _rate(model, q, P, L, a, b, ja, jb)
-                # pushed back in this step: stop it (the push alone would reflect it, a bounce)
-                if work.limit_hit[j] or (at_upper and rate > 0.0) or (at_lower and rate < 0.0):
-                    k_inv = effective_inverse(table, work, a, b, ja, jb)
-                    if k_inv > 0.0:
-                        _push(table, work, j, a, b, ja, jb, -rate / k_inv, P, L)
+        if table.kind[j] == JOINT_BALL:
+            if damper:
+                _ball_damper(model, table, work, j, a, b, h, q, P, L)
+            if bounded:
+                c, ja, jb = limit_row(table, j, False, x, q)
+                _stop(model, table, work, j, 0, c, a, b, ja, jb, q, P, L)
+        elif motor or damper or bounded:
+            c, ja, jb = limit_row(table, j, False, x, q)
+            if motor or damper:
+                k_inv = effective_inverse(table, work, a, b, ja, jb)
+                if k_inv > 0.0:  # 0: the coordinate cannot move (both ends fixed, or the joints forbid it)
+                    rate = _rate(model, q, P, L, a, b, ja, jb)
+                    impulse = 0.0
+                    if motor:
+                        cap = table.motor_cap[j] * h
+                        impulse = min(max((table.motor_speed[j] - rate) / k_inv, -cap), cap)
+                        rate += k_inv * impulse
+                    if damper:
+                        impulse += rate * (math.exp(-table.damping[j] * k_inv * h) - 1.0) / k_inv
+                    _push(table, work, j, a, b, ja, jb, impulse, P, L)
+            if bounded:
+                _stop(model, table, work, j, 0, c, a, b, ja, jb, q, P, L)
+        if swing:
+            c, ja, jb = limit_row(table, j, True, x, q)
+            _stop(model, table, work, j, 1, c, a, b, ja, jb, q, P, L)
 
 
 @separately_compiled
@@ -218,25 +275,28 @@ def limit_positions(table, work, h, x, q, P, L, onto) -> bool:  # noqa: ANN001
     so one push lands that fraction short (3.6e-9 rad for a rod hitting its limit at 3.6 rad/s), and a
     round or two more land it to round-off. Not in every round: limits that push each other (a hip and
     a knee stopped in the same step) would then converge as a Gauss-Seidel sweep on their coupling,
-    measured up to 128 iterations a step; past the first rounds an overshoot into the range stays."""
+    measured up to 128 iterations a step; past the first rounds an overshoot into the range stays.
+    A ball joint has two limits, its twist (slot 0) and its cone (slot 1), each as a hinge's."""
     moved = False
     for j in range(table.kind.shape[0]):
-        lower, upper = table.limit_lower[j], table.limit_upper[j]
-        if lower == -math.inf and upper == math.inf:
-            continue
-        c = coordinate_row(table, j, x, q)[0]
-        hit = work.limit_hit[j]  # +1 / -1: pushed onto the upper / lower bound in this step
-        bound = upper if hit > 0.0 or (hit == 0.0 and c > upper) else lower
-        # off by more than a few ulps of the bound: below that the correction would be round-off
-        slack = 4e-16 * max(1.0, abs(bound))
-        if lower - slack <= c <= upper + slack and (hit == 0.0 or not onto or abs(c - bound) <= slack):
-            continue
-        a, b = table.body_a[j], table.body_b[j]
-        _, ja, jb = coordinate_row(table, j, work.x_start, work.q_start)
-        k_inv = effective_inverse(table, work, a, b, ja, jb)
-        if not k_inv > 0.0:
-            continue
-        _push(table, work, j, a, b, ja, jb, -(c - bound) / (h * k_inv), P, L)
-        work.limit_hit[j] = 1.0 if bound == upper else -1.0
-        moved = True
+        for slot in range(2):
+            lower, upper = _bounds(table, j, slot)
+            if lower == -math.inf and upper == math.inf:
+                continue
+            swing = slot == 1
+            c = limit_row(table, j, swing, x, q)[0]
+            hit = work.limit_hit[j, slot]  # +1 / -1: pushed onto the upper / lower bound in this step
+            bound = upper if hit > 0.0 or (hit == 0.0 and c > upper) else lower
+            # off by more than a few ulps of the bound: below that the correction would be round-off
+            slack = 4e-16 * max(1.0, abs(bound))
+            if lower - slack <= c <= upper + slack and (hit == 0.0 or not onto or abs(c - bound) <= slack):
+                continue
+            a, b = table.body_a[j], table.body_b[j]
+            _, ja, jb = limit_row(table, j, swing, work.x_start, work.q_start)
+            k_inv = effective_inverse(table, work, a, b, ja, jb)
+            if not k_inv > 0.0:
+                continue
+            _push(table, work, j, a, b, ja, jb, -(c - bound) / (h * k_inv), P, L)
+            work.limit_hit[j, slot] = 1.0 if bound == upper else -1.0
+            moved = True
     return moved

@@ -121,7 +121,7 @@ def joint_position(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
     redundant = factor_at(model, table, work, work.x_start, work.q_start)
     work.impulse[:] = 0.0
     work.joint_impulse[:, :] = 0.0
-    work.limit_hit[:] = 0.0
+    work.limit_hit[:, :] = 0.0
     scale = 0.0
     for b in range(x.shape[0]):
         scale = max(scale, abs(x[b, 0]), abs(x[b, 1]), abs(x[b, 2]))

@@ -49,6 +49,8 @@ JOINT_ROWS = {JOINT_BALL: 3, JOINT_HINGE: 5, JOINT_FIXED: 6, JOINT_SLIDER: 5, JO
 # and the round-off level at which the position stage's Newton iteration stopped [m] (stages.py)
 STAT_ITERATIONS, STAT_POSITION, STAT_VELOCITY, STAT_REDUNDANT, STAT_FLOOR = range(5)
 STAT_COUNT = 5
+# columns of JointTable.cone
+CONE_FRAME_A, CONE_FRAME_B, CONE_SWING = 0, 4, 8
 
 
 class JointTable(NamedTuple):
@@ -67,10 +69,16 @@ class JointTable(NamedTuple):
     damping: np.ndarray  # (J,): hinge [N m s/rad], slider [N s/m]; 0: no damper (stages.py: drives)
     motor_speed: np.ndarray  # (J,): hinge [rad/s], slider [m/s]: the target rate of a velocity motor
     motor_cap: np.ndarray  # (J,): hinge [N m], slider [N]: the motor's largest torque / force; 0: no motor
-    limit_lower: np.ndarray  # (J,): hinge [rad], slider [m] from the initial configuration; -inf: none
+    limit_lower: np.ndarray  # (J,): hinge [rad], slider [m], ball twist [rad] from the initial pose; -inf: none
     limit_upper: np.ndarray  # (J,): +inf: none
     reference_a: np.ndarray  # [1] (J, 3), principal frame of body_a: n_b1 at the initial poses (hinge angle 0)
     travel0: np.ndarray  # [m] (J,): a slider's initial (p_a - p_b) . u (its travel is measured from it)
+    # (J, 10) a ball joint's cone (joints/cone.py), one array (each array of the table costs every kernel
+    # call that takes it): [0:4] f_a, [4:8] f_b, the wxyz principal-from-joint frame of each end (world-
+    # from-joint for the world), the joint frame's x the cone axis, y its reference, the same world frame
+    # at the initial poses; [8:10] the swing half-angles [rad] toward the reference and toward axis x
+    # reference, 0: no swing limit (CONE_FRAME_A, CONE_FRAME_B, CONE_SWING). Twist: limit_lower / upper.
+    cone: np.ndarray
     row_start: np.ndarray  # int64 (J,)
     row_count: np.ndarray  # int64 (J,)
     body_ground: np.ndarray  # bool (N,): static or kinematic bodies, which act as the world
@@ -91,7 +99,9 @@ class JointWork(NamedTuple):
     inv_mass: np.ndarray  # [1/kg] (N,): 0 for ground bodies
     inv_inertia: np.ndarray  # [1/(kg m^2)] (N, 3, 3), world frame: R I0^-1 R^T, 0 for ground bodies
     impulse_body: np.ndarray  # [N s, N m s] (N, 6): one solve's momentum change per body
-    limit_hit: np.ndarray  # (J,): 1 where this step's position stage pushed a coordinate back onto a limit
+    # (J, 2): +1 / -1 where this step's position stage pushed a limit back onto its upper / lower bound;
+    # column 0 the joint's coordinate (hinge angle, slider travel, ball twist), 1 a ball joint's swing
+    limit_hit: np.ndarray
     # [N s, N m s] (J, 12), world frame: each joint's impulse on its bodies over the last (sub-)step, its
     # rows', motor's, damper's and limit's summed: [0:3] linear and [3:6] angular (about the centre of
     # mass) on body_a, [6:12] on body_b (zero for the world); / h it is the joint's reaction force and
@@ -124,6 +134,9 @@ def joint_table(
     limit_upper=None,
     reference_a=None,
     travel0=None,
+    cone_frame_a=None,
+    cone_frame_b=None,
+    swing_limit=None,
     *,
     body_ground: np.ndarray,
 ) -> JointTable:  # noqa: ANN001
@@ -140,6 +153,10 @@ def joint_table(
     lower = frozen_floats(np.full(rows, -np.inf) if limit_lower is None else limit_lower)
     upper = frozen_floats(np.full(rows, np.inf) if limit_upper is None else limit_upper)
     reference = frozen_floats(np.zeros((rows, 3)) if reference_a is None else reference_a, 3)
+    identity = np.tile([1.0, 0.0, 0.0, 0.0], (rows, 1))
+    frame_a, frame_b = (identity if f is None else np.reshape(f, (-1, 4)) for f in (cone_frame_a, cone_frame_b))
+    swing = np.zeros((rows, 2)) if swing_limit is None else np.reshape(swing_limit, (-1, 2))
+    cone = frozen_floats(np.hstack([frame_a, frame_b, swing]) if rows else np.zeros((0, 10)), 10)
     return JointTable(
         kinds,
         a,
@@ -157,6 +174,7 @@ def joint_table(
         upper,
         reference,
         frozen_floats(zeros if travel0 is None else travel0),
+        cone,
         start,
         count,
         ground,
@@ -174,6 +192,6 @@ def make_joint_work(table: JointTable) -> JointWork:
     return JointWork(
         np.zeros((rows, 6)), np.zeros((rows, 6)), np.zeros(rows), np.zeros(rows), np.zeros(rows), np.zeros(rows),
         np.zeros((bodies, 3)), np.zeros((bodies, 4)), np.zeros(bodies), np.zeros((bodies, 3, 3)),
-        np.zeros((bodies, 6)), np.zeros(table.kind.shape[0]), np.zeros((table.kind.shape[0], 12)),
+        np.zeros((bodies, 6)), np.zeros((table.kind.shape[0], 2)), np.zeros((table.kind.shape[0], 12)),
         np.zeros(STAT_COUNT), make_solver_work(table.graph), np.zeros((bodies, 3)), np.zeros((bodies, 4)), np.zeros(2),
     )  # fmt: skip
