@@ -59,10 +59,10 @@ def pytest_sessionfinish(session):  # noqa: ANN001, ANN201
         signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-# Where the suite's compile time goes: RBSIM_COMPILE_LOG=DIR makes each process (each xdist worker) write
-# DIR/<worker>-<pid>.jsonl, one line per test, written as it ends: its node id and the CPU seconds numba spent compiling while it
-# ran (setup, call and teardown; only the outermost compiles: a compile inside another counts once),
-# with the functions compiled. `python benchmarks/suite_compiles.py DIR` sums them up.
+# Where the suite's compile time goes: RBSIM_COMPILE_LOG=DIR makes each process (each xdist worker)
+# write DIR/<worker>-<pid>.jsonl, one line per test as it ends: its node id, the CPU seconds numba spent
+# compiling while it ran (setup, call and teardown; only the outermost compiles: a compile inside another
+# counts once) and the functions compiled. `python benchmarks/suite_compiles.py DIR` sums them up.
 _COMPILE_LOG = os.environ.get("RBSIM_COMPILE_LOG")
 _compiling = {"depth": 0, "start": 0.0, "test": "", "seconds": {}, "functions": {}}
 
