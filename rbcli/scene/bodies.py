@@ -245,8 +245,17 @@ class BodyResolver:
             geometry, size = "lattice", 2.0 * float(cloud.radius[0])
         else:
             geometry, size = "particles", 0.0
+        primitive = None
+        shape = entry.get("shape") if "shape" in entry and "mesh" not in entry else None
+        if shape is not None and shape.get("type") == "box":
+            half = 0.5 * np.asarray(shape["size"], dtype=float)
+            primitive = ("box", (float(half[0]), float(half[1]), float(half[2])))
+        elif shape is not None and shape.get("type") == "capsule":
+            axis = {"x": 0, "y": 1, "z": 2}[shape.get("axis", "z")]
+            primitive = ("capsule", (float(shape["radius"]), 0.5 * float(shape["height"]), float(axis)))
         kinematic = entry.get("kinematic", False)
         return dict(
+            contact_primitive=primitive,
             material=material_from_mapping(entry.get("material"), (*path, "material"), self.issues),
             static=bool(entry.get("static", False)),
             kinematic=bool(kinematic),

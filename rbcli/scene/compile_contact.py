@@ -169,6 +169,11 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
         plane_k[b] = stiffness[b]
         if material.stiffness is None:  # carried at rest by fewer spheres than `support` (parameters.py)
             plane_k[b] = plane_stiffness(stiffness[b], int(support[b]), rest)
+    primitive = compile_primitives(spec, model, centres_user, frames, np.asarray([len(r) for r in radii]),
+                                   [b for b, body in enumerate(spec.bodies) if body.collide], g)  # fmt: skip
+    for b in np.flatnonzero(primitive.kind >= 0):  # planes touch its primitive, its own stiffness (module doc)
+        material = spec.bodies[b].material.over(base)
+        plane_k[b] = material.stiffness if material.stiffness is not None else primitive.stiffness[b]
     colliding = np.isfinite(min_radius)
     stiffness[~colliding] = plane_k[~colliding] = (
         1.0  # never used: such a body has no spheres; keeps the pair formula finite
@@ -176,13 +181,14 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
     # static and kinematic bodies: infinite mass for contact, their wrench held at zero (they keep P and L)
     static = np.array([b.static or b.kinematic for b in spec.bodies], dtype=bool)
     inv_mass = np.where(static, 0.0, support / model.body_mass)
+    plane_support = np.where(primitive.kind >= 0, primitive.points, support)  # what carries it on a plane
     planes = contact.planes
     plane_zeta = [damping_ratio(e)
                   for e in (p.material.over(base).restitution or DEFAULT_RESTITUTION for p in planes)]  # fmt: skip
     movable = colliding & ~static
     with np.errstate(all="ignore"):  # a huge stiffness over a tiny mass: dt_crit 0 (a warning of its own)
         dt_crit, worst = stable_step(model.body_mass, stiffness * support, np.where(colliding, zeta, 0.0), movable,
-                                     planes=bool(planes), plane_stiffness=plane_k * support)  # fmt: skip
+                                     planes=bool(planes), plane_stiffness=plane_k * plane_support)  # fmt: skip
     table = contact_table(
         sphere_body=np.concatenate(sphere_body) if sphere_body else [],
         sphere_offset=np.concatenate(offsets) if offsets else np.zeros((0, 3)),
@@ -198,6 +204,11 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
         plane_damping_ratio=plane_zeta,
         plane_friction=[p.material.over(base).friction for p in planes],
         stable_step=dt_crit,
+        body_plane_inv_contact_mass=np.where(static, 0.0, plane_support / model.body_mass),
+        primitive_kind=primitive.kind,
+        primitive_offset=primitive.offset,
+        primitive_rotation=primitive.rotation,
+        primitive_size=primitive.size,
     )
     summary = ContactSummary(
         sphere_count=int(table.sphere_radius.shape[0]),
@@ -209,6 +220,66 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
         stiffness=float(stiffness[worst]) if worst >= 0 else math.nan,
     )
     return table, summary
+
+
+@dataclass(frozen=True)
+class Primitives:
+    """The bodies' primitives for ContactTable (kind -1: none), each one's plane stiffness per manifold
+    point by default [N/m] and the points it rests on (`compile_primitives`)."""
+
+    kind: np.ndarray
+    offset: np.ndarray
+    rotation: np.ndarray
+    size: np.ndarray
+    stiffness: np.ndarray
+    points: np.ndarray
+
+
+# a capsule along user axis x, y or z: its frame's columns (its local z is the axis), right-handed
+_CAPSULE_FRAMES = (np.eye(3)[:, [1, 2, 0]], np.eye(3)[:, [2, 0, 1]], np.eye(3))
+
+
+def compile_primitives(spec: SceneSpec, model: Model, centres_user: np.ndarray, frames: np.ndarray,
+                       sphere_counts: np.ndarray, colliding: list[int], g: float) -> Primitives:  # fmt: skip
+    """Each box and capsule shape body's primitive (docs/contact.md "Primitive contact"), in a scene whose
+    planes it can touch (`contact.primitives`, the default): its centre and axes in the principal frame
+    (r = E^T (p_user - centre_user), R = E^T R_user), its size (box: half extents; capsule: radius,
+    half-length) and its stiffness from geometry: resting on its `points` manifold points (a box on a face
+    4, a lying capsule 2) it sinks PENETRATION_AT_REST of its size (box: its smallest half extent; capsule:
+    its radius), k = M g / (PENETRATION_AT_REST size) / points per point, as a sphere sinks that fraction of
+    its radius. A body with fewer contact spheres than its features (a box's 8 vertices: each feature keeps
+    its tangential spring in the history row of one of the body's spheres) keeps its spheres."""
+    from rbcli.physics.contact.primitives import PRIMITIVE_BOX, PRIMITIVE_CAPSULE
+
+    n = model.body_count
+    out = Primitives(np.full(n, -1, dtype=np.int64), np.zeros((n, 3)), np.tile(np.eye(3), (n, 1, 1)),
+                     np.zeros((n, 3)), np.zeros(n), np.ones(n))  # fmt: skip
+    contact = spec.contact
+    if contact is None or not contact.primitives or not contact.planes:
+        return out
+    for row, b in enumerate(colliding):
+        body = spec.bodies[b]
+        if body.contact_primitive is None or body.contact_spheres is not None:
+            continue
+        name, size = body.contact_primitive
+        if name == "box":
+            kind, features, points, scale = PRIMITIVE_BOX, 8, 4, min(size)
+            rotation, extent = np.eye(3), np.asarray(size, dtype=float)
+        else:
+            kind, features, points, scale = PRIMITIVE_CAPSULE, 2, 2, size[0]
+            rotation, extent = _CAPSULE_FRAMES[int(size[2])], np.array([size[0], size[1], 0.0])
+        if sphere_counts[row] < features:
+            continue
+        E = frames[b]
+        out.kind[b] = kind
+        out.offset[b] = (np.zeros(3) - centres_user[b]) @ E
+        out.rotation[b] = E.T @ rotation
+        out.size[b] = extent
+        out.points[b] = points
+        with np.errstate(all="ignore"):
+            k_body = float(default_body_stiffness(model.body_mass[b : b + 1], np.array([scale]), g)[0])
+        out.stiffness[b] = k_body / points
+    return out
 
 
 def kinematic_rows(spec: SceneSpec, model: Model, state: State) -> list[KinematicRow]:

@@ -116,6 +116,7 @@ def contact_from_mapping(
         planes=tuple(p for p in planes if p is not None),
         material=material,
         substeps=None if substeps == "auto" else int(substeps),
+        primitives=bool(section.get("primitives", True)) if clean((*path, "primitives")) else True,
         location=issues.locate(path, key=True),
     )
 

@@ -31,7 +31,9 @@ Depth of an impact at speed v against a plane or a static body: the linear sprin
 to peak_compression(zeta) v / w (parameters.py), w = sqrt(k / m). The estimate takes the first sphere
 to touch as carrying the whole body mass M (its effective mass is at most M, and the next spheres of a
 lattice take part only once it is deep), so it is an upper bound until then: a tilted brick landing on
-a corner sphere. It is compared with DEPTH_FRACTION of that sphere's radius.
+a corner sphere. It is compared with DEPTH_FRACTION of that sphere's radius, or for a body that touches
+planes as its primitive (a box or capsule shape), with DEPTH_FRACTION of the primitive's size, its first
+manifold point carrying the whole mass at its per-point stiffness.
 """
 
 from __future__ import annotations
@@ -136,7 +138,7 @@ def impact_bound(spec: SceneSpec, model: Model, state: State, table: ContactTabl
         body=model.body_names[fastest],
         speed=float(speed[fastest]),
         fall=float(fall[fastest]),
-        deep=_deepest(model, table, speed, radius, movable),
+        deep=_deepest(model, table, speed, _depth_scale(table, radius), movable),
     )
 
 
@@ -160,6 +162,18 @@ def _fall_height(spec: SceneSpec, model: Model, state: State, table: ContactTabl
     world = state.x[body] + np.einsum("kij,kj->ki", quat_to_matrix(state.q[body]), table.sphere_offset[spheres])
     lowest = float((world @ down).max())  # the deepest held sphere along gravity
     return np.maximum(0.0, lowest - state.x @ down)
+
+
+def _depth_scale(table: ContactTable, radius: np.ndarray) -> np.ndarray:
+    """[m] per body, what an impact's depth is compared with: its smallest contact sphere radius, or for a body
+    that touches planes as its primitive the primitive's size (a box's smallest half extent, a capsule's
+    radius: the size its default stiffness is set from, scene/compile_contact.py)."""
+    kind = table.primitive_kind
+    if not kind.shape[0] or not (kind >= 0).any():
+        return radius
+    size = table.primitive_size
+    scale = np.where(kind == 2, size.min(axis=1), size[:, 0])
+    return np.where(kind >= 0, scale, radius)
 
 
 def _deepest(model: Model, table: ContactTable, speed: np.ndarray, radius: np.ndarray,

@@ -130,6 +130,9 @@ class ContactSpec:
     material: MaterialSpec = field(default_factory=MaterialSpec)
     substeps: int | None = 1
     location: SourceLocation | None = None
+    # shape bodies (box, capsule) touch planes as their exact primitive (docs/contact.md); False: as their
+    # lattice spheres, as before primitives existed
+    primitives: bool = True
 
 
 @dataclass(frozen=True)
@@ -174,6 +177,10 @@ class BodySpec:
     # explicit contact spheres (centres [m] (k, 3) in the body's own frame, radii [m] (k,)), used instead of
     # contact_geometry: a welded body's parts keep their own spheres (scene/welds.py); None from the loader
     contact_spheres: tuple[np.ndarray, np.ndarray] | None = None
+    # a box or capsule shape's exact surface, against planes in place of its lattice spheres (docs/contact.md
+    # "Primitive contact"): (kind, size) in the body's own frame about its origin, kind "box" (size: half
+    # extents) or "capsule" (size: radius, half-length, axis 0 / 1 / 2); None for other bodies
+    contact_primitive: tuple[str, tuple[float, float, float]] | None = None
 
 
 @dataclass(frozen=True)

@@ -83,7 +83,9 @@ def relative_velocity(contact, work, x, ba, bb, n0, n1, n2, c0, c1, c2):  # noqa
     """(m_eff, v_n, v_t) of a contact at c: m_eff = 1 / (1/m_a + 1/m_b) [kg] (tables.py's per-sphere
     contact masses; bb = -1, a plane: m_b infinite), and the velocity of a's point at c relative to b's,
     v = v_a(c) - v_b(c), split into v_n = v . n [m/s] and v_t = v - v_n n [m/s, world]."""
-    inv_a = contact.body_inv_contact_mass[ba]
+    # a plane contact: the plane's inverse contact mass of the body (tables.py: a primitive's manifold
+    # points share its mass; for spheres the same number as body_inv_contact_mass)
+    inv_a = contact.body_inv_contact_mass[ba] if bb >= 0 else contact.body_plane_inv_contact_mass[ba]
     inv_b = contact.body_inv_contact_mass[bb] if bb >= 0 else 0.0
     m_eff = 1.0 / (inv_a + inv_b)
     va0, va1, va2 = velocity_at(work, x, ba, c0, c1, c2)

@@ -49,7 +49,9 @@ from numba.extending import overload
 
 from rbcli.physics.contact.body_phase import body_phase, excluded, place_spheres, whole_grid_hashed
 from rbcli.physics.contact.broad_phase import HALF_SHELL, bucket_of, build_grid_of
+from rbcli.physics.contact.manifold import Manifold
 from rbcli.physics.contact.narrow import pair_candidates, pair_candidates_threaded
+from rbcli.physics.contact.primitives import primitive_plane
 from rbcli.physics.contact.tables import ACTIVE_PLANE, PLANE_PARTNER_BASE, SWEEP_SPHERES
 from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.step import STEP_KERNEL
@@ -74,6 +76,7 @@ def sphere_positions(contact, work, x, q) -> int:  # noqa: ANN001
     flagged bodies: with none, find_contacts has nothing to find and its callers skip it."""
     body_phase(contact, work, x, q, work.body_pair)
     place_spheres(contact, work, x, q)
+    place_primitives(contact, work, x, q)
     flagged = 0
     for b in range(work.body_active.shape[0]):
         if work.body_active[b]:
@@ -212,6 +215,8 @@ def plane_contacts(contact, work, sink) -> None:  # noqa: ANN001
     for b in range(active.shape[0]):
         if not active[b] & ACTIVE_PLANE:
             continue
+        if primitive_planes(contact, work, sink, b):  # a shape body touches planes as its primitive
+            continue
         for i in range(start[b], start[b + 1]):
             r = contact.sphere_radius[i]
             for p in range(planes):
@@ -233,6 +238,81 @@ def plane_contacts(contact, work, sink) -> None:  # noqa: ANN001
                 mu = contact.body_friction_root[b] * contact.plane_friction_root[p]
                 contact_found(sink, contact, work, i, PLANE_PARTNER_BASE - p, b, -1, n0, n1, n2, overlap,
                               c0, c1, c2, k, zeta, mu)  # fmt: skip
+
+
+def place_primitives(contact, work, x, q) -> None:  # noqa: ANN001
+    """The world centre c = x_b + R r0 and rotation R R0 of the primitive of every body flagged near a
+    plane (work.primitive_centre, primitive_frame), once per evaluation. Kernels only; compiled to nothing
+    where the work has no primitive arrays (a scene without primitives)."""
+    raise TypeError("place_primitives runs in compiled kernels only")
+
+
+@overload(place_primitives, jit_options=_OPTIONS)
+def _place_primitives(contact, work, x, q):  # noqa: ANN001, ANN202
+    if isinstance(dict(zip(work.fields, work.types, strict=True))["primitive_centre"], types.NoneType):
+        return lambda contact, work, x, q: None
+
+    def place(contact, work, x, q):  # noqa: ANN001, ANN202
+        centre, frame = work.primitive_centre, work.primitive_frame
+        off, rot = contact.primitive_offset, contact.primitive_rotation
+        for b in range(work.body_active.shape[0]):
+            if not work.body_active[b] & ACTIVE_PLANE or contact.primitive_kind[b] < 0:
+                continue
+            w, i, j, k = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
+            r00, r01, r02 = 1.0 - 2.0 * (j * j + k * k), 2.0 * (i * j - w * k), 2.0 * (i * k + w * j)
+            r10, r11, r12 = 2.0 * (i * j + w * k), 1.0 - 2.0 * (i * i + k * k), 2.0 * (j * k - w * i)
+            r20, r21, r22 = 2.0 * (i * k - w * j), 2.0 * (j * k + w * i), 1.0 - 2.0 * (i * i + j * j)
+            o0, o1, o2 = off[b, 0], off[b, 1], off[b, 2]
+            centre[b, 0] = x[b, 0] + r00 * o0 + r01 * o1 + r02 * o2
+            centre[b, 1] = x[b, 1] + r10 * o0 + r11 * o1 + r12 * o2
+            centre[b, 2] = x[b, 2] + r20 * o0 + r21 * o1 + r22 * o2
+            for m in range(3):
+                a0, a1, a2 = rot[b, 0, m], rot[b, 1, m], rot[b, 2, m]
+                frame[b, 0, m] = r00 * a0 + r01 * a1 + r02 * a2
+                frame[b, 1, m] = r10 * a0 + r11 * a1 + r12 * a2
+                frame[b, 2, m] = r20 * a0 + r21 * a1 + r22 * a2
+
+    return place
+
+
+def primitive_planes(contact, work, sink, b) -> bool:  # noqa: ANN001
+    """Body b's primitive against each plane its box meets (primitives.primitive_plane), each manifold
+    point handed to the sink as a contact of its own: owner the body's sphere start[b] + feature (a history
+    row of the shape per feature: its tangential spring persists while the feature touches), partner the
+    plane, the body's plane stiffness (per manifold point), the materials mixed as a sphere's. Returns
+    False for a body without a primitive (its spheres are tested instead). Kernels only; compiled to False
+    where the work has no primitive arrays."""
+    raise TypeError("primitive_planes runs in compiled kernels only")
+
+
+@overload(primitive_planes, jit_options=_OPTIONS)
+def _primitive_planes(contact, work, sink, b):  # noqa: ANN001, ANN202
+    if isinstance(dict(zip(work.fields, work.types, strict=True))["primitive_centre"], types.NoneType):
+        return lambda contact, work, sink, b: False
+
+    def touch(contact, work, sink, b):  # noqa: ANN001, ANN202
+        kind = contact.primitive_kind[b]
+        if kind < 0:
+            return False
+        out = Manifold(work.manifold_point, work.manifold_normal, work.manifold_depth, work.manifold_feature)
+        c, R, size = work.primitive_centre[b], work.primitive_frame[b], contact.primitive_size[b]
+        first = contact.body_sphere_start[b]
+        for p in range(contact.plane_point.shape[0]):
+            if work.body_plane[b, p] == 0:
+                continue
+            count = primitive_plane(kind, c, R, size, contact.plane_point[p], contact.plane_normal[p], out)
+            if count == 0:
+                continue
+            k = contact.body_plane_stiffness[b]
+            zeta = min(contact.body_damping_ratio[b], contact.plane_damping_ratio[p])
+            mu = contact.body_friction_root[b] * contact.plane_friction_root[p]
+            for i in range(count):
+                contact_found(sink, contact, work, first + out.feature[i], PLANE_PARTNER_BASE - p, b, -1,
+                              out.normal[i, 0], out.normal[i, 1], out.normal[i, 2], out.depth[i],
+                              out.point[i, 0], out.point[i, 1], out.point[i, 2], k, zeta, mu)  # fmt: skip
+        return True
+
+    return touch
 
 
 @numba.njit(cache=True, inline="always")

@@ -121,6 +121,17 @@ class ContactTable(NamedTuple):
     # of a joint without `collide: true` (docs/joints.md); empty for a scene without joints, where the
     # pair search pays one length test per overlapping pair
     excluded_pair: np.ndarray = np.zeros(0, dtype=np.int64)
+    # [1/kg] (body_count,): the inverse contact mass of a body's plane contacts, body_inv_contact_mass but
+    # for a body that touches planes as its primitive: points / M, its manifold points sharing its mass
+    # (docs/contact.md "Primitive contact")
+    body_plane_inv_contact_mass: np.ndarray = np.zeros(0)
+    # a shape body's primitive (docs/contact.md "Primitive contact"), against planes in place of its contact
+    # spheres: kind (int64 (body_count,): primitives.PRIMITIVE_*, -1 none), centre [m] (body_count, 3) and
+    # rotation (body_count, 3, 3; columns: its axes) in the principal frame, size [m] (body_count, 3)
+    primitive_kind: np.ndarray = np.zeros(0, dtype=np.int64)
+    primitive_offset: np.ndarray = np.zeros((0, 3))
+    primitive_rotation: np.ndarray = np.zeros((0, 3, 3))
+    primitive_size: np.ndarray = np.zeros((0, 3))
 
 
 class ContactWork(NamedTuple):
@@ -211,6 +222,15 @@ class ContactWork(NamedTuple):
     record_float: np.ndarray | None = None
     record_count: np.ndarray | None = None
     record_candidates: np.ndarray | None = None
+    # the primitives' plane contacts (search.py; None in a scene without primitives: numba then compiles
+    # none of it): each primitive's world centre [m] (body_count, 3) and rotation (body_count, 3, 3) of the
+    # evaluation, and a manifold's rows (manifold.py: point, normal, depth, feature)
+    primitive_centre: np.ndarray | None = None
+    primitive_frame: np.ndarray | None = None
+    manifold_point: np.ndarray | None = None
+    manifold_normal: np.ndarray | None = None
+    manifold_depth: np.ndarray | None = None
+    manifold_feature: np.ndarray | None = None
 
 
 def _ro(values: object, dtype: type, *shape: int) -> np.ndarray:
@@ -237,8 +257,14 @@ def contact_table(
     tangential_ratio: float = 2.0 / 7.0,
     stable_step: float = math.inf,
     excluded_pair=(),  # noqa: ANN001
+    body_plane_inv_contact_mass=None,  # noqa: ANN001
+    primitive_kind=None,  # noqa: ANN001
+    primitive_offset=None,  # noqa: ANN001
+    primitive_rotation=None,  # noqa: ANN001
+    primitive_size=None,  # noqa: ANN001
 ) -> ContactTable:
-    """A ContactTable with consistent dtypes (all empty: a scene without contact)."""
+    """A ContactTable with consistent dtypes (all empty: a scene without contact). Without primitives
+    every body's kind is -1 and its plane contacts take body_inv_contact_mass."""
     radius = _ro(sphere_radius, np.float64)
     spheres = radius.shape[0]
     bodies = len(np.asarray(body_inv_contact_mass))
@@ -246,6 +272,14 @@ def contact_table(
         np.asarray(sphere_body, dtype=np.int64).reshape(-1), np.asarray(sphere_offset, dtype=float).reshape(-1, 3),
         radius, bodies,
     )  # fmt: skip
+    kind = np.full(bodies, -1, dtype=np.int64) if primitive_kind is None else np.asarray(primitive_kind, np.int64)
+    prim_offset = np.zeros((bodies, 3)) if primitive_offset is None else np.asarray(primitive_offset, float)
+    prim_rotation = np.tile(np.eye(3), (bodies, 1, 1))
+    if primitive_rotation is not None:
+        prim_rotation = np.asarray(primitive_rotation, float)
+    prim_size = np.zeros((bodies, 3)) if primitive_size is None else np.asarray(primitive_size, float)
+    if (kind >= 0).any():  # the body boxes hold the primitives too (the body phase flags their planes)
+        centre, half, rho = primitive_boxes_numpy(centre, half, rho, kind, prim_offset, prim_rotation, prim_size)
     finite = rho >= 0.0
     large = finite & (rho > LARGE_BODY * (np.median(rho[finite]) if finite.any() else 0.0))
     regular = finite & ~large
@@ -281,7 +315,40 @@ def contact_table(
         bucket_count=int(buckets),
         stable_step=float(stable_step),
         excluded_pair=excluded_pair_keys(excluded_pair, bodies),
+        body_plane_inv_contact_mass=_ro(
+            body_inv_contact_mass if body_plane_inv_contact_mass is None else body_plane_inv_contact_mass, np.float64
+        ),
+        primitive_kind=_ro(kind, np.int64),
+        primitive_offset=_ro(prim_offset, np.float64, 3),
+        primitive_rotation=_ro(prim_rotation, np.float64, 3, 3),
+        primitive_size=_ro(prim_size, np.float64, 3),
     )
+
+
+def primitive_extent(kind: int, rotation: np.ndarray, size: np.ndarray) -> tuple[np.ndarray, float]:
+    """(half extents [m] of the box about its centre that holds a primitive (kind PRIMITIVE_*: 0 sphere, 1
+    capsule, 2 box) of `rotation` (columns: its axes) and `size`, its bound radius [m] about its centre)."""
+    if kind == 0:
+        return np.full(3, size[0]), float(size[0])
+    if kind == 1:
+        return np.abs(rotation[:, 2]) * size[1] + size[0], float(size[0] + size[1])
+    return np.abs(rotation) @ size[:3], float(np.linalg.norm(size[:3]))
+
+
+def primitive_boxes_numpy(
+    centre: np.ndarray, half: np.ndarray, rho: np.ndarray, kind: np.ndarray, offset: np.ndarray,
+    rotation: np.ndarray, size: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """The body boxes (centre, half extents, rho_max; body_boxes_numpy) grown to hold each body's primitive."""
+    centre, half, rho = centre.copy(), half.copy(), rho.copy()
+    for b in np.flatnonzero(kind >= 0):
+        extent, bound = primitive_extent(int(kind[b]), rotation[b], size[b])
+        lo, hi = offset[b] - extent, offset[b] + extent
+        if np.isfinite(rho[b]):
+            lo, hi = np.minimum(lo, centre[b] - half[b]), np.maximum(hi, centre[b] + half[b])
+        centre[b], half[b] = 0.5 * (lo + hi), 0.5 * (hi - lo)
+        rho[b] = max(rho[b], float(np.linalg.norm(offset[b])) + bound)
+    return centre, half, rho
 
 
 def contact_present(contact: ContactTable | None) -> bool:
@@ -416,4 +483,20 @@ def make_contact_work(contact: ContactTable, body_count: int, *, history: bool =
         record_float=np.zeros((rows, RECORD_COUNT)) if threaded else None,
         record_count=np.zeros(blocks, dtype=np.int64) if threaded else None,
         record_candidates=np.zeros(blocks, dtype=np.int64) if threaded else None,
+        **primitive_work(contact, b),
+    )
+
+
+def primitive_work(contact: ContactTable, body_count: int) -> dict[str, np.ndarray | None]:
+    """ContactWork's primitive arrays: None where no body has a primitive (make_contact_work)."""
+    if not body_count or not (contact.primitive_kind >= 0).any():
+        return {}
+    rows = 8  # manifold.MANIFOLD_ROWS (this module imports numpy only; tested equal)
+    return dict(
+        primitive_centre=np.zeros((body_count, 3)),
+        primitive_frame=np.zeros((body_count, 3, 3)),
+        manifold_point=np.zeros((rows, 3)),
+        manifold_normal=np.zeros((rows, 3)),
+        manifold_depth=np.zeros(rows),
+        manifold_feature=np.zeros(rows, dtype=np.int64),
     )
