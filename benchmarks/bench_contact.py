@@ -1,6 +1,6 @@
 """The sphere pile of the collisions issue (18): rbsim's contact against MuJoCo, in one process.
 
-    python benchmarks/bench_contact.py [--quick] [--no-mujoco] [--big] [--sections pile,far,idle,scenes]
+    python benchmarks/bench_contact.py [--quick] [--no-mujoco] [--big] [--sections pile,far,idle,scenes,primitives]
 
 Rows without "1 thread" run on rbsim's default threads (every core: the contact search on threads,
 physics/contact/threaded.py); "1 thread" rows are the serial search.
@@ -26,6 +26,8 @@ idle: issue 47 item 6's far-apart scenes (two tumbling 0.2 m boxes 5 m apart, no
   plane near or far, nearer boxes, balls, other integrators), CPU ns per step with and without
   `contact:` measured in the same run (target <= 1.2x each).
 scenes: steps/s of dominoes.yaml and container_mix.yaml (broad-phase work: sphere pairs tested).
+primitives: a box and a capsule resting and sliding on the ground as their primitive (issue 47 slice 2)
+  and as their lattice spheres (`contact.primitives: false`), CPU us per step in the same run.
 """
 
 from __future__ import annotations
@@ -420,6 +422,60 @@ def scenes_section(quick: bool) -> list[str]:
     return lines
 
 
+PRIMITIVE_BODIES = {
+    "box": "shape: {type: box, size: [0.2, 0.1, 0.05]}, spacing: 0.0125, density: 600",  # 128 face spheres
+    "capsule": "shape: {type: capsule, radius: 0.03, height: 0.12, axis: y}, spacing: 0.01, density: 800",
+}
+
+
+def primitive_scene(body: str, primitives: bool, sliding: bool) -> str:
+    """One shape body on the ground, resting (set down still) or sliding (2 m/s along y, friction 0.1: the
+    capsule along its axis, so it slides, not rolls), as its primitive or its lattice spheres
+    (`contact.primitives`)."""
+    height = 0.025 if body == "box" else 0.03
+    v = ", velocity: [0, 2, 0]" if sliding else ""
+    return (
+        "simulation: {dt: 0.001, steps: 3000, integrator: split2}\ngravity: [0, 0, -9.81]\n"
+        f"contact: {{ground: 0, primitives: {str(primitives).lower()}, material: {{friction: 0.1}}}}\n"
+        f"bodies:\n  - {{name: b, {PRIMITIVE_BODIES[body]}, position: [0, 0, {height}]{v}}}\n"
+    )
+
+
+def primitives_section(quick: bool) -> list[str]:
+    """Issue 47 slice 2: a box and a capsule resting and sliding on the ground, touching it as their
+    primitive (4 / 2 points) and as their lattice spheres, CPU us per step (process time), best of 5
+    interleaved blocks of 500 steps after reset(), and the contacts per step."""
+    from rbcli.physics.contact.tables import STAT_CONTACTS
+    from rbcli.scene.load import load_scene_text
+
+    steps = 200 if quick else 500
+    lines = ["### Shape bodies on the ground: primitive against lattice spheres (CPU us per step, best of 5)", "",
+             "| body | motion | spheres: us/step (contacts) | primitive: us/step (contacts) | speed-up |",
+             "|---|---|---:|---:|---:|"]  # fmt: skip
+    for body in PRIMITIVE_BODIES:
+        for sliding in (False, True):
+            sims = {p: rbcli.Simulation(load_scene_text(primitive_scene(body, p, sliding))) for p in (False, True)}
+            for sim in sims.values():
+                sim.step(10)  # compile or load the kernels
+            best = {p: math.inf for p in sims}
+            contacts = {p: 0.0 for p in sims}
+            for _ in range(5):
+                for p, sim in sims.items():
+                    sim.reset()
+                    began = time.process_time()
+                    sim.step(steps)
+                    best[p] = min(best[p], (time.process_time() - began) / steps)
+                    contacts[p] = float(sim.data.force.contact.stats[STAT_CONTACTS])
+            motion = "sliding 2 m/s" if sliding else "resting"
+            lines.append(
+                f"| {body} | {motion} | {best[False] * 1e6:.2f} ({contacts[False]:.0f}) "
+                f"| {best[True] * 1e6:.2f} ({contacts[True]:.0f}) | {best[False] / best[True]:.1f}x |"
+            )
+    load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
+    lines += ["", f"- load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} (1, 5, 15 min)"]
+    return lines
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
@@ -429,7 +485,8 @@ def main() -> None:
     )
     parser.add_argument("--no-mujoco", action="store_true")
     parser.add_argument("--big", action="store_true", help="also the 10^5-sphere pile (200 steps)")
-    parser.add_argument("--sections", default="pile,far,idle,scenes", help="comma-separated: pile, far, idle, scenes")
+    parser.add_argument("--sections", default="pile,far,idle,scenes,primitives",
+                        help="comma-separated: pile, far, idle, scenes, primitives")  # fmt: skip
     args = parser.parse_args()
     sections = args.sections.split(",")
     lines = []
@@ -439,6 +496,8 @@ def main() -> None:
         lines += idle_section(args.quick) + [""]
     if "scenes" in sections:
         lines += scenes_section(args.quick) + [""]
+    if "primitives" in sections:
+        lines += primitives_section(args.quick) + [""]
     if "pile" in sections:
         lines += pile_section(args.quick, not args.no_mujoco, args.big)
     load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3

@@ -143,7 +143,10 @@ def _deepest(text: str) -> tuple[float, list[str]]:
     spec = load_scene_text(text, file="brick.yaml")
     warnings = [str(w) for w in rbcli.prepare(spec).warnings]
     trajectory = rbcli.simulate(spec)
-    radius = float(spec.compiled_model.model.contact.sphere_radius.min())
+    contact = spec.compiled_model.model.contact
+    radius = float(contact.sphere_radius.min())
+    if contact.primitive_kind[0] >= 0:  # the brick touches the ground as its box: depths against its size
+        radius = float(contact.primitive_size[0].min())
     return float(trajectory.invariants["contact_max_overlap"].max()) / radius, warnings
 
 
