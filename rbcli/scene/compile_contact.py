@@ -235,6 +235,8 @@ class Primitives:
     points: np.ndarray
 
 
+# primitives.PRIMITIVE_CAPSULE, PRIMITIVE_BOX (not imported: `rbsim validate` imports no numba; tested equal)
+PRIMITIVE_CAPSULE, PRIMITIVE_BOX = 1, 2
 # a capsule along user axis x, y or z: its frame's columns (its local z is the axis), right-handed
 _CAPSULE_FRAMES = (np.eye(3)[:, [1, 2, 0]], np.eye(3)[:, [2, 0, 1]], np.eye(3))
 
@@ -249,8 +251,6 @@ def compile_primitives(spec: SceneSpec, model: Model, centres_user: np.ndarray, 
     its radius), k = M g / (PENETRATION_AT_REST size) / points per point, as a sphere sinks that fraction of
     its radius. A body with fewer contact spheres than its features (a box's 8 vertices: each feature keeps
     its tangential spring in the history row of one of the body's spheres) keeps its spheres."""
-    from rbcli.physics.contact.primitives import PRIMITIVE_BOX, PRIMITIVE_CAPSULE
-
     n = model.body_count
     out = Primitives(np.full(n, -1, dtype=np.int64), np.zeros((n, 3)), np.tile(np.eye(3), (n, 1, 1)),
                      np.zeros((n, 3)), np.zeros(n), np.ones(n))  # fmt: skip

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 import rbcli
+from rbcli.physics.contact.manifold import MANIFOLD_ROWS
 from rbcli.physics.contact.parameters import PENETRATION_AT_REST
 from rbcli.physics.contact.primitives import PRIMITIVE_BOX, PRIMITIVE_CAPSULE
 from rbcli.physics.contact.tables import STAT_CONTACTS, STAT_ENERGY, STAT_MAX_PENETRATION
@@ -170,6 +171,20 @@ def test_box_landing_on_an_edge_settles_flat():
     assert sim.state.x[0, 2] == pytest.approx(half - PENETRATION_AT_REST * 0.025, abs=2e-6)
     assert np.linalg.norm(sim.state.v[0]) < 1e-3
     assert stats(sim)[STAT_CONTACTS] == 4
+
+
+def test_numba_free_copies_of_the_primitive_kinds_agree():
+    from rbcli.physics.contact import primitives, tables
+    from rbcli.scene import compile_contact
+
+    assert (compile_contact.PRIMITIVE_CAPSULE, compile_contact.PRIMITIVE_BOX) == (PRIMITIVE_CAPSULE, PRIMITIVE_BOX)
+    assert tables.primitive_extent(primitives.PRIMITIVE_SPHERE, np.eye(3), np.ones(3))[1] == 1.0
+    assert tables.primitive_work(tables.contact_table(), 0) == {}
+    boxed = tables.contact_table(
+        body_inv_contact_mass=[1.0], primitive_kind=[PRIMITIVE_BOX], primitive_size=[[1, 2, 3.0]]
+    )
+    assert tables.primitive_work(boxed, 1)["manifold_depth"].shape == (MANIFOLD_ROWS,)
+    np.testing.assert_array_equal(boxed.body_box_half[0], [1, 2, 3])  # the body box holds the primitive
 
 
 def test_primitives_false_keeps_the_sphere_carpet():
