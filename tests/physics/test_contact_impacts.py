@@ -159,7 +159,7 @@ def test_a_brick_at_20_m_s_goes_no_deeper_than_half_a_radius_with_the_stiffness_
     deep = spec.compiled_model.contact.impact.deep
     assert deep is not None and deep.body == "brick" and 20.0 < deep.speed < 22.0
     depth, warnings = _deepest(text)
-    assert depth > 4 * DEPTH_FRACTION  # the warning is true
+    assert depth > 2 * DEPTH_FRACTION  # the warning is true (1.2 of the box's half thickness as a primitive)
     assert any(f"{deep.speed:.3g} m/s" in w and f"{deep.stiffness_needed:.3g} N/m" in w for w in warnings), warnings
     depth, warnings = _deepest(_brick(20.0, f"{deep.stiffness_needed:.3g}"))
     assert depth <= DEPTH_FRACTION, depth

@@ -79,7 +79,8 @@ def test_contact_points_of_a_box_resting_on_the_ground(tmp_path, suffix):
         # box still settles by ~1e-12 m)
         np.testing.assert_allclose(points[:, 2], -depth / 2, atol=1e-3 * depth)
         np.testing.assert_allclose(np.abs(points[:, :2]), 0.05, atol=1e-9)  # under the box's corners
-        assert force.min() > 0 and force.sum() == pytest.approx(weight, rel=1e-5)
+        # the weight once settled (its 4 stiffer corner springs still ring early on, ~1e-3 of it)
+        assert force.min() > 0 and force.sum() == pytest.approx(weight, rel=1e-5 if k == len(frames) - 1 else 1e-2)
 
 
 def test_no_contacts_stream_no_contact_points(tmp_path):
