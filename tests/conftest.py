@@ -88,7 +88,7 @@ def _install_compile_log() -> None:
                     seconds.get(_compiling["test"], 0.0) + time.process_time() - _compiling["start"]
                 )
 
-    event.install_listener("numba:compile", CompileLog())
+    event.register("numba:compile", CompileLog())  # for the whole process (install_listener is a context)
 
 
 if _COMPILE_LOG:
