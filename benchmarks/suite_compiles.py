@@ -30,9 +30,18 @@ def main() -> None:
     print("\nby file:")
     for name, seconds in per_file.most_common(args.top):
         print(f"  {seconds:7.1f}  {name}")
+    own: collections.Counter[str] = collections.Counter()
+    count: collections.Counter[str] = collections.Counter()
+    for row in rows:
+        for name, seconds in row["functions"]:
+            own[name] += seconds
+            count[name] += 1
+    print("\nby function (its own compile time, callees left out; times compiled):")
+    for name, seconds in own.most_common(args.top):
+        print(f"  {seconds:7.1f}  {count[name]:3d}x  {name}")
     print("\nby test:")
     for row in sorted(rows, key=lambda r: -r["compile_cpu_s"])[: args.top]:
-        top = collections.Counter(f.rsplit(".", 1)[-1] for f in row["functions"]).most_common(4)
+        top = sorted(row["functions"], key=lambda f: -f[1])[:4]
         print(f"  {row['compile_cpu_s']:7.1f}  {row['test']}  ({len(row['functions'])} functions; {top})")
 
 

@@ -62,9 +62,10 @@ def pytest_sessionfinish(session):  # noqa: ANN001, ANN201
 # Where the suite's compile time goes: RBSIM_COMPILE_LOG=DIR makes each process (each xdist worker)
 # write DIR/<worker>-<pid>.jsonl, one line per test as it ends: its node id, the CPU seconds numba spent
 # compiling while it ran (setup, call and teardown; only the outermost compiles: a compile inside another
-# counts once) and the functions compiled. `python benchmarks/suite_compiles.py DIR` sums them up.
+# counts once) and each function compiled with its own CPU seconds.
+# `python benchmarks/suite_compiles.py DIR` sums them up.
 _COMPILE_LOG = os.environ.get("RBSIM_COMPILE_LOG")
-_compiling = {"depth": 0, "start": 0.0, "test": "", "seconds": {}, "functions": {}}
+_compiling: dict = {"stack": [], "test": "", "seconds": {}, "functions": {}}
 
 
 def _install_compile_log() -> None:
@@ -73,22 +74,23 @@ def _install_compile_log() -> None:
     from numba.core import event
 
     class CompileLog(event.Listener):
+        """Per test: the outermost compiles' CPU time, and each function's own (its callees' left out)."""
+
         def on_start(self, ev):  # noqa: ANN001, ANN202
-            if _compiling["depth"] == 0:
-                _compiling["start"] = time.process_time()
-            _compiling["depth"] += 1
             f = ev.data["dispatcher"].py_func
-            _compiling["functions"].setdefault(_compiling["test"], []).append(f"{f.__module__}.{f.__qualname__}")
+            _compiling["stack"].append([f"{f.__module__}.{f.__qualname__}", time.process_time(), 0.0])
 
         def on_end(self, ev):  # noqa: ANN001, ANN202
-            _compiling["depth"] -= 1
-            if _compiling["depth"] == 0:
-                seconds = _compiling["seconds"]
-                seconds[_compiling["test"]] = (
-                    seconds.get(_compiling["test"], 0.0) + time.process_time() - _compiling["start"]
-                )
+            name, started, inner = _compiling["stack"].pop()
+            spent = time.process_time() - started
+            test = _compiling["test"]
+            _compiling["functions"].setdefault(test, []).append((name, round(spent - inner, 3)))
+            if _compiling["stack"]:
+                _compiling["stack"][-1][2] += spent
+            else:
+                _compiling["seconds"][test] = _compiling["seconds"].get(test, 0.0) + spent
 
-    event.install_listener("numba:compile", CompileLog())
+    event.register("numba:compile", CompileLog())  # for the whole process (install_listener is a context)
 
 
 if _COMPILE_LOG:
