@@ -1,5 +1,6 @@
-"""Determinism guard: every integrator on the free-body scenes and on one scene with every force term, split2 on
-each single-force scene, and the contact and joint scenes give bitwise the trajectories stored in
+"""Determinism guard: every integrator on the free-body scenes and on one scene with every force term
+(three integrators in the suite, all ten with RBSIM_FULL_HASHES=1: CASES below), split2 on each
+single-force scene, and the contact and joint scenes give bitwise the trajectories stored in
 trajectory_hashes.json (Box2D's determinism hash, one per scene and integrator).
 
 Why: a refactor of the step (stages, Model/Data, chunk loops) must not change a single bit of any
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import platform
 import sys
 from pathlib import Path
@@ -64,6 +66,13 @@ FIXED = ("euler-matrix", "euler-quat", "semi-implicit", "semi-implicit-gyro", "r
 STEPS = 600  # enough to pass the impulses (t = 0.3 s and 0.5 s at dt = 1 ms); short enough for the suite
 RECORD_EVERY = 20
 
+# The suite runs every integrator on the free-body scenes (their loops are the ones the integrator tests
+# compile anyway) and EVERY_FORCE with one integrator of each kind of force handling: split2 (kicks and
+# its own damping flow), rk4 (forces at its stages) and exact (the deferred torque-free bodies); the
+# other seven EVERY_FORCE loops cost ~80 CPU-s cold, a tenth of the suite's compile. RBSIM_FULL_HASHES=1
+# runs every case (before and after a refactor of the step: `RBSIM_FULL_HASHES=1 pytest -n0 <this file>`),
+# and --regenerate always writes all of them.
+EVERY_FORCE_IN_SUITE = ("split2", "rk4", "exact")
 CASES = [(scene, name, None) for scene in (*FREE_SCENES, EVERY_FORCE) for name in FIXED]
 CASES += [(scene, "split2", None) for scene in FORCE_SCENES]
 # adaptive: EVERY_FORCE's torque window opens at 0.1 s, a force jump (adaptive.py: the schedule step floor)
@@ -72,6 +81,9 @@ CASES += [(scene, "dopri5", 1e-8) for scene in ("verification/intermediate_axis.
 CASES += [(scene, name, None) for scene in CONTACT_SCENES for name in CONTACT_INTEGRATORS]
 CASES += [("contact/box_drop.yaml", "dopri5", 1e-6)]
 CASES += [(scene, "split2", None) for scene in JOINT_SCENES]
+ALL_CASES = CASES
+if os.environ.get("RBSIM_FULL_HASHES") != "1":
+    CASES = [c for c in ALL_CASES if c[0] != EVERY_FORCE or c[1] in EVERY_FORCE_IN_SUITE or c[2] is not None]
 
 
 def platform_key() -> str:
@@ -124,16 +136,16 @@ def test_trajectory_is_bitwise_unchanged(store, scene, integrator, tolerance):
 def regenerate(missing_only: bool = False) -> None:
     """Rewrite this platform's hashes (and the final states when none are stored yet); with
     missing_only, compute only the cases this platform has no hash for (new cases) and keep the rest.
-    Cases no longer in CASES are dropped from every platform's hashes and from the final states."""
+    Cases no longer in ALL_CASES are dropped from every platform's hashes and from the final states."""
     store = json.loads(STORE.read_text()) if STORE.exists() else {"hashes": {}, "final_state": {}}
-    current = {case_id(*case) for case in CASES}
+    current = {case_id(*case) for case in ALL_CASES}
     for platform_hashes in store["hashes"].values():
         for key in set(platform_hashes) - current:
             del platform_hashes[key]
     finals = {key: value for key, value in store["final_state"].items() if key in current}
     store["final_state"] = finals
     hashes = dict(store["hashes"].get(platform_key(), {})) if missing_only else {}
-    for case in CASES:
+    for case in ALL_CASES:
         if case_id(*case) in hashes:
             continue
         traj = run_case(*case)
