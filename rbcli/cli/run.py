@@ -411,12 +411,15 @@ class _CompileStatus:
             now = f" — {progress.current}" if progress.current else ""
             messages.live_status(f"compiling kernels: {count}, {progress.seconds:.0f} s{now}")
         elif not self.shown:
-            if progress.current.startswith(_HANDLE_STORE):  # ~0.3 s per table; the loop comes next: name it
+            if not progress.current or progress.current.startswith(_HANDLE_STORE):  # the loop comes next: name it
                 return
             messages.status(f"compiling kernels, from {progress.current} (once: later runs load them from the cache)…")
         self.shown = True
 
     def end(self, progress: CompileProgress, stopped: bool) -> None:
+        if not self.shown and not self.quiet and progress.functions:  # only the handles' stores compiled
+            messages.status("compiling kernels (once: later runs load them from the cache)…")
+            self.shown = True
         if not self.shown:
             return
         if self.live:

@@ -171,7 +171,7 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
             plane_k[b] = plane_stiffness(stiffness[b], int(support[b]), rest)
     primitive = compile_primitives(spec, model, centres_user, frames, np.asarray([len(r) for r in radii]),
                                    [b for b, body in enumerate(spec.bodies) if body.collide], g)  # fmt: skip
-    for b in np.flatnonzero(primitive.kind >= 0):  # planes touch its primitive, its own stiffness (module doc)
+    for b in np.flatnonzero(primitive.kind >= 0).tolist():  # planes touch its primitive, its own stiffness
         material = spec.bodies[b].material.over(base)
         plane_k[b] = material.stiffness if material.stiffness is not None else primitive.stiffness[b]
     colliding = np.isfinite(min_radius)
