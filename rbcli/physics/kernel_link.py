@@ -18,7 +18,7 @@ caller from the cache first loads (or compiles) every callee its code refers to:
 unresolved. numba's symbol for a function holds a number given in the process that compiled it (the
 `v<uid>` of its mangled name: the order in which that process met functions), so a callee this process
 compiled itself has another symbol than the one a caller compiled elsewhere refers to: two processes
-compiling on one empty cache (two test workers, `rbsim warm`, a sweep's workers) would crash the one that
+compiling on one empty cache (two test workers, a sweep's workers, two `rbsim run`s) would crash the one that
 then loads the other's caller. Each loader knows the symbol its caller refers to and refuses a callee
 whose symbol differs (`StaleKernelSymbol`): the caller is then compiled here, as on a cache miss
 (kernel_cache's loads turn the refusal into one), and links the callee this process has.
