@@ -50,11 +50,19 @@ class ContactSummary:
     limiting_body: str  # the body that sets it
     stiffness: float  # [N/m] that body's per-sphere stiffness
     impact: ImpactBound | None = None  # how fast spheres can meet (scene/contact_speed.py), set by compile_model
+    boxes: int = 0  # shape bodies that touch planes and walls as their exact box (compile_primitives)
+    capsules: int = 0  # ... as their exact capsule
 
     def describe(self, substeps: int | None = None) -> str:
         """One line for `rbsim validate` and the run summary."""
         planes = f"{self.plane_count} plane" + "s" * (self.plane_count != 1)
+        kinds = (("box", "boxes", self.boxes), ("capsule", "capsules", self.capsules))
+        shapes = " and ".join(f"{n} {one if n == 1 else many}" for one, many, n in kinds if n)
         text = f"contact: {self.sphere_count:,} contact spheres, {planes}"
+        if shapes:  # their spheres still meet other bodies (docs/contact.md)
+            meets = "meets planes and walls as its exact shape"
+            many = "meet planes and walls as their exact shapes"
+            text += f" ({shapes} {meets if self.boxes + self.capsules == 1 else many})"
         if self.static_count:
             text += f", {self.static_count} static bod" + ("y" if self.static_count == 1 else "ies")
         if self.kinematic_count:
@@ -218,6 +226,8 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
         stable_step=dt_crit,
         limiting_body=model.body_names[worst] if worst >= 0 else "",
         stiffness=float(stiffness[worst]) if worst >= 0 else math.nan,
+        boxes=int(np.count_nonzero(primitive.kind == PRIMITIVE_BOX)),
+        capsules=int(np.count_nonzero(primitive.kind == PRIMITIVE_CAPSULE)),
     )
     return table, summary
 

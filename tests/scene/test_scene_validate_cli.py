@@ -195,3 +195,30 @@ def test_verbose_counts_contact_spheres_and_sub_steps_in_the_cost(tmp_path):
     ) in "\n".join(lines)
     (kernels,) = [line for line in lines if line.startswith("  kernels: ")]
     assert "+ contact (" in kernels and "joints" not in kernels
+
+
+SHAPES_ON_A_PLANE = """\
+simulation: {{dt: 0.001, duration: 0.1}}
+gravity: [0, 0, -9.81]
+contact: {{ground: 0{off}}}
+bodies:
+  - {{name: brick, shape: {{type: box, size: [0.2, 0.1, 0.05]}}, spacing: 0.025, density: 500, position: [0, 0, 0.2]}}
+  - {{name: pill, shape: {{type: capsule, radius: 0.03, height: 0.1}}, spacing: 0.02, density: 500,
+     position: [0.5, 0, 0.2]}}
+  - {{name: ball, shape: {{type: sphere, radius: 0.05}}, spacing: 0.025, density: 500, position: [1, 0, 0.2]}}
+"""
+
+
+def test_the_contact_line_says_which_shapes_meet_planes_as_themselves(tmp_path):
+    """A box and a capsule touch the ground as their exact primitive (issue 47: the run's cost depends on
+    it); a sphere shape is one exact sphere already and is not counted; with `primitives: false` no shape
+    does, and the line says nothing of shapes."""
+    on = write(tmp_path, "on.yaml", SHAPES_ON_A_PLANE.format(off=""))
+    off = write(tmp_path, "off.yaml", SHAPES_ON_A_PLANE.format(off=", primitives: false"))
+    lines = {}
+    for path in (on, off):
+        result = runner.invoke(app, ["validate", str(path)])
+        assert result.exit_code == 0, result.output
+        lines[path.stem] = next(line for line in result.output.splitlines() if "contact:" in line)
+    assert "(1 box and 1 capsule meet planes and walls as their exact shapes)" in lines["on"], lines
+    assert "exact shape" not in lines["off"] and "1 plane" in lines["off"], lines
