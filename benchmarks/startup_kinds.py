@@ -26,89 +26,14 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from rbcli.runner.warm import KIND_SCENES, kind_scene
+
 ROOT = Path(__file__).resolve().parents[1]
 
 # Short scenes of each kind; `{integrator}` is filled per row. Durations are a few hundred steps: the
 # first run's cost is compiling, and a warm run of each stays well under a second of stepping.
-SCENES: dict[str, str] = {
-    "free": """\
-name: free-cloud
-simulation: {{dt: 0.001, duration: 0.2, integrator: {integrator}}}
-bodies:
-  - name: handle
-    particles: {{positions: [[0, 0, 0], [0.1, 0, 0], [0, 0.2, 0], [0, 0, 0.3]], masses: [1.0, 0.5, 0.5, 0.25]}}
-    position: [0, 0, 1]
-    angular_momentum: [0.02, 0.05, 0.01]
-""",
-    "forces": """\
-name: forces
-simulation: {{dt: 0.001, duration: 0.2, integrator: {integrator}}}
-gravity: [0, 0, -9.81]
-bodies:
-  - {{name: a, shape: {{type: box, size: [0.2, 0.1, 0.05]}}, spacing: 0.05, density: 500, position: [0, 0, 1]}}
-  - {{name: b, shape: {{type: sphere, radius: 0.1}}, spacing: 0.05, density: 500, position: [0.5, 0, 1]}}
-forces:
-  - {{type: spring, bodies: [a, b], points: [[0.1, 0, 0], [0, 0, 0]], stiffness: 200, damping: 1}}
-  - {{type: drag, bodies: all, linear: 0.05}}
-""",
-    "contact": """\
-name: poured
-simulation: {{dt: 0.0005, duration: 0.1, integrator: {integrator}}}
-gravity: [0, 0, -9.81]
-contact:
-  container: {{min: [-0.3, -0.3, 0], max: [0.3, 0.3, 2]}}
-  material: {{restitution: 0.3, friction: 0.5}}
-bodies:
-  - grid:
-      name: ball
-      count: [5, 4, 3]
-      spacing: [0.1, 0.1, 0.1]
-      origin: [-0.2, -0.15, 0.2]
-      template: {{particles: {{positions: [[0, 0, 0]], masses: 0.1, radius: 0.04}}}}
-""",
-    "joints": """\
-name: hinge-chain
-simulation: {{dt: 0.001, duration: 0.2, integrator: {integrator}}}
-gravity: [0, 0, -9.81]
-defaults:
-  particles: {{positions: [[-0.1, 0, 0], [0.1, 0, 0]], masses: 0.2, radius: 0.02}}
-bodies:
-  - {{name: l1, position: [0.1, 0, 1]}}
-  - {{name: l2, position: [0.3, 0, 1]}}
-  - {{name: l3, position: [0.5, 0, 1]}}
-  - {{name: l4, position: [0.7, 0, 1]}}
-  - {{name: l5, position: [0.9, 0, 1]}}
-  - {{name: l6, position: [1.1, 0, 1]}}
-joints:
-  - {{name: j1, type: hinge, bodies: [l1, world], anchor: [0, 0, 1], axis: [0, 1, 0]}}
-  - {{name: j2, type: hinge, bodies: [l2, l1], anchor: [0.2, 0, 1], axis: [0, 1, 0]}}
-  - {{name: j3, type: hinge, bodies: [l3, l2], anchor: [0.4, 0, 1], axis: [0, 1, 0]}}
-  - {{name: j4, type: hinge, bodies: [l4, l3], anchor: [0.6, 0, 1], axis: [0, 1, 0]}}
-  - {{name: j5, type: hinge, bodies: [l5, l4], anchor: [0.8, 0, 1], axis: [0, 1, 0]}}
-  - {{name: j6, type: hinge, bodies: [l6, l5], anchor: [1.0, 0, 1], axis: [0, 1, 0]}}
-""",
-    "joints+contact": """\
-name: capsule-chain
-simulation: {{dt: 0.0005, duration: 0.1, integrator: {integrator}}}
-gravity: [0, 0, -9.81]
-contact:
-  planes: [{{point: [0, 0, 0], normal: [0, 0, 1]}}]
-  material: {{restitution: 0.2, friction: 0.6}}
-defaults:
-  shape: {{type: capsule, radius: 0.03, height: 0.14, axis: x}}
-  spacing: 0.03
-  density: 900
-bodies:
-  - {{name: c1, position: [0.1, 0, 0.2]}}
-  - {{name: c2, position: [0.3, 0, 0.2]}}
-  - {{name: c3, position: [0.5, 0, 0.2]}}
-  - {{name: c4, position: [0.7, 0, 0.2]}}
-joints:
-  - {{name: b1, type: ball, bodies: [c2, c1], anchor: [0.2, 0, 0.2]}}
-  - {{name: b2, type: ball, bodies: [c3, c2], anchor: [0.4, 0, 0.2]}}
-  - {{name: b3, type: ball, bodies: [c4, c3], anchor: [0.6, 0, 0.2]}}
-""",
-}
+# Short scenes of each kind: the ones `rbsim warm` prepares (rbcli/runner/warm.py)
+SCENES = KIND_SCENES
 
 # The child: `rbsim run` in this process with numba's compile and LLVM-lock events recorded; the record
 # is written by an atexit hook (`rbsim run` ends the process with os._exit after the atexit handlers).
@@ -185,8 +110,8 @@ def run_scene(scene: Path, cache: Path, workdir: Path) -> FirstRun:
 
 def kinds(integrators: list[str]) -> list[tuple[str, str]]:
     """(label, scene text): the five kinds on split2, then the free body under each other integrator."""
-    rows = [(kind, text.format(integrator="split2")) for kind, text in SCENES.items()]
-    rows += [(f"free, {name}", SCENES["free"].format(integrator=name)) for name in integrators if name != "split2"]
+    rows = [(kind, kind_scene(kind, "split2")) for kind in SCENES]
+    rows += [(f"free, {name}", kind_scene("free", name)) for name in integrators if name != "split2"]
     return rows
 
 

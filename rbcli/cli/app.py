@@ -27,6 +27,7 @@ from rbcli.cli import schema as _schema
 from rbcli.cli import study as _study
 from rbcli.cli import sweep as _sweep
 from rbcli.cli import validate as _validate
+from rbcli.cli import warm as _warm
 from rbcli.cli.exit_codes import ExitCode, exit_code_lines
 
 coercion.install()  # plain parameters' values converted without pydantic (cli/coercion.py)
@@ -70,6 +71,7 @@ app.command("integrators", short_help="List the integrators (--measure: time the
 app.command("schema", short_help="Print the scene JSON Schema (for editors)")(_schema.schema)
 app.command("study", short_help="Work-precision study of the integrators on a scene")(_study.study)
 app.command("sweep", short_help="Run every variant of a sweep on Dask into one Parquet table")(_sweep.sweep)
+app.command("warm", short_help="Compile the kernels of each kind of scene (or SCENEs) ahead of runs")(_warm.warm)
 
 
 # Commands that end the process without the interpreter's teardown (`_exit_now`): after a run has
