@@ -35,17 +35,7 @@ import numba
 import numpy as np
 
 from rbcli.physics.integrators.kinematics import rotate
-
-
-@numba.njit(cache=True, inline="always")
-def _multiply(aw, ax, ay, az, bw, bx, by, bz):  # noqa: ANN001, ANN202
-    """Hamilton product a b of quaternions (w, x, y, z)."""
-    return (
-        aw * bw - ax * bx - ay * by - az * bz,
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-    )
+from rbcli.physics.joints.rows import quaternion_product
 
 
 @numba.njit(cache=True)
@@ -53,9 +43,9 @@ def relative_rotation(table, j, qa, qb):  # noqa: ANN001, ANN202
     """(Q, p_b): Q = (q_b f_b)^* (q_a f_a) of joint j with w >= 0, and p_b = q_b f_b (world-from-b's joint
     frame); qa, qb 4-tuples (qb = 1 for the world)."""
     f = table.cone[j]  # [0:4] f_a, [4:8] f_b (tables.CONE_FRAME_A, CONE_FRAME_B)
-    pa = _multiply(qa[0], qa[1], qa[2], qa[3], f[0], f[1], f[2], f[3])
-    pb = _multiply(qb[0], qb[1], qb[2], qb[3], f[4], f[5], f[6], f[7])
-    Q = _multiply(pb[0], -pb[1], -pb[2], -pb[3], pa[0], pa[1], pa[2], pa[3])
+    pa = quaternion_product(qa[0], qa[1], qa[2], qa[3], f[0], f[1], f[2], f[3])
+    pb = quaternion_product(qb[0], qb[1], qb[2], qb[3], f[4], f[5], f[6], f[7])
+    Q = quaternion_product(pb[0], -pb[1], -pb[2], -pb[3], pa[0], pa[1], pa[2], pa[3])
     if Q[0] < 0.0:
         Q = (-Q[0], -Q[1], -Q[2], -Q[3])
     return Q, pb

@@ -101,7 +101,7 @@ def _linear_row(jac_a, jac_b, r, n0, n1, n2, ra0, ra1, ra2, rb0, rb1, rb2, t0, t
 
 
 @numba.njit(cache=True, inline="always")
-def _multiply(aw, ax, ay, az, bw, bx, by, bz):  # noqa: ANN001, ANN202
+def quaternion_product(aw, ax, ay, az, bw, bx, by, bz):  # noqa: ANN001, ANN202
     """Hamilton product a b of quaternions (w, x, y, z)."""
     return (
         aw * bw - ax * bx - ay * by - az * bz,
@@ -115,8 +115,8 @@ def _multiply(aw, ax, ay, az, bw, bx, by, bz):  # noqa: ANN001, ANN202
 def _rotation_rows(table, j, r, aw, ax, ay, az, bw, bx, by, bz, jac_a, jac_b, residual, with_jacobian) -> int:  # noqa: ANN001
     """The three relative-rotation rows of joint j from row r; returns the next row."""
     c = table.relative_q[j]
-    tw, tx, ty, tz = _multiply(aw, ax, ay, az, c[0], -c[1], -c[2], -c[3])
-    ew, ex, ey, ez = _multiply(tw, tx, ty, tz, bw, -bx, -by, -bz)
+    tw, tx, ty, tz = quaternion_product(aw, ax, ay, az, c[0], -c[1], -c[2], -c[3])
+    ew, ex, ey, ez = quaternion_product(tw, tx, ty, tz, bw, -bx, -by, -bz)
     if ew < 0.0:  # e and -e are the same rotation: take the one near 1
         ew, ex, ey, ez = -ew, -ex, -ey, -ez
     for i in range(3):
