@@ -65,6 +65,8 @@ def pytest_sessionfinish(session):  # noqa: ANN001, ANN201
 # counts once) and each function compiled with its own CPU seconds.
 # `python benchmarks/suite_compiles.py DIR` sums them up.
 _COMPILE_LOG = os.environ.get("RBSIM_COMPILE_LOG")
+# RBSIM_COMPILE_LOG_TYPES=run_chunk,find_contacts: those functions' entries carry their argument types
+_COMPILE_LOG_TYPES = os.environ.get("RBSIM_COMPILE_LOG_TYPES", "")
 _compiling: dict = {"stack": [], "test": "", "seconds": {}, "functions": {}}
 
 
@@ -78,7 +80,10 @@ def _install_compile_log() -> None:
 
         def on_start(self, ev):  # noqa: ANN001, ANN202
             f = ev.data["dispatcher"].py_func
-            _compiling["stack"].append([f"{f.__module__}.{f.__qualname__}", time.process_time(), 0.0])
+            name = f"{f.__module__}.{f.__qualname__}"
+            if _COMPILE_LOG_TYPES and any(part in name for part in _COMPILE_LOG_TYPES.split(",")):
+                name += f" {ev.data['args']}"  # which types made this compile another one
+            _compiling["stack"].append([name, time.process_time(), 0.0])
 
         def on_end(self, ev):  # noqa: ANN001, ANN202
             name, started, inner = _compiling["stack"].pop()
@@ -118,6 +123,16 @@ def _write_compile_log(test: str) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     with path.open("a") as out:
         out.write(json.dumps({"test": test, "compile_cpu_s": seconds, "functions": functions}) + "\n")
+
+
+def as_runner_passes(model, forces, data, frames) -> tuple:  # noqa: ANN001
+    """A chunk loop's four tables as the runner hands them: KernelHandles (runner/simulation.py
+    `_handles_of`), so a test that calls a loop itself runs the loop the runner compiled instead of
+    compiling one of its own for plain tables (~6 CPU-s each on an empty cache). Keep the tuple while the
+    loop runs; the arrays are written in place as with plain tables."""
+    from rbcli.physics.kernel_handle import KernelHandle
+
+    return tuple(KernelHandle(value) for value in (model, forces, data, frames))
 
 
 def make_body(name: str = "b", **overrides) -> BodySpec:

@@ -1,7 +1,9 @@
 """A first run compiles only what the scene needs (tracker issue 16, item 5): the kernels take
-`ForceTables.kernel()` and `Model.kernel()`, whose tables of unused force types (and contact, joints,
-kinematic bodies) are None, and every optional stage is called through a dispatcher (physics/stages.py,
-physics/forces/stages.py) that compiles to nothing for None. Checked by numba's
+`ForceTables.kernel()` and `Model.kernel()`, whose tables of what the scene lacks (force terms beyond
+gravity, contact, joints, kinematic bodies) are None, and every optional stage is called through a
+dispatcher (physics/stages.py, physics/forces/stages.py) that compiles to nothing for None. The force
+types go together (issue 44): a scene with any force term compiles the stages of all six, once, and every
+other mix of force types then compiles nothing. Checked by numba's
 own compile events in a fresh process with an empty cache (a warm cache compiles nothing at all, so it
 could not tell), then that a second process loads every kernel from that cache without compiling."""
 
@@ -27,7 +29,7 @@ from rbcli.physics.forces.tables import KernelForceTables, make_force_data
 from rbcli.physics.integrators import get_integrator
 from rbcli.physics.model import KernelModel
 from rbcli.physics.step import empty_buffers
-from rbcli.scene.force_specs import BodyPoint, ForceField, ForceImpulse, ForceSpring
+from rbcli.scene.force_specs import BodyPoint, ForceDrag, ForceField, ForceImpulse, ForceSpring
 
 ROOT = Path(__file__).resolve().parents[2]
 INTEGRATOR = "semi-implicit"  # the cheapest step to compile: the test is about the stages around it
@@ -38,8 +40,8 @@ def _name(dispatcher) -> str:  # noqa: ANN001
     return f"{dispatcher.py_func.__module__}.{dispatcher.py_func.__qualname__}"
 
 
-# the kernels of the force types and stages a gravity-only scene does not have
-UNUSED_BY_GRAVITY = {
+# the kernels of the force types a gravity-only scene does not have
+FORCE_TYPES = {
     _name(k)
     for k in (
         field.accumulate_field,
@@ -48,17 +50,24 @@ UNUSED_BY_GRAVITY = {
         spring.accumulate_spring,
         drag.accumulate_drag,
         impulse.apply_impulses,
+    )
+}
+# ...and of the contact stages, which no scene without contact has
+CONTACT_STAGES = {
+    _name(k)
+    for k in (
         contact_force.accumulate_contact,
         contact_force.hold_static_bodies,
         contact_force.begin_contact_step,
         contact_force.commit_contacts,
     )
 }
+UNUSED_BY_GRAVITY = FORCE_TYPES | CONTACT_STAGES
 CHUNK = f"rbcli.physics.chunk_loop.run_chunk[{INTEGRATOR.replace('-', '_')}]"  # its loop: chunk_loop.py
 
 # Run in a fresh process: prints the qualified names of the functions numba compiled (not loaded from
 # its cache) while stepping a gravity-only scene and, with --forces, then a scene with a spring and an
-# impulse; `numba:compile` events fire only for real compilations.
+# impulse and a scene with drag and a field; `numba:compile` events fire only for real compilations.
 SCRIPT = """
 import json, sys
 from dataclasses import replace
@@ -79,7 +88,7 @@ ev.register("numba:compile", Recorder())
 
 from conftest import make_body, make_scene
 from rbcli.runner.simulation import Simulation
-from rbcli.scene.force_specs import BodyPoint, ForceImpulse, ForceSpring
+from rbcli.scene.force_specs import BodyPoint, ForceDrag, ForceField, ForceImpulse, ForceSpring
 
 def run(forces):
     body = make_body("h", velocity=np.array([0.5, 0.0, 4.0]), angular_momentum=np.array([0.01, 0.02, 0.03]))
@@ -96,6 +105,9 @@ if "--forces" in sys.argv:
     spring = ForceSpring(end_a=BodyPoint(body="h", point=np.array([0.1, 0.0, 0.0])), anchor=np.zeros(3), stiffness=1.0)
     kick = ForceImpulse(at=BodyPoint(body="h"), time=0.001, vector=np.array([0.0, 1.0, 0.0]))
     out["spring_impulse"] = run([spring, kick])
+    drag = ForceDrag(bodies=("h",), linear=0.1)
+    field = ForceField(value=np.array([0.0, 0.3, 0.0]))
+    out["drag_field"] = run([drag, field])
 out["states"] = states
 out["integrators"] = sorted(m for m in sys.modules if m.startswith("rbcli.physics.integrators."))
 out["joint_stages"] = "rbcli.physics.joints.stages" in sys.modules
@@ -137,14 +149,17 @@ def test_first_run_compiles_only_the_stages_the_scene_has_and_the_second_loads_t
     # record_if_due copies with element loops: no array-assignment shape-error message (~2.5 s) compiled
     assert not [name for name in gravity if "shape_context" in name], sorted(gravity)
 
-    # a scene with a spring and an impulse compiles those two (a loop of its own types), still nothing else
+    # a scene with a spring and an impulse compiles the loop of scenes with forces and every force type's
+    # stage (one numba type for every mix of force types: forces/tables.py), still nothing of contact...
     forces = set(first["spring_impulse"])
-    assert {CHUNK, _name(spring.accumulate_spring), _name(impulse.apply_impulses)} <= forces, sorted(forces)
-    assert not forces & (UNUSED_BY_GRAVITY - {_name(spring.accumulate_spring), _name(impulse.apply_impulses)})
+    assert {CHUNK} | FORCE_TYPES <= forces, sorted(FORCE_TYPES - forces)
+    assert not forces & CONTACT_STAGES, sorted(forces & CONTACT_STAGES)
+    # ...so a scene with another mix of force types compiles nothing at all
+    assert first["drag_field"] == [], first["drag_field"]
 
     # numba's cache serves the loops that call the dispatchers: a second process compiles nothing...
     second = _compiled_in_fresh_process(cache, "--forces")
-    assert (second["gravity"], second["spring_impulse"]) == ([], []), second
+    assert (second["gravity"], second["spring_impulse"], second["drag_field"]) == ([], [], []), second
     # ...loads them without numba's compiler tables (physics/kernel_cache.py), which compiling built...
     # (on the numba versions it was verified on: kernel_cache.VERIFIED_NUMBA)
     assert first["arraymath"] and second["arraymath"] != second["fast_loads"]
@@ -157,22 +172,29 @@ def test_first_run_compiles_only_the_stages_the_scene_has_and_the_second_loads_t
     assert second["states"] == first["states"]
 
 
-def test_kernel_tables_are_none_for_unused_types_and_stable_per_scene():
+def test_kernel_tables_are_none_without_forces_and_all_present_with_any():
     body = make_body("h")
+    alone = prepare(make_scene([body], gravity=G))
+    kernel_alone = alone.forces.kernel()
+    for name in ("field", "point_force", "torque", "spring", "drag", "impulse"):
+        assert getattr(kernel_alone, name) is None, name  # gravity only: no force stage compiles
     kick = ForceImpulse(at=BodyPoint(body="h"), time=0.5, vector=np.ones(3))
     compiled = prepare(replace(make_scene([body], gravity=G), forces=(kick,)))
     forces, model = compiled.forces, compiled.model
     kernel = forces.kernel()
     assert isinstance(kernel, KernelForceTables) and kernel._fields == forces._fields
     assert kernel.impulse is forces.impulse and kernel.schedule is forces.schedule
-    for name in ("field", "point_force", "torque", "spring", "drag"):
-        assert getattr(kernel, name) is None, name
+    for name in ("field", "point_force", "torque", "spring", "drag"):  # present, with 0 rows
+        assert getattr(kernel, name) is getattr(forces, name) and getattr(kernel, name)[0].shape[0] == 0, name
     kernel_model = model.kernel()  # the model's tables: None where the scene lacks them
     assert isinstance(kernel_model, KernelModel)
     assert (kernel_model.contact, kernel_model.joint, kernel_model.kinematic) == (None, None, None)
     assert make_force_data(model).contact is None and make_force_data(kernel_model).contact is None
+    # one numba type for every scene with forces, whatever its force types
+    drag = ForceDrag(bodies=("h",), linear=0.5)
+    other = prepare(replace(make_scene([body], gravity=G), forces=(drag,)))
+    assert numba.typeof(other.forces.kernel()) == numba.typeof(kernel) != numba.typeof(kernel_alone)
     again = prepare(replace(make_scene([body], gravity=G), forces=(kick,)))
-    assert numba.typeof(again.forces.kernel()) == numba.typeof(kernel)  # one compiled kernel per kind of scene
     assert numba.typeof(again.model.kernel()) == numba.typeof(kernel_model)
 
 

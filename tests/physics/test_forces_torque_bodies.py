@@ -6,7 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import make_scene, random_bodies
+from conftest import as_runner_passes, make_scene, random_bodies
 
 from rbcli.api import prepare
 from rbcli.physics.data import make_data
@@ -150,8 +150,8 @@ def _run_chunk(name, compiled, forces, steps):  # noqa: ANN001, ANN202
     data = make_data(compiled.initial_state, compiled.model, chunk.SCRATCH_WIDTH)
     n, dt = compiled.model.body_count, compiled.settings.dt
     never = np.iinfo(np.int64).max
-    done, _, status = chunk.run_chunk(compiled.model.kernel(), forces, data.kernel(), dt, 0, steps, never,
-                                      empty_buffers(1, n), 0)  # fmt: skip
+    handles = as_runner_passes(compiled.model.kernel(), forces, data.kernel(), empty_buffers(1, n))
+    done, _, status = chunk.run_chunk(*handles[:3], dt, 0, steps, never, handles[3], 0)
     assert (done, status) == (steps, STATUS_OK)
     return data.state
 
@@ -228,9 +228,8 @@ def test_adaptive_dopri5_per_body_torque_path_is_bitwise_the_all_bodies_path():
     run_chunk = get_integrator("dopri5").adaptive_chunk().run_chunk
     for forces in (tables, all_bodies, tables._replace(has_torque=False)):
         data = make_data(compiled.initial_state, compiled.model, 0, adaptive=True, tolerance=1e-8, duration=2.0)
-        done, _, status = run_chunk(
-            compiled.model.kernel(), forces, data.kernel(), 0.01, 0, 200, 50, empty_buffers(8, 5), 0
-        )
+        handles = as_runner_passes(compiled.model.kernel(), forces, data.kernel(), empty_buffers(8, 5))
+        done, _, status = run_chunk(*handles[:3], 0.01, 0, 200, 50, handles[3], 0)
         assert (done, status) == (200, STATUS_OK)
         results.append((_bits(data.state), data.adaptive_counters.tolist()))
     assert np.array_equal(results[0][0], results[1][0]) and results[0][1] == results[1][1]

@@ -7,7 +7,7 @@ does (chunks, frame buffers), on a Data of its own.
 import dataclasses
 
 import numpy as np
-from conftest import make_body, make_scene
+from conftest import as_runner_passes, make_body, make_scene
 
 from rbcli.analysis.exact import quat_geodesic_angle, torque_free
 from rbcli.api import prepare
@@ -49,9 +49,8 @@ def run_adaptive(compiled, tolerance, chunk_steps=None):
     filled, index, status = 1, 0, STATUS_OK
     while index < total and status in (STATUS_OK, STATUS_FULL):
         todo = total - index if chunk_steps is None else min(chunk_steps, total - index)
-        done, filled, status = run_chunk(
-            model.kernel(), compiled.forces, data.kernel(), dt, index, todo, every, frames, filled
-        )
+        handles = as_runner_passes(model.kernel(), compiled.forces.kernel(), data.kernel(), frames)
+        done, filled, status = run_chunk(*handles[:3], dt, index, todo, every, handles[3], filled)
         index += done
     k = filled
     return frames.step[:k] * dt, user_orientation(model, frames.q[:k]), frames.x[:k], data.adaptive_counters, status

@@ -5,7 +5,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import make_scene, random_bodies
+from conftest import as_runner_passes, make_scene, random_bodies
 
 from rbcli.api import prepare
 from rbcli.physics.forces import WORLD, build_force_tables, drag_table, spring_table
@@ -97,7 +97,8 @@ def test_chunk_loop_equals_repeated_steps(name):
     a, b = data.state, compiled.initial_state.copy()
     F, tau, scratch = np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, kernel.SCRATCH_WIDTH))
     frames = empty_buffers(4, 3)
-    done, filled, status = chunk.run_chunk(kmodel, forces, data.kernel(), 0.01, 0, 10, 3, frames, 0)
+    handles = as_runner_passes(kmodel, forces, data.kernel(), frames)  # the runner's form: its loop
+    done, filled, status = chunk.run_chunk(*handles[:3], 0.01, 0, 10, 3, handles[3], 0)
     assert (done, filled, status) == (10, 3, 0)
     assert frames.step[:3].tolist() == [3, 6, 9]
     contact, force_data = kmodel.contact, make_force_data(kmodel)

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import as_runner_passes
 
 from rbcli.physics import adaptive_loop, chunk_loop
 from rbcli.physics.forces import wrench_pass
@@ -149,9 +150,8 @@ def test_a_loop_runs_the_joint_stages_only_where_its_integrator_holds_joints():
         chunk = get_integrator(name).chunk()
         data = make_data(compiled.initial_state, compiled.model, chunk.SCRATCH_WIDTH)
         frames = empty_buffers(1, 1, 1)
-        done, _, status = chunk.run_chunk(
-            compiled.model.kernel(), compiled.forces.kernel(), data.kernel(), dt, 0, steps, 10**9, frames, 0
-        )
+        handles = as_runner_passes(compiled.model.kernel(), compiled.forces.kernel(), data.kernel(), frames)
+        done, _, status = chunk.run_chunk(*handles[:3], dt, 0, steps, 10**9, handles[3], 0)
         assert (done, status) == (steps, 0)
         x = data.state.x[0]
         if name == "split2":

@@ -2,9 +2,10 @@
 
 A table has one row per (term, touched body); a scene that does not use a type gets the same table
 with 0 rows, so Python code reads every ForceTables alike (`forces.spring.body_a`, `table_rows`).
-Compiled kernels take `ForceTables.kernel()` instead (KernelForceTables): the same fields with None for
-every table without rows, so the stages of absent types compile to nothing (forces/stages.py); a scene
-always gets the same combination, so its kernels' numba types are stable from run to run.
+Compiled kernels take `ForceTables.kernel()` instead (KernelForceTables): every force type's table None
+in a scene whose only force is gravity, so no force stage compiles (forces/stages.py), and every table,
+empty ones too, in a scene with any other force, so all such scenes share one compiled loop; the numba
+types are stable from run to run.
 
 Points are body-fixed offsets about the centre of mass in the PRINCIPAL frame
 (`KernelModel.particle_offset`'s frame), converted once at compile time from the user's body frame:
@@ -175,23 +176,24 @@ class ForceTables(NamedTuple):
     impulse: ImpulseTable
 
     def kernel(self) -> KernelForceTables:
-        """The tables as compiled kernels take them: None for each table without rows (see
-        KernelForceTables)."""
-
-        def kernel_field(name: str, value: Any) -> Any:  # noqa: ANN401 - a table or a switch
-            if name in _KERNEL_AS_IS:
-                return value
-            return value if table_rows(value) else None  # every force type's table
-
-        return KernelForceTables(*(kernel_field(name, getattr(self, name)) for name in self._fields))
+        """The tables as compiled kernels take them: None for every force type's table when the scene has
+        no rows of any, else every table as it is, the empty ones too (see KernelForceTables)."""
+        forced = any(table_rows(getattr(self, name)) for name in self._fields if name not in _KERNEL_AS_IS)
+        return KernelForceTables(*(value if name in _KERNEL_AS_IS or forced else None
+                                   for name, value in zip(self._fields, self, strict=True)))  # fmt: skip
 
 
 class KernelForceTables(NamedTuple):
     """ForceTables as compiled kernels take them (`ForceTables.kernel()`, like Model.kernel()): the
-    same fields in the same order, each force type's table None when the scene has no rows of it, so
-    numba types it as NoneType and its stage compiles to nothing (forces/stages.py, physics/stages.py).
-    Kernels also accept a ForceTables (every stage then compiled, skipped at run time for 0 rows), as
-    tests and benchmarks that call them directly do."""
+    same fields in the same order. A scene whose only force is gravity has every force type's table None,
+    so numba types them as NoneType and the force stages compile to nothing (forces/stages.py,
+    physics/stages.py). A scene with any other force term has every table, those of the types it lacks
+    with 0 rows, which each stage skips at run time (one row-count test per force evaluation): every scene
+    with forces has the same numba type, so the loop and the stages one such scene compiles serve all of
+    them, whatever their mix of force types (issue 44: each combination of six types was a loop of its
+    own, ~6 CPU-s each; the stages of all six types together compile in a few seconds, once). Kernels
+    also accept a ForceTables (every stage then compiled, skipped at run time for 0 rows), as tests and
+    benchmarks that call them directly do."""
 
     gravity: np.ndarray
     has_gravity: bool
