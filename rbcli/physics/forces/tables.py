@@ -179,8 +179,9 @@ class ForceTables(NamedTuple):
         """The tables as compiled kernels take them: None for every force type's table when the scene has
         no rows of any, else every table as it is, the empty ones too (see KernelForceTables)."""
         forced = any(table_rows(getattr(self, name)) for name in self._fields if name not in _KERNEL_AS_IS)
-        return KernelForceTables(*(value if name in _KERNEL_AS_IS or forced else None
-                                   for name, value in zip(self._fields, self, strict=True)))  # fmt: skip
+        fields: list[Any] = [value if name in _KERNEL_AS_IS or forced else None
+                             for name, value in zip(self._fields, self, strict=True)]  # fmt: skip
+        return KernelForceTables(*fields)
 
 
 class KernelForceTables(NamedTuple):
