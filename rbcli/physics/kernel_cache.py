@@ -39,12 +39,20 @@ the fast load, this guard is installed on every numba that has the internals it 
 rbcli's kernels are not cached at all rather than cached stale. tests/physics/test_kernel_cache.py edits
 a copy of the package in a subprocess and checks that the edit takes effect and that an unchanged copy
 loads without compiling.
+
+An index that cannot be read is a miss. numba unpickles an index's entries before it compares their
+source stamp, and an entry's signature names the types of its arguments (rbcli's NamedTuple tables,
+sinks): an index written before such a class was renamed or removed raised AttributeError at every
+load, and the run failed, where the index was obsolete anyway (its stamp is another physics hash).
+`_install_index_guard` makes any such failure return an empty index, as numba does for an index of
+another version, so the function compiles and its index is written anew (test_kernel_cache.py).
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+import pickle
 from typing import Any
 
 from rbcli.physics.kernel_link import StaleKernelSymbol
@@ -108,6 +116,31 @@ def _may_call_rbcli(py_func: Any) -> bool:  # noqa: ANN401 - any Python function
         if isinstance(owner, str) and (owner == "rbcli" or owner.startswith("rbcli.")):
             return True
     return False
+
+
+# what unpickling an index written by another version of rbcli (or numba) raises: a class or module it
+# names is gone or moved, or the bytes are cut short
+_UNREADABLE_INDEX = (AttributeError, ImportError, EOFError, TypeError, ValueError, IndexError, pickle.UnpicklingError)
+
+
+def _install_index_guard() -> None:
+    """An index whose entries cannot be unpickled reads as empty (module docstring)."""
+    try:
+        from numba.core.caching import IndexDataCacheFile
+    except ImportError:  # pragma: no cover - a numba without this internal: its own behaviour stays
+        return
+    load_index = getattr(IndexDataCacheFile, "_load_index", None)
+    if load_index is None or getattr(load_index, "_rbcli", False):  # pragma: no cover - other numba, or done
+        return
+
+    def guarded_load_index(self: Any) -> Any:  # noqa: ANN401
+        try:
+            return load_index(self)
+        except _UNREADABLE_INDEX:  # obsolete: compiled anew, the index overwritten by the next save
+            return {}
+
+    guarded_load_index._rbcli = True  # type: ignore[attr-defined]
+    IndexDataCacheFile._load_index = guarded_load_index  # type: ignore[method-assign]
 
 
 def _install_guard(Cache: Any) -> None:  # noqa: ANN401, N803 - numba's Cache class
@@ -176,6 +209,7 @@ def install() -> None:
     from numba.core.caching import Cache
 
     _install_guard(Cache)
+    _install_index_guard()
     if tuple(int(p) for p in numba.__version__.split(".")[:2]) in VERIFIED_NUMBA:
         from rbcli.physics import kernel_link
 

@@ -135,3 +135,51 @@ def test_every_kernel_module_installs_the_cache_guard_before_its_kernels_can_run
     missing = sorted(name for name in uses_numba if not installs(name, set()))
     assert not missing, f"these modules import numba but never kernel_cache: {missing}"
     assert len(uses_numba) > 40  # the walk found the kernel modules
+
+
+# a cached function whose signature names a NamedTuple of its module (as rbcli's kernels name their tables
+# and sinks); version 2 of the module has removed that class
+HOLDER_V1 = """
+from typing import NamedTuple
+import numba
+import numpy as np
+
+class Gone(NamedTuple):
+    values: np.ndarray
+
+@numba.njit(cache=True)
+def total(table):
+    return table[0].sum()
+"""
+HOLDER_V2 = HOLDER_V1.replace("Gone", "Kept").replace("table[0].sum()", "table[0].sum() + 1.0")
+HOLDER_CALL = """
+import sys
+from rbcli.physics import kernel_cache
+kernel_cache.install()
+import numpy as np
+import holder
+print(holder.total(getattr(holder, sys.argv[1])(np.ones(3))))
+"""
+
+
+def test_an_index_naming_a_class_that_is_gone_is_a_cache_miss_not_a_crash(tmp_path):
+    """numba unpickles a cache index before it checks its source stamp: an index written by a version
+    of the code whose argument type is gone raised AttributeError at every later load (seen when a sink
+    class of contact/ was merged away: a suite run on the old cache failed). kernel_cache reads such an
+    index as empty: the function compiles and its index is written anew."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba_cache")}
+    env["PYTHONPATH"] = os.pathsep.join([str(tmp_path), str(ROOT)])
+
+    def call(version: str, type_name: str) -> subprocess.CompletedProcess:
+        (tmp_path / "holder.py").write_text(version)
+        return subprocess.run([sys.executable, "-c", HOLDER_CALL, type_name], env=env, cwd=tmp_path,
+                              capture_output=True, text=True, timeout=120)  # fmt: skip
+
+    first = call(HOLDER_V1, "Gone")
+    assert first.returncode == 0 and first.stdout.split() == ["3.0"], first.stderr[-2000:]
+    assert any((tmp_path / "numba_cache").rglob("holder.total-*.nbi"))  # the index naming holder.Gone
+    second = call(HOLDER_V2, "Kept")
+    assert second.returncode == 0, second.stderr[-2000:]
+    assert second.stdout.split() == ["4.0"]  # version 2's code, compiled anew
+    again = call(HOLDER_V2, "Kept")  # and its index, written anew, serves the next process
+    assert again.returncode == 0 and again.stdout.split() == ["4.0"], again.stderr[-2000:]

@@ -23,43 +23,24 @@ velocities (`commit_contacts`). A tangential spring with a Coulomb cap lets a bo
 without creeping (a viscous tangential law creeps), which is why it is used; see docs/contact.md.
 
 Where the pieces are: the contacts come from the one contact search (search.py: planes, the grid walk,
-the mixed materials), the formulas from law.py; this module is the stage that applies them (the force
-sink of the search), and the stages around the update (the clock, the commit, static bodies held).
+the mixed materials), the formulas from law.py, the force sink of the search from sink.py; this module is the stage
+that applies them, and the stages around the update (the clock, the commit, static bodies held).
 """
 
 from __future__ import annotations
 
 import math
-from typing import Any, NamedTuple
 
 import numba
-import numpy as np
-from numba.core import types
-from numba.extending import overload
 
-from rbcli.physics.contact.law import ContactGeometry, apply_contact, body_velocities, contact_values, velocity_at
+from rbcli.physics.contact.law import body_velocities, velocity_at
 from rbcli.physics.contact.quiet import try_quiet
-from rbcli.physics.contact.search import contact_found, sphere_positions
+from rbcli.physics.contact.search import sphere_positions
+from rbcli.physics.contact.sink import force_sink
 from rbcli.physics.contact.tables import COUNT_CANDIDATES, COUNT_EVALUATIONS
 from rbcli.physics.contact.threaded import contact_search
 from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.step import STEP_KERNEL
-
-_OPTIONS: Any = STEP_KERNEL  # typed Any: numba's stubs type jit_options as a TypedDict without `_nrt`
-
-
-class ContactForceSink(NamedTuple):
-    """The force stage's sink of the contact search (search.py): each contact's force is added to F and
-    tau (at the bodies' centres of mass x), its spring proposed to the history, at offset s into the step."""
-
-    x: np.ndarray
-    s: float
-    F: np.ndarray
-    tau: np.ndarray
-
-
-# search.pairs_of_bodies: the force stage takes narrow.py's pair path (a class attribute, not a field)
-setattr(ContactForceSink, "PAIRS_OF_BODIES", True)  # noqa: B010
 
 
 @numba.njit(**STEP_KERNEL)
@@ -158,21 +139,4 @@ def accumulate_contact(model, contact, work, t, x, q, P, L, F, tau) -> None:  # 
     if not flagged:  # nothing can touch: no search (search.py)
         return
     # the serial search, or the same contacts and sums with the walk and force law on threads (threaded.py)
-    work.counters[COUNT_CANDIDATES] += contact_search(contact, work, ContactForceSink(x, s, F, tau))
-
-
-# not inline="always": numba 0.68's IR inlining of this overload lost the writes to sink.F and sink.tau
-# (the forces came out zero; measured); as a function LLVM still inlines it into the walk
-@overload(contact_found, jit_options=_OPTIONS)
-def _contact_force(sink, contact, work, owner, partner, ba, bb, n0, n1, n2, overlap, c0, c1, c2, k, zeta, mu):  # noqa: ANN001, ANN202
-    """The force of one contact (module docstring) on body ba (owner) and bb (partner; -1: a plane), its
-    spring proposed to the history (trial arrays; commit_contacts advances it to the end of the step)."""
-    if not (isinstance(sink, types.BaseNamedTuple) and sink.instance_class is ContactForceSink):
-        return None
-
-    def resolve(sink, contact, work, owner, partner, ba, bb, n0, n1, n2, overlap, c0, c1, c2, k, zeta, mu):  # noqa: ANN001, ANN202
-        geometry = ContactGeometry(owner, partner, ba, bb, (n0, n1, n2), overlap, (c0, c1, c2))
-        outcome = contact_values(contact, work, sink.x, sink.s, geometry, k, zeta, mu)
-        apply_contact(work, sink.x, sink.F, sink.tau, geometry, mu > 0.0, outcome)
-
-    return resolve
+    work.counters[COUNT_CANDIDATES] += contact_search(contact, work, force_sink(x, s, F, tau, work))

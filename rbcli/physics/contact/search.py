@@ -28,9 +28,10 @@ hold several cells, so a candidate of another cell is skipped by comparing cells
 cell). The walk reads the bucket-ordered copies (sorted_*: build_grid), so the distance checks of the
 candidates touch neighbouring memory; sphere and body arrays are read only for real overlaps.
 
-Sinks: `contact_found(sink, ...)` is a stub; each sink module registers a numba `overload` of it for
-its own sink type (a NamedTuple), so a search compiled for one sink inlines that sink's code and no
-other: the force stage pays nothing for the recorded streams, and numba caches each combination.
+Sinks: `contact_found(sink, ...)` is a stub; a sink module registers a numba `overload` of it for its
+sink type (a NamedTuple). The force stage, the statistics and the contact points share one type,
+sink.ContactSink, whose `purpose` chooses at run time, so a scene compiles the search once for all
+three (sink.py says why); the threaded search's record blocks have their own (threaded.py).
 `find_contacts` is a compiled function of its own (one per sink type), called only when the body phase
 flagged some body: inlined into each caller at numba's IR level, as it was, the search was ~4-5 s of
 each caller's first compile (numba's pass events), and a call passes the contact table and work by
@@ -103,9 +104,8 @@ def pairs_of_bodies(contact, work, sink, gridded, threaded) -> int:  # noqa: ANN
     """The sphere pairs of the body pairs (narrow.py; on threads when `threaded`, a literal) handed to
     the sink in the walk's order; returns the tests made, or -1 when the walk must run instead. Kernels
     only; compiled to -1 where the work has no pair buffers (the body level off), so those scenes
-    compile none of it, and for sinks that do not ask for it (class attribute PAIRS_OF_BODIES: the
-    force stage's; the recorded statistics and contact points run once per frame and walk, which
-    saves compiling a second copy of their code, ~1.6 s each)."""
+    compile none of it, and for sinks that do not ask for it (class attribute PAIRS_OF_BODIES:
+    sink.ContactSink asks, whatever its purpose; the threaded search's record blocks do not)."""
     raise TypeError("pairs_of_bodies runs in compiled kernels only")
 
 

@@ -18,28 +18,14 @@ frame (no velocities, no forces), in the pipeline's contact_record stage.
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
-
 import numba
-import numpy as np
-from numba.core import types
-from numba.extending import overload
 
-from rbcli.physics.contact.law import history_elongation
 from rbcli.physics.contact.quiet import quiet_at_step_end
-from rbcli.physics.contact.search import contact_found, find_contacts, sphere_positions
-from rbcli.physics.contact.tables import COUNT_OVERFLOW, STAT_CONTACTS, STAT_ENERGY, STAT_MAX_PENETRATION, STAT_OVERFLOW
+from rbcli.physics.contact.search import find_contacts, sphere_positions
+from rbcli.physics.contact.sink import state_sink
+from rbcli.physics.contact.tables import COUNT_OVERFLOW, STAT_OVERFLOW
 from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.step import STEP_KERNEL
-
-_OPTIONS: Any = STEP_KERNEL  # typed Any: numba's stubs type jit_options as a TypedDict without `_nrt`
-
-
-class ContactStateSink(NamedTuple):
-    """The statistics sink of the contact search: row `row` of out (rows, FRAME_STAT_COUNT) takes the sums."""
-
-    out: np.ndarray
-    row: int
 
 
 @separately_compiled
@@ -53,23 +39,5 @@ def record_contact_state(contact, work, x, q, out, row) -> None:  # noqa: ANN001
     if quiet_at_step_end(work, x):  # nothing can touch (quiet.py)
         pass
     elif sphere_positions(contact, work, x, q):  # else nothing can touch (search.py)
-        find_contacts(contact, work, ContactStateSink(out, row))
+        find_contacts(contact, work, state_sink(x, out, row, work))
     out[row, STAT_OVERFLOW] = work.counters[COUNT_OVERFLOW]
-
-
-@overload(contact_found, jit_options=_OPTIONS)
-def _contact_state(sink, contact, work, owner, partner, ba, bb, n0, n1, n2, overlap, c0, c1, c2, k, zeta, mu):  # noqa: ANN001, ANN202
-    if not (isinstance(sink, types.BaseNamedTuple) and sink.instance_class is ContactStateSink):
-        return None
-
-    def add(sink, contact, work, owner, partner, ba, bb, n0, n1, n2, overlap, c0, c1, c2, k, zeta, mu):  # noqa: ANN001, ANN202
-        energy = 0.5 * k * overlap * overlap
-        if mu > 0.0:
-            x0, x1, x2 = history_elongation(work, owner, partner, n0, n1, n2)
-            energy += 0.5 * contact.tangential_ratio * k * (x0 * x0 + x1 * x1 + x2 * x2)
-        out, row = sink.out, sink.row
-        out[row, STAT_CONTACTS] += 1.0
-        out[row, STAT_MAX_PENETRATION] = max(out[row, STAT_MAX_PENETRATION], overlap)
-        out[row, STAT_ENERGY] += energy
-
-    return add

@@ -109,7 +109,7 @@ def _contact_search(contact, work, sink):  # noqa: ANN001, ANN202
 
 @numba.njit(**STEP_KERNEL, parallel=True)
 def find_contacts_threaded(contact, work, sink) -> int:  # noqa: ANN001
-    """search.find_contacts for the force stage's sink (force.ContactForceSink) on numba's threads, with
+    """search.find_contacts for the force stage's sink (sink.force_sink) on numba's threads, with
     the same results bit for bit (module docstring); returns the candidate pairs tested."""
     plane_contacts(contact, work, sink)
     gridded = work.body_sweep[SWEEP_SPHERES]
