@@ -1,6 +1,6 @@
 """The threaded step (issues 28 and 45) against the serial one and MuJoCo, idle and under a load.
 
-    python benchmarks/bench_threads.py [--quick] [--repeats N] [--load]
+    python benchmarks/bench_threads.py [--quick] [--repeats N] [--load | --one-thread]
 
 `Simulation.step` of split2 on 1 thread (`threads=1`: the serial loop), on every core (`threads="all"`:
 the threaded loop, fixed) and on the default (auto: runner/governor.py chooses 1 or every core per slice
@@ -14,6 +14,8 @@ Idle table: free bodies under gravity (bench_speed's bodies) at N = 100, 300, 1,
   capsule chain) under a load this benchmark makes on the same cores: "twin", a second process
   stepping the same scene with the default threads (a second `rbsim run`), and "busy", two Python
   busy loops. Target (issue 45): the default >= 0.8x of one thread under any load.
+--one-thread: each scene's threaded variant run on one thread (as the governor's one-thread slices run
+  it) against the serial loop, CPU time per step.
 """
 
 from __future__ import annotations
@@ -127,6 +129,41 @@ def idle_table(quick: bool, repeats: int) -> None:
         )
 
 
+def one_thread_table(quick: bool, repeats: int) -> None:
+    """The threaded variant of each scene's step run on one thread (as the governor's one-thread slices
+    run it) against the serial loop: CPU us per step, best of the interleaved rounds, the two runs stepping
+    the same states in lockstep (bitwise equal: checked)."""
+    import numba
+
+    print(f"\nThreaded variants on one thread: CPU us per step, best of {repeats}; load average {load_average()}")
+    print("| scene | serial loop | threaded variant on 1 thread | threaded / serial | bitwise |")
+    print("|---|---|---|---|---|")
+    for name in ("free bodies N = 10,000", "spring chain N = 1,000", "sphere pile N = 1,000"):
+        compiled, _ = scene_named(name)
+        serial, threaded = Simulation(compiled, threads=1), Simulation(compiled, threads="all")
+        steps = 20 if quick else 60
+
+        def chunk(sim: Simulation, n: int) -> float:
+            started = time.process_time()
+            sim._chunk(sim._kmodel, sim._kforces, sim._kdata, sim.settings.dt, sim.data.state.step, n, 2**62,
+                       sim._no_frames, 0)  # fmt: skip
+            sim.data.state.step += n
+            return (time.process_time() - started) / n
+
+        best = {"serial": float("inf"), "threaded": float("inf")}
+        numba.set_num_threads(1)
+        try:
+            chunk(serial, 2), chunk(threaded, 2)  # loaded, the pool started
+            for _ in range(repeats):
+                best["serial"] = min(best["serial"], chunk(serial, steps))
+                best["threaded"] = min(best["threaded"], chunk(threaded, steps))
+        finally:
+            numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+        same = all(np.array_equal(getattr(serial.data.state, k), getattr(threaded.data.state, k)) for k in "xqPL")
+        print(f"| {name} | {best['serial'] * 1e6:.1f} | {best['threaded'] * 1e6:.1f} | "
+              f"{best['threaded'] / best['serial']:.3f} | {'yes' if same else 'NO'} |", flush=True)  # fmt: skip
+
+
 def start_load(load: str, scene: str) -> list[subprocess.Popen]:
     if load == "none":
         return []
@@ -178,6 +215,8 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=None)
     parser.add_argument("--load", action="store_true", help="also the table under a load the benchmark makes")
     parser.add_argument("--only-load", action="store_true", help="only the loaded table")
+    parser.add_argument("--one-thread", action="store_true",
+                        help="only the threaded variants on one thread against the serial loop")  # fmt: skip
     parser.add_argument("--twin", help=argparse.SUPPRESS)
     options = parser.parse_args()
     if options.twin:
@@ -187,6 +226,9 @@ def main() -> None:
     print(f"threads: {available_cores()} cores; threaded loop from {PARALLEL_MIN_BODIES} bodies; "
           f"GOMP_SPINCOUNT={os.environ.get('GOMP_SPINCOUNT', '(rbsim sets it at the first threaded run)')}; "
           f"load average {load_average()}")  # fmt: skip
+    if options.one_thread:
+        one_thread_table(options.quick, repeats)
+        return
     if not options.only_load:
         idle_table(options.quick, repeats)
     if options.load or options.only_load:

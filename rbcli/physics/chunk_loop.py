@@ -160,7 +160,7 @@ def fixed_step_loop(module: str, *, joints: bool = False, defers: bool = False, 
         from rbcli.physics.joints import rattle, stages
 
         names = ("joint_begin", "joint_velocity", "joint_record")
-        bound.update({name: getattr(stages, name) for name in names}, joint_update=rattle.joint_update)
+        bound.update({name: getattr(stages, name) for name in names}, joint_update=rattle.joint_update_stage)
     function = types.FunctionType(run_chunk.__code__, {**run_chunk.__globals__, **bound}, run_chunk.__name__)
     function.__doc__ = run_chunk.__doc__
     # numba names each function's cache files and index after its qualified name (the code is the same)

@@ -122,7 +122,7 @@ def test_each_integrator_s_loop_is_the_one_loop_bound_to_its_step(name):
         assert bound["integrator_step"] is step
         assert (bound["HOLDS_JOINTS"], bound["DEFERS"]) == (info.joints, info.defers)
         assert (bound["integrator_materialise"] is getattr(module, "materialise", None)) == info.defers
-        assert (bound["joint_update"] is rattle.joint_update) == info.joints
+        assert (bound["joint_update"] is rattle.joint_update_stage) == info.joints
         assert loop.SCRATCH_WIDTH == module.SCRATCH_WIDTH
         assert info.chunk() is info.chunk()  # one dispatcher per integrator: compiled or loaded once
     names = {get_integrator(n).chunk().run_chunk.py_func.__qualname__ for n in INTEGRATORS}

@@ -37,7 +37,9 @@ a palindrome: second order (symplectic only in the conservative part, as split2)
 from __future__ import annotations
 
 import numba
+from numba.extending import overload
 
+from rbcli.physics.dispatch import DISPATCH_OPTIONS, absent, kernel_only
 from rbcli.physics.forces.damping import dissipation_flow, dissipation_present
 from rbcli.physics.forces.wrench import accumulate_wrench
 from rbcli.physics.integrators.split2 import free_drift
@@ -175,3 +177,29 @@ def _newton(model, table, work, h, x, q, P, L):  # noqa: ANN001, ANN202
         if worst > NEWTON_STALL * previous:
             break
     return worst, iterations
+
+
+def joint_update_stage(
+    model, forces, contact, force_data, table, work, kinematic, schedule, t, h, x, q, P, L, F, tau
+) -> bool:  # noqa: ANN001
+    """`joint_update` as split2's loop calls it (chunk_loop.py): the RATTLE step where the scene has
+    joints, and False, compiling nothing of it, where the joint table or work is None (a split2 scene
+    without joints: joint_update pruned to nothing still cost ~0.5-0.8 CPU-s of numba's front end on
+    every such first run; physics/dispatch.py)."""
+    kernel_only()
+    return False
+
+
+@overload(joint_update_stage, jit_options=DISPATCH_OPTIONS)
+def _joint_update_stage(model, forces, contact, force_data, table, work, kinematic, schedule, t, h, x, q, P, L, F, tau):  # noqa: ANN001, ANN202
+    if absent(table, work):
+        return lambda model, forces, contact, force_data, table, work, kinematic, schedule, t, h, x, q, P, L, F, tau: (
+            False
+        )  # noqa: E501
+
+    def step(model, forces, contact, force_data, table, work, kinematic, schedule, t, h, x, q, P, L, F, tau):  # noqa: ANN001, ANN202
+        return joint_update(
+            model, forces, contact, force_data, table, work, kinematic, schedule, t, h, x, q, P, L, F, tau
+        )
+
+    return step
