@@ -147,7 +147,11 @@ def _run_lines(spec) -> list[str]:  # noqa: ANN001 - a SceneSpec
             f"{body_steps:,} body-steps"
         )
     forces = [term for term in force_terms(spec) if term != "contact"]
-    families = ["free bodies"] + ([f"forces ({', '.join(forces)})"] if forces else [])
+    families = ["free bodies"]
+    if set(forces) - {"gravity"}:  # one loop serves every mix of force types (forces/tables.py KernelForceTables)
+        families.append(f"forces ({', '.join(forces)}: the loop of every mix of force types)")
+    elif forces:
+        families.append(f"forces ({', '.join(forces)})")
     optional = {"contact": kernel_tables.contact, "kinematic": kernel_tables.kinematic, "joints": kernel_tables.joint}
     families += [name for name, table in optional.items() if table is not None]
     loop = f"{settings.integrator} {'adaptive ' if settings.tolerance is not None else ''}loop"

@@ -222,3 +222,10 @@ def test_the_contact_line_says_which_shapes_meet_planes_as_themselves(tmp_path):
         lines[path.stem] = next(line for line in result.output.splitlines() if "contact:" in line)
     assert "(1 box and 1 capsule meet planes and walls as their exact shapes)" in lines["on"], lines
     assert "exact shape" not in lines["off"] and "1 plane" in lines["off"], lines
+
+
+def test_verbose_says_a_scene_with_forces_runs_the_loop_of_every_mix_of_force_types():
+    """forces/tables.py: every scene with a force term beyond gravity has the same kernel tables' type."""
+    lines = verbose_lines(REPO / "scenes" / "forces" / "spring_chain.yaml")
+    (kernels,) = [line for line in lines if line.startswith("  kernels: ")]
+    assert "forces (gravity, spring, drag: the loop of every mix of force types)" in kernels, kernels
