@@ -100,6 +100,15 @@ def descendants(pid: int) -> set[int]:
     return found
 
 
+def _kill_all(pids: list[int] | set[int]) -> None:
+    """SIGKILL to each of pids still there (what a failed test leaves of the viewer's processes)."""
+    for pid in pids:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
+
+
 def alive(pid: int) -> bool:
     fields = _stat(pid)
     return fields is not None and fields[0] != "Z"  # a zombie holds no port and runs nothing
@@ -116,6 +125,7 @@ def test_a_stop_signal_leaves_no_process_and_no_bound_port(tmp_path, recording, 
         proc = subprocess.Popen(
             [*args, "--grpc-port", str(grpc)], cwd=ROOT, stdout=out, stderr=subprocess.STDOUT, env=env
         )
+    below: list[int] = []
     try:
         deadline = time.monotonic() + 60.0
         while not (listening(web) and listening(grpc)):
@@ -126,14 +136,16 @@ def test_a_stop_signal_leaves_no_process_and_no_bound_port(tmp_path, recording, 
                 raise AssertionError(text)
             assert time.monotonic() < deadline, log.read_text()
             time.sleep(0.05)
-        below = descendants(proc.pid)
-        assert below and all(alive(p) for p in below)  # python -m rerun and the rerun binary
+        # python -m rerun and the rerun binary (a helper the viewer starts may come and go meanwhile)
+        below = [p for p in descendants(proc.pid) if alive(p)]
+        assert len(below) >= 2, below
         proc.send_signal(signum)
         proc.wait(timeout=30)
     finally:
-        if proc.poll() is None:  # the test failed: leave nothing either
-            proc.kill()
+        if proc.poll() is None:  # the test failed: leave nothing either (rbsim killed cannot stop its
+            proc.kill()  # viewer: a server left behind kept a core busy for the rest of the suite)
             proc.wait()
+            _kill_all(below)
     text = log.read_text()
     assert proc.returncode == status, text
     assert f"stopped the web viewer ({signal.Signals(signum).name}); ports {web} and {grpc} are free" in text
@@ -217,10 +229,16 @@ def test_the_printed_address_loads_the_recording(tmp_path, recording, mcap_recor
             time.sleep(0.2)
         assert (tmp_path / "opened.txt").read_text() == address  # opened, once it loads (no display here)
     finally:
+        below = descendants(proc.pid)
         for process in (saver, proc):
             if process is not None and process.poll() is None:
                 process.send_signal(signal.SIGINT)
-                process.wait(timeout=30)
+                try:
+                    process.wait(timeout=30)
+                except subprocess.TimeoutExpired:  # leave no server running on the suite's cores
+                    process.kill()
+                    process.wait()
+                    _kill_all(below)
     if kind == "rrd":  # and it reads back as the recording, frame for frame
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # a streamed .rrd has no footer: rerun's reader says so
