@@ -106,7 +106,7 @@ def test_threaded_search_gives_the_bits_of_the_serial_one(text, tmp_path, thread
     one = Simulation(scene, threads=2)  # the threaded search on one thread: the same bits
     numba.set_num_threads(1)
     try:
-        one._chunk(one._kmodel, one._kforces, one._kdata, one.settings.dt, 0, 251, 2**62, one._no_frames, 0)
+        one._run_chunk(0, 251, 2**62, one._no_frames, 0)  # the runner's call (kernel handles): its loop
     finally:
         numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
     one.data.state.step = 251

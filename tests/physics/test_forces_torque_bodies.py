@@ -142,6 +142,14 @@ def _mixed(integrator: str, dt: float = 0.01):  # noqa: ANN202
     return compiled
 
 
+def _every_body(count: int) -> np.ndarray:
+    """torque_body flagging every body, read-only as the compiled tables' are (a writable array is another
+    numba type: a loop compiled for it alone)."""
+    flags = np.ones(count, dtype=np.bool_)
+    flags.flags.writeable = False
+    return flags
+
+
 def _run_chunk(name, compiled, forces, steps):  # noqa: ANN001, ANN202
     """The integrator's run_chunk over `steps` steps of the compiled scene with these force tables."""
     from rbcli.physics.data import make_data
@@ -178,7 +186,7 @@ def test_per_body_torque_path_is_bitwise_the_all_bodies_path(name):
     chains the flow through the kicks, which agree to round-off (1e-13 here)."""
     compiled = _mixed(name)
     tables = compiled.forces.kernel()  # as Simulation passes them: only the stages the scene has compile
-    all_bodies = tables._replace(torque_body=np.ones(compiled.model.body_count, dtype=np.bool_))
+    all_bodies = tables._replace(torque_body=_every_body(compiled.model.body_count))
     per_body = _run_chunk(name, compiled, tables, 200)
     old = _run_chunk(name, compiled, all_bodies, 200)
     if name == "exact":
@@ -223,7 +231,7 @@ def test_adaptive_dopri5_per_body_torque_path_is_bitwise_the_all_bodies_path():
     not the result without torques."""
     compiled = _mixed("dopri5")
     tables = compiled.forces.kernel()
-    all_bodies = tables._replace(torque_body=np.ones(5, dtype=np.bool_))
+    all_bodies = tables._replace(torque_body=_every_body(5))
     results = []
     run_chunk = get_integrator("dopri5").adaptive_chunk().run_chunk
     for forces in (tables, all_bodies, tables._replace(has_torque=False)):
