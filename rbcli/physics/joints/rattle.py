@@ -193,9 +193,11 @@ def joint_update_stage(
 @overload(joint_update_stage, jit_options=DISPATCH_OPTIONS)
 def _joint_update_stage(model, forces, contact, force_data, table, work, kinematic, schedule, t, h, x, q, P, L, F, tau):  # noqa: ANN001, ANN202
     if absent(table, work):
-        return lambda model, forces, contact, force_data, table, work, kinematic, schedule, t, h, x, q, P, L, F, tau: (
-            False
-        )  # noqa: E501
+
+        def no_joints(model, forces, contact, force_data, table, work, kinematic, schedule, t, h, x, q, P, L, F, tau):  # noqa: ANN001, ANN202
+            return False  # the loop runs split2's own update
+
+        return no_joints
 
     def step(model, forces, contact, force_data, table, work, kinematic, schedule, t, h, x, q, P, L, F, tau):  # noqa: ANN001, ANN202
         return joint_update(
