@@ -50,22 +50,16 @@ from numba.extending import overload
 
 from rbcli.physics.contact.body_phase import body_phase, excluded, place_spheres, whole_grid_hashed
 from rbcli.physics.contact.broad_phase import HALF_SHELL, bucket_of, build_grid_of
+from rbcli.physics.contact.found import contact_found
 from rbcli.physics.contact.manifold import Manifold
 from rbcli.physics.contact.narrow import pair_candidates, pair_candidates_threaded
+from rbcli.physics.contact.primitive_search import primitive_pairs
 from rbcli.physics.contact.primitives import primitive_plane
 from rbcli.physics.contact.tables import ACTIVE_PLANE, PLANE_PARTNER_BASE, SWEEP_SPHERES
 from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.step import STEP_KERNEL
 
 _OPTIONS: Any = STEP_KERNEL  # typed Any: numba's stubs type jit_options as a TypedDict without `_nrt`
-
-
-def contact_found(sink, contact, work, owner, partner, ba, bb, n0, n1, n2, overlap, c0, c1, c2, k, zeta, mu):  # noqa: ANN001, ANN201
-    """One contact for `sink` (kernels only; implemented per sink type by an overload in the sink's
-    module): owner and partner (sphere indices; a plane: PLANE_PARTNER_BASE - p), their bodies ba and bb
-    (bb = -1: a plane), the unit normal n towards the owner, the overlap d [m], the contact point c [m,
-    world], the mixed stiffness k [N/m], damping ratio zeta [1] and friction mu [1]."""
-    raise TypeError("contact_found runs in compiled kernels only, with a sink type that registers it")
 
 
 @numba.njit(cache=True, inline="always")
@@ -92,6 +86,7 @@ def find_contacts(contact, work, sink) -> int:  # noqa: ANN001
     then plane), then the pairs in walk order, each handed to `contact_found(sink, ...)`; returns the
     candidate pairs tested (distance checks)."""
     plane_contacts(contact, work, sink)
+    primitive_pairs(contact, work, sink)  # (primitive_search.py; nothing in a scene without primitives)
     gridded = work.body_sweep[SWEEP_SPHERES]  # the spheres of bodies in body pairs (sphere_positions)
     tested = pairs_of_bodies(contact, work, sink, gridded, False)  # (narrow.py; -1: the walk runs)
     if tested >= 0:
@@ -241,9 +236,9 @@ def plane_contacts(contact, work, sink) -> None:  # noqa: ANN001
 
 
 def place_primitives(contact, work, x, q) -> None:  # noqa: ANN001
-    """The world centre c = x_b + R r0 and rotation R R0 of the primitive of every body flagged near a
-    plane (work.primitive_centre, primitive_frame), once per evaluation. Kernels only; compiled to nothing
-    where the work has no primitive arrays (a scene without primitives)."""
+    """The world centre c = x_b + R r0 and rotation R R0 of the primitive of every flagged body (near a
+    plane or in a body pair: work.primitive_centre, primitive_frame), once per evaluation. Kernels only;
+    compiled to nothing where the work has no primitive arrays (a scene without primitives)."""
     raise TypeError("place_primitives runs in compiled kernels only")
 
 
@@ -256,7 +251,7 @@ def _place_primitives(contact, work, x, q):  # noqa: ANN001, ANN202
         centre, frame = work.primitive_centre, work.primitive_frame
         off, rot = contact.primitive_offset, contact.primitive_rotation
         for b in range(work.body_active.shape[0]):
-            if not work.body_active[b] & ACTIVE_PLANE or contact.primitive_kind[b] < 0:
+            if work.body_active[b] == 0 or contact.primitive_kind[b] < 0:  # planes and body pairs read it
                 continue
             w, i, j, k = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
             r00, r01, r02 = 1.0 - 2.0 * (j * j + k * k), 2.0 * (i * j - w * k), 2.0 * (i * k + w * j)

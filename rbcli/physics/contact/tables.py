@@ -231,6 +231,9 @@ class ContactWork(NamedTuple):
     manifold_normal: np.ndarray | None = None
     manifold_depth: np.ndarray | None = None
     manifold_feature: np.ndarray | None = None
+    # [m] (body_count + 1, 3): ContactTable.primitive_size, writable (primitive_search.py passes each pair's
+    # sizes from one array type, so primitive_pair compiles once), and a last row for a cloud sphere's (r, 0, 0)
+    primitive_shape: np.ndarray | None = None
 
 
 def _ro(values: object, dtype: type, *shape: int) -> np.ndarray:
@@ -308,7 +311,8 @@ def contact_table(
         body_bound_radius=_ro(rho, np.float64),
         body_large=_ro(large, np.bool_),
         body_cell_size=body_cell,
-        body_level_off=bool(spheres <= 2 * int(finite.sum())),
+        # a primitive's pairs come from the body pairs (primitive_search.py): never off with primitives
+        body_level_off=bool(spheres <= 2 * int(finite.sum())) and not bool((kind >= 0).any()),
         cell_size=float(2.0 * radius.max()) if spheres else 1.0,
         sphere_radius_min=float(radius.min()) if spheres else 0.0,
         tangential_ratio=float(tangential_ratio),
@@ -499,4 +503,5 @@ def primitive_work(contact: ContactTable, body_count: int) -> dict[str, np.ndarr
         manifold_normal=np.zeros((rows, 3)),
         manifold_depth=np.zeros(rows),
         manifold_feature=np.zeros(rows, dtype=np.int64),
+        primitive_shape=np.concatenate([contact.primitive_size, np.zeros((1, 3))]),
     )
