@@ -59,9 +59,9 @@ class ContactSummary:
         kinds = (("box", "boxes", self.boxes), ("capsule", "capsules", self.capsules))
         shapes = " and ".join(f"{n} {one if n == 1 else many}" for one, many, n in kinds if n)
         text = f"contact: {self.sphere_count:,} contact spheres, {planes}"
-        if shapes:  # their spheres still meet other bodies (docs/contact.md)
-            meets = "meets planes and walls as its exact shape"
-            many = "meet planes and walls as their exact shapes"
+        if shapes:  # their spheres are their mass only (docs/contact.md "Primitive contact")
+            meets = "touches planes, walls and bodies as its exact shape"
+            many = "touch planes, walls and bodies as their exact shapes"
             text += f" ({shapes} {meets if self.boxes + self.capsules == 1 else many})"
         if self.static_count:
             text += f", {self.static_count} static bod" + ("y" if self.static_count == 1 else "ies")

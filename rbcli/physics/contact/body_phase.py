@@ -38,12 +38,9 @@ the arrays are ContactWork's.
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numba
 import numpy as np
-from numba.core import types
-from numba.extending import overload
 
 from rbcli.physics.contact.broad_phase import _PRIME_X, _PRIME_Y, _PRIME_Z, HALF_SHELL, _cell
 from rbcli.physics.contact.tables import ACTIVE_PAIR, ACTIVE_PLANE, SWEEP_CHECKS, SWEEP_PAIRS, SWEEP_SPHERES
@@ -51,7 +48,6 @@ from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.rotation_kernels import rotate
 from rbcli.physics.step import STEP_KERNEL
 
-_OPTIONS: Any = STEP_KERNEL  # typed Any: numba's stubs type jit_options as a TypedDict without `_nrt`
 _FEW_BODIES = 8  # up to this many bodies every pair is tested (28 box tests): less than setting up the grid
 _BOX_PAD = 1e-9  # of rho_max: far above R's rounding (~1e-16 rho), far below any contact's overlap
 
@@ -309,7 +305,7 @@ def place_spheres(contact, work, x, q) -> int:  # noqa: ANN001
     count = 0
     for b in range(work.body_active.shape[0]):
         flags = work.body_active[b]
-        if flags == 0 or is_primitive(contact, work, b):  # its spheres touch nothing (primitive_search.py)
+        if flags == 0 or contact.primitive_kind[b] >= 0:  # a primitive's spheres touch nothing (primitive_search.py)
             continue
         for i in range(start[b], start[b + 1]):
             o0, o1, o2 = off[i, 0], off[i, 1], off[i, 2]
@@ -323,20 +319,6 @@ def place_spheres(contact, work, x, q) -> int:  # noqa: ANN001
                 count += 1
     work.body_sweep[SWEEP_SPHERES] = count
     return count
-
-
-def is_primitive(contact, work, b) -> bool:  # noqa: ANN001
-    """Whether body b touches as its primitive (ContactTable.primitive_kind >= 0): its contact spheres are
-    then its mass only, never placed, gridded or paired (primitive_search.py). Kernels only; compiled to
-    False where the work has no primitive arrays (a scene without primitives: the branch is pruned)."""
-    raise TypeError("is_primitive runs in compiled kernels only")
-
-
-@overload(is_primitive, jit_options=_OPTIONS)
-def _is_primitive(contact, work, b):  # noqa: ANN001, ANN202
-    if isinstance(dict(zip(work.fields, work.types, strict=True))["primitive_centre"], types.NoneType):
-        return lambda contact, work, b: False
-    return lambda contact, work, b: contact.primitive_kind[b] >= 0
 
 
 @numba.njit(cache=True, inline="always")

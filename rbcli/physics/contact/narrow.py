@@ -26,7 +26,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from rbcli.physics.contact.body_phase import is_primitive, whole_grid_hashed
+from rbcli.physics.contact.body_phase import whole_grid_hashed
 from rbcli.physics.contact.broad_phase import grid_box
 from rbcli.physics.contact.tables import SWEEP_PAIRS
 from rbcli.physics.kernel_link import separately_compiled
@@ -125,7 +125,7 @@ def _pairs_of(contact, work, grid, first, last, side_a, side_b, near, row0, capa
     tests, cost, n = 0, 0, 0
     for k in range(first, last):
         a, b = body_pair[k, 0], body_pair[k, 1]
-        if is_primitive(contact, work, a) or is_primitive(contact, work, b):  # primitive_search.py's pairs
+        if contact.primitive_kind[a] >= 0 or contact.primitive_kind[b] >= 0:  # primitive_search.py's pairs
             continue
         na = _cull(pos, radius, start[a], start[a + 1], lo, hi, b, side_a)
         if na == 0:

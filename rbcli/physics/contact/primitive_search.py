@@ -21,11 +21,8 @@ shares the pair's reduced mass, so each point's damping ratio is zeta / sqrt(n):
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numba
-from numba.core import types
-from numba.extending import overload
 
 from rbcli.physics.contact.body_phase import excluded
 from rbcli.physics.contact.found import contact_found
@@ -33,8 +30,6 @@ from rbcli.physics.contact.manifold import INLINE_KERNEL, Manifold
 from rbcli.physics.contact.primitives import PRIMITIVE_SPHERE, primitive_pair
 from rbcli.physics.contact.tables import SWEEP_PAIRS
 from rbcli.physics.step import STEP_KERNEL
-
-_OPTIONS: Any = STEP_KERNEL  # typed Any: numba's stubs type jit_options as a TypedDict without `_nrt`
 
 # box-box features (box_box.py: 64 face + code < 32, 1024 + 12 edge_a + edge_b) packed densely below this
 FEATURE_KEYS = 528
@@ -51,61 +46,52 @@ def feature_key(feature):  # noqa: ANN001, ANN201
     return feature
 
 
+@numba.njit(**STEP_KERNEL)
 def primitive_pairs(contact, work, sink) -> None:  # noqa: ANN001
-    """The contacts of the body pairs with a primitive (module docstring) handed to the sink. Kernels
-    only; compiled to nothing where the work has no primitive arrays (a scene without primitives)."""
-    raise TypeError("primitive_pairs runs in compiled kernels only")
-
-
-@overload(primitive_pairs, jit_options=_OPTIONS)
-def _primitive_pairs(contact, work, sink):  # noqa: ANN001, ANN202
-    if isinstance(dict(zip(work.fields, work.types, strict=True))["primitive_centre"], types.NoneType):
-        return lambda contact, work, sink: None
-
-    def touch(contact, work, sink):  # noqa: ANN001, ANN202
-        out = Manifold(work.manifold_point, work.manifold_normal, work.manifold_depth, work.manifold_feature)
-        start, kind, shape = contact.body_sphere_start, contact.primitive_kind, work.primitive_shape
-        centre, frame, lo, hi = work.primitive_centre, work.primitive_frame, work.body_lo, work.body_hi
-        sphere = shape.shape[0] - 1  # the scratch row of a cloud sphere's size (r, 0, 0)
-        for p in range(min(work.body_sweep[SWEEP_PAIRS], work.body_pair.shape[0])):
-            a, b = work.body_pair[p, 0], work.body_pair[p, 1]
-            if kind[a] < 0 and kind[b] < 0:
+    """The contacts of the body pairs with a primitive (module docstring) handed to the sink. Called by
+    search.pairs_of_bodies only where the work has primitive arrays (a scene without primitives compiles
+    none of it)."""
+    out = Manifold(work.manifold_point, work.manifold_normal, work.manifold_depth, work.manifold_feature)
+    start, kind, shape = contact.body_sphere_start, contact.primitive_kind, work.primitive_shape
+    centre, frame, lo, hi = work.primitive_centre, work.primitive_frame, work.body_lo, work.body_hi
+    sphere = shape.shape[0] - 1  # the scratch row of a cloud sphere's size (r, 0, 0)
+    for p in range(min(work.body_sweep[SWEEP_PAIRS], work.body_pair.shape[0])):
+        a, b = work.body_pair[p, 0], work.body_pair[p, 1]
+        if kind[a] < 0 and kind[b] < 0:
+            continue
+        if contact.excluded_pair.shape[0] and excluded(contact, a, b):
+            continue
+        ka, kb = contact.body_stiffness[a], contact.body_stiffness[b]
+        k = ka if ka == kb else 2.0 * ka * kb / (ka + kb)
+        zeta = min(contact.body_damping_ratio[a], contact.body_damping_ratio[b])
+        mu = contact.body_friction_root[a] * contact.body_friction_root[b]
+        if kind[a] >= 0 and kind[b] >= 0:
+            count = primitive_pair(kind[a], centre[a], frame[a], shape[a], kind[b], centre[b], frame[b],
+                                   shape[b], out)  # fmt: skip
+            if count == 0:
                 continue
-            if contact.excluded_pair.shape[0] and excluded(contact, a, b):
+            shared = zeta / math.sqrt(count)
+            na, nb = start[a + 1] - start[a], start[b + 1] - start[b]
+            for i in range(count):
+                key = feature_key(out.feature[i])
+                contact_found(sink, contact, work, start[a] + key % na, start[b] + (key // na) % nb, a, b,
+                              out.normal[i, 0], out.normal[i, 1], out.normal[i, 2], out.depth[i],
+                              out.point[i, 0], out.point[i, 1], out.point[i, 2], k, shared, mu)  # fmt: skip
+            continue
+        cloud, prim = (a, b) if kind[a] < 0 else (b, a)
+        pos, radius = work.sphere_position, contact.sphere_radius
+        for i in range(start[cloud], start[cloud + 1]):
+            r = radius[i]
+            if not (
+                (pos[i, 0] + r >= lo[prim, 0]) & (pos[i, 0] - r <= hi[prim, 0])
+                & (pos[i, 1] + r >= lo[prim, 1]) & (pos[i, 1] - r <= hi[prim, 1])
+                & (pos[i, 2] + r >= lo[prim, 2]) & (pos[i, 2] - r <= hi[prim, 2])
+            ):  # fmt: skip
                 continue
-            ka, kb = contact.body_stiffness[a], contact.body_stiffness[b]
-            k = ka if ka == kb else 2.0 * ka * kb / (ka + kb)
-            zeta = min(contact.body_damping_ratio[a], contact.body_damping_ratio[b])
-            mu = contact.body_friction_root[a] * contact.body_friction_root[b]
-            if kind[a] >= 0 and kind[b] >= 0:
-                count = primitive_pair(kind[a], centre[a], frame[a], shape[a], kind[b], centre[b], frame[b],
-                                       shape[b], out)  # fmt: skip
-                if count == 0:
-                    continue
-                shared = zeta / math.sqrt(count)
-                na, nb = start[a + 1] - start[a], start[b + 1] - start[b]
-                for i in range(count):
-                    key = feature_key(out.feature[i])
-                    contact_found(sink, contact, work, start[a] + key % na, start[b] + (key // na) % nb, a, b,
-                                  out.normal[i, 0], out.normal[i, 1], out.normal[i, 2], out.depth[i],
-                                  out.point[i, 0], out.point[i, 1], out.point[i, 2], k, shared, mu)  # fmt: skip
-                continue
-            cloud, prim = (a, b) if kind[a] < 0 else (b, a)
-            pos, radius = work.sphere_position, contact.sphere_radius
-            for i in range(start[cloud], start[cloud + 1]):
-                r = radius[i]
-                if not (
-                    (pos[i, 0] + r >= lo[prim, 0]) & (pos[i, 0] - r <= hi[prim, 0])
-                    & (pos[i, 1] + r >= lo[prim, 1]) & (pos[i, 1] - r <= hi[prim, 1])
-                    & (pos[i, 2] + r >= lo[prim, 2]) & (pos[i, 2] - r <= hi[prim, 2])
-                ):  # fmt: skip
-                    continue
-                shape[sphere, 0] = r
-                count = primitive_pair(PRIMITIVE_SPHERE, pos[i], frame[prim], shape[sphere], kind[prim],
-                                       centre[prim], frame[prim], shape[prim], out)  # fmt: skip
-                if count:  # sphere-X: one point, normal from the primitive to the sphere (the owner)
-                    contact_found(sink, contact, work, i, start[prim], cloud, prim,
-                                  out.normal[0, 0], out.normal[0, 1], out.normal[0, 2], out.depth[0],
-                                  out.point[0, 0], out.point[0, 1], out.point[0, 2], k, zeta, mu)  # fmt: skip
-
-    return touch
+            shape[sphere, 0] = r
+            count = primitive_pair(PRIMITIVE_SPHERE, pos[i], frame[prim], shape[sphere], kind[prim],
+                                   centre[prim], frame[prim], shape[prim], out)  # fmt: skip
+            if count:  # sphere-X: one point, normal from the primitive to the sphere (the owner)
+                contact_found(sink, contact, work, i, start[prim], cloud, prim,
+                              out.normal[0, 0], out.normal[0, 1], out.normal[0, 2], out.depth[0],
+                              out.point[0, 0], out.point[0, 1], out.point[0, 2], k, zeta, mu)  # fmt: skip

@@ -86,7 +86,6 @@ def find_contacts(contact, work, sink) -> int:  # noqa: ANN001
     then plane), then the pairs in walk order, each handed to `contact_found(sink, ...)`; returns the
     candidate pairs tested (distance checks)."""
     plane_contacts(contact, work, sink)
-    primitive_pairs(contact, work, sink)  # (primitive_search.py; nothing in a scene without primitives)
     gridded = work.body_sweep[SWEEP_SPHERES]  # the spheres of bodies in body pairs (sphere_positions)
     tested = pairs_of_bodies(contact, work, sink, gridded, False)  # (narrow.py; -1: the walk runs)
     if tested >= 0:
@@ -100,16 +99,29 @@ def pairs_of_bodies(contact, work, sink, gridded, threaded) -> int:  # noqa: ANN
     the sink in the walk's order; returns the tests made, or -1 when the walk must run instead. Kernels
     only; compiled to -1 where the work has no pair buffers (the body level off), so those scenes
     compile none of it, and for sinks that do not ask for it (class attribute PAIRS_OF_BODIES:
-    sink.ContactSink asks, whatever its purpose; the threaded search's record blocks do not)."""
+    sink.ContactSink asks, whatever its purpose; the threaded search's record blocks do not). In a scene
+    with primitives it first hands on the contacts of the body pairs with a primitive (primitive_search.py),
+    whichever way the sphere pairs are then found."""
     raise TypeError("pairs_of_bodies runs in compiled kernels only")
 
 
 @overload(pairs_of_bodies, jit_options=_OPTIONS, prefer_literal=True)
 def _pairs_of_bodies(contact, work, sink, gridded, threaded):  # noqa: ANN001, ANN202
-    found = dict(zip(work.fields, work.types, strict=True))["pair_found"]
+    fields = dict(zip(work.fields, work.types, strict=True))
+    found = fields["pair_found"]
     wanted = getattr(getattr(sink, "instance_class", None), "PAIRS_OF_BODIES", False)
+    # the body pairs with a primitive go first (primitive_search.py); here, so that a scene without
+    # primitives compiles no function for them
+    primitives = not isinstance(fields["primitive_centre"], types.NoneType)
     if isinstance(found, types.NoneType) or not wanted:
-        return lambda contact, work, sink, gridded, threaded: -1
+        if not primitives:
+            return lambda contact, work, sink, gridded, threaded: -1
+
+        def primitives_only(contact, work, sink, gridded, threaded):  # noqa: ANN001, ANN202
+            primitive_pairs(contact, work, sink)
+            return -1
+
+        return primitives_only
     search = pair_candidates_threaded if getattr(threaded, "literal_value", False) else pair_candidates
 
     def search_and_emit(contact, work, sink, gridded, threaded):  # noqa: ANN001, ANN202
@@ -119,7 +131,18 @@ def _pairs_of_bodies(contact, work, sink, gridded, threaded):  # noqa: ANN001, A
         emit_pairs(contact, work, sink, 0, found)
         return work.pair_tests[0]
 
-    return search_and_emit
+    if not primitives:
+        return search_and_emit
+
+    def primitives_then_search(contact, work, sink, gridded, threaded):  # noqa: ANN001, ANN202
+        primitive_pairs(contact, work, sink)
+        found = search(contact, work, gridded)
+        if found < 0:
+            return -1
+        emit_pairs(contact, work, sink, 0, found)
+        return work.pair_tests[0]
+
+    return primitives_then_search
 
 
 @numba.njit(cache=True, inline="always")

@@ -55,7 +55,6 @@ from rbcli.physics.contact.search import (
     grid_of_gridded,
     pairs_of_bodies,
     plane_contacts,
-    primitive_pairs,
     walk_pairs,
     walk_range,
 )
@@ -113,7 +112,6 @@ def find_contacts_threaded(contact, work, sink) -> int:  # noqa: ANN001
     """search.find_contacts for the force stage's sink (sink.force_sink) on numba's threads, with
     the same results bit for bit (module docstring); returns the candidate pairs tested."""
     plane_contacts(contact, work, sink)
-    primitive_pairs(contact, work, sink)  # serially, as find_contacts
     gridded = work.body_sweep[SWEEP_SPHERES]
     tested = pairs_of_bodies(contact, work, sink, gridded, True)  # (narrow.py; -1: the walk runs)
     if tested >= 0:
