@@ -260,8 +260,8 @@ _CAPSULE_FRAMES = (np.eye(3)[:, [1, 2, 0]], np.eye(3)[:, [2, 0, 1]], np.eye(3))
 
 def compile_primitives(spec: SceneSpec, model: Model, centres_user: np.ndarray, frames: np.ndarray,
                        sphere_counts: np.ndarray, colliding: list[int], g: float) -> Primitives:  # fmt: skip
-    """Each box and capsule shape body's primitive (docs/contact.md "Primitive contact"), in a scene whose
-    planes it can touch (`contact.primitives`, the default): its centre and axes in the principal frame
+    """Each box and capsule shape body's primitive (docs/contact.md "Primitive contact"), in a scene with
+    contact (`contact.primitives`, the default): its centre and axes in the principal frame
     (r = E^T (p_user - centre_user), R = E^T R_user), its size (box: half extents; capsule: radius,
     half-length) and its stiffness from geometry: resting on its `points` manifold points (a box on a face
     4, a lying capsule 2) it sinks PENETRATION_AT_REST of its size (box: its smallest half extent; capsule:
