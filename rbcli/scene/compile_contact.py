@@ -59,9 +59,9 @@ class ContactSummary:
         kinds = (("box", "boxes", self.boxes), ("capsule", "capsules", self.capsules))
         shapes = " and ".join(f"{n} {one if n == 1 else many}" for one, many, n in kinds if n)
         text = f"contact: {self.sphere_count:,} contact spheres, {planes}"
-        if shapes:  # their spheres still meet other bodies (docs/contact.md)
-            meets = "meets planes and walls as its exact shape"
-            many = "meet planes and walls as their exact shapes"
+        if shapes:  # their spheres are their mass only (docs/contact.md "Primitive contact")
+            meets = "touches planes, walls and bodies as its exact shape"
+            many = "touch planes, walls and bodies as their exact shapes"
             text += f" ({shapes} {meets if self.boxes + self.capsules == 1 else many})"
         if self.static_count:
             text += f", {self.static_count} static bod" + ("y" if self.static_count == 1 else "ies")
@@ -179,23 +179,30 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
             plane_k[b] = plane_stiffness(stiffness[b], int(support[b]), rest)
     primitive = compile_primitives(spec, model, centres_user, frames, np.asarray([len(r) for r in radii]),
                                    [b for b, body in enumerate(spec.bodies) if body.collide], g)  # fmt: skip
+    lattice_k = stiffness * support  # its carpet's stiffness at rest (the stable step below)
     for b in np.flatnonzero(primitive.kind >= 0).tolist():  # planes touch its primitive, its own stiffness
         material = spec.bodies[b].material.over(base)
         plane_k[b] = material.stiffness if material.stiffness is not None else primitive.stiffness[b]
+        # and so do other bodies (primitive_search.py): per manifold point, its points sharing 1 / M
+        stiffness[b] = plane_k[b]
     colliding = np.isfinite(min_radius)
     stiffness[~colliding] = plane_k[~colliding] = (
         1.0  # never used: such a body has no spheres; keeps the pair formula finite
     )
     # static and kinematic bodies: infinite mass for contact, their wrench held at zero (they keep P and L)
     static = np.array([b.static or b.kinematic for b in spec.bodies], dtype=bool)
-    inv_mass = np.where(static, 0.0, support / model.body_mass)
+    inv_mass = np.where(static, 0.0, np.where(primitive.kind >= 0, 1.0, support) / model.body_mass)
+    # what carries it on another body; the stable step keeps its carpet's stiffness where that is stiffer (a
+    # lattice of spheres smaller than the primitive: conservative, and what slice 2's runs stepped by)
+    pair_support = np.where(primitive.kind >= 0, primitive.points, support)
     plane_support = np.where(primitive.kind >= 0, primitive.points, support)  # what carries it on a plane
     planes = contact.planes
     plane_zeta = [damping_ratio(e)
                   for e in (p.material.over(base).restitution or DEFAULT_RESTITUTION for p in planes)]  # fmt: skip
     movable = colliding & ~static
     with np.errstate(all="ignore"):  # a huge stiffness over a tiny mass: dt_crit 0 (a warning of its own)
-        dt_crit, worst = stable_step(model.body_mass, stiffness * support, np.where(colliding, zeta, 0.0), movable,
+        pair_k = np.maximum(lattice_k, stiffness * pair_support)
+        dt_crit, worst = stable_step(model.body_mass, pair_k, np.where(colliding, zeta, 0.0), movable,
                                      planes=bool(planes), plane_stiffness=plane_k * plane_support)  # fmt: skip
     table = contact_table(
         sphere_body=np.concatenate(sphere_body) if sphere_body else [],
@@ -253,8 +260,8 @@ _CAPSULE_FRAMES = (np.eye(3)[:, [1, 2, 0]], np.eye(3)[:, [2, 0, 1]], np.eye(3))
 
 def compile_primitives(spec: SceneSpec, model: Model, centres_user: np.ndarray, frames: np.ndarray,
                        sphere_counts: np.ndarray, colliding: list[int], g: float) -> Primitives:  # fmt: skip
-    """Each box and capsule shape body's primitive (docs/contact.md "Primitive contact"), in a scene whose
-    planes it can touch (`contact.primitives`, the default): its centre and axes in the principal frame
+    """Each box and capsule shape body's primitive (docs/contact.md "Primitive contact"), in a scene with
+    contact (`contact.primitives`, the default): its centre and axes in the principal frame
     (r = E^T (p_user - centre_user), R = E^T R_user), its size (box: half extents; capsule: radius,
     half-length) and its stiffness from geometry: resting on its `points` manifold points (a box on a face
     4, a lying capsule 2) it sinks PENETRATION_AT_REST of its size (box: its smallest half extent; capsule:
@@ -265,7 +272,7 @@ def compile_primitives(spec: SceneSpec, model: Model, centres_user: np.ndarray, 
     out = Primitives(np.full(n, -1, dtype=np.int64), np.zeros((n, 3)), np.tile(np.eye(3), (n, 1, 1)),
                      np.zeros((n, 3)), np.zeros(n), np.ones(n))  # fmt: skip
     contact = spec.contact
-    if contact is None or not contact.primitives or not contact.planes:
+    if contact is None or not contact.primitives:
         return out
     for row, b in enumerate(colliding):
         body = spec.bodies[b]

@@ -209,7 +209,7 @@ bodies:
 """
 
 
-def test_the_contact_line_says_which_shapes_meet_planes_as_themselves(tmp_path):
+def test_the_contact_line_says_which_shapes_touch_as_themselves(tmp_path):
     """A box and a capsule touch the ground as their exact primitive (issue 47: the run's cost depends on
     it); a sphere shape is one exact sphere already and is not counted; with `primitives: false` no shape
     does, and the line says nothing of shapes."""
@@ -220,7 +220,7 @@ def test_the_contact_line_says_which_shapes_meet_planes_as_themselves(tmp_path):
         result = runner.invoke(app, ["validate", str(path)])
         assert result.exit_code == 0, result.output
         lines[path.stem] = next(line for line in result.output.splitlines() if "contact:" in line)
-    assert "(1 box and 1 capsule meet planes and walls as their exact shapes)" in lines["on"], lines
+    assert "(1 box and 1 capsule touch planes, walls and bodies as their exact shapes)" in lines["on"], lines
     assert "exact shape" not in lines["off"] and "1 plane" in lines["off"], lines
 
 

@@ -305,7 +305,7 @@ def place_spheres(contact, work, x, q) -> int:  # noqa: ANN001
     count = 0
     for b in range(work.body_active.shape[0]):
         flags = work.body_active[b]
-        if flags == 0:
+        if flags == 0 or contact.primitive_kind[b] >= 0:  # a primitive's spheres touch nothing (primitive_search.py)
             continue
         for i in range(start[b], start[b + 1]):
             o0, o1, o2 = off[i, 0], off[i, 1], off[i, 2]

@@ -172,6 +172,17 @@ def _candidate(out, count, x0, x1, x2, depth, feature) -> int:  # noqa: ANN001
     return count + 1
 
 
+@numba.njit(**INLINE_KERNEL)
+def _fresh(out, count, x0, x1, x2, touch) -> bool:  # noqa: ANN001
+    """Whether no candidate so far lies within `touch` of x: the corners and crossings of faces whose edges
+    coincide (boxes of one width stacked) are found twice, by the tests that take the outline's points."""
+    for i in range(count):
+        e0, e1, e2 = out.point[i, 0] - x0, out.point[i, 1] - x1, out.point[i, 2] - x2
+        if e0 * e0 + e1 * e1 + e2 * e2 <= touch * touch:
+            return False
+    return True
+
+
 @numba.njit(**STEP_KERNEL)
 def _face_contact(cx, Rx, hx, k, cy, Ry, hy, reference_is_b, out) -> int:  # noqa: ANN001
     """Reference box x's face along axis k facing box y, clipped against y's incident face (box_box).
@@ -207,7 +218,8 @@ def _face_contact(cx, Rx, hx, k, cy, Ry, hy, reference_is_b, out) -> int:  # noq
     fu = g0 * Rx[0, k1] + g1 * Rx[1, k1] + g2 * Rx[2, k1]
     fw = g0 * Rx[0, k2] + g1 * Rx[1, k2] + g2 * Rx[2, k2]
     fz = g0 * r0 + g1 * r1 + g2 * r2 - hx[k]
-    for c in range(4):  # reference corners strictly inside the incident face's outline
+    touch = TOUCH_FRACTION * (w1 + w2)
+    for c in range(4):  # reference corners inside the incident face's outline or on it
         su, sw = _corner_signs(c)
         u, w = su * w1, sw * w2
         positive, negative = 0, 0
@@ -217,14 +229,15 @@ def _face_contact(cx, Rx, hx, k, cy, Ry, hy, reference_is_b, out) -> int:  # noq
             cross = (b[3] - a[3]) * (w - a[4]) - (b[4] - a[4]) * (u - a[3])
             positive += cross > 0.0
             negative += cross < 0.0
-        if positive != 4 and negative != 4:
+        if positive and negative:
             continue
         z = fz - (nu * (u - fu) + nw * (w - fw)) / nz
         if z < 0.0:
             x0 = cx[0] + u * Rx[0, k1] + w * Rx[0, k2] + (hx[k] + z) * r0
             x1 = cx[1] + u * Rx[1, k1] + w * Rx[1, k2] + (hx[k] + z) * r1
             x2 = cx[2] + u * Rx[2, k1] + w * Rx[2, k2] + (hx[k] + z) * r2
-            count = _candidate(out, count, x0, x1, x2, -z, 8 + (_bit(side, k) | _bit(su, k1) | _bit(sw, k2)))
+            if _fresh(out, count, x0, x1, x2, touch):
+                count = _candidate(out, count, x0, x1, x2, -z, 8 + (_bit(side, k) | _bit(su, k1) | _bit(sw, k2)))
     for e in range(4):  # incident edges crossing the reference face's sides u = -+w1 (0, 1), w = -+w2 (2, 3)
         a = _pick4(corner0, corner1, corner2, corner3, e)
         b = _pick4(corner0, corner1, corner2, corner3, (e + 1) % 4)
@@ -236,12 +249,13 @@ def _face_contact(cx, Rx, hx, k, cy, Ry, hy, reference_is_b, out) -> int:  # noq
             if span == 0.0:
                 continue
             t = ((bound if edge_side % 2 else -bound) - start) / span
-            if not (0.0 < t < 1.0) or not abs(across + t * slope) < limit:
+            if not (0.0 < t < 1.0) or not abs(across + t * slope) <= limit:
                 continue
             z = a[5] + t * (b[5] - a[5])
             if z < 0.0:
                 x0, x1, x2 = a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]), a[2] + t * (b[2] - a[2])
-                count = _candidate(out, count, x0, x1, x2, -z, 16 + 4 * e + edge_side)
+                if _fresh(out, count, x0, x1, x2, touch):
+                    count = _candidate(out, count, x0, x1, x2, -z, 16 + 4 * e + edge_side)
     if count > MANIFOLD_POINTS:
         count = _keep_four(out, count, r0, r1, r2)
     face = FACE_FEATURE * ((6 if reference_is_b else 0) + 2 * k + (1 if side > 0.0 else 0))

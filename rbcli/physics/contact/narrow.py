@@ -125,6 +125,8 @@ def _pairs_of(contact, work, grid, first, last, side_a, side_b, near, row0, capa
     tests, cost, n = 0, 0, 0
     for k in range(first, last):
         a, b = body_pair[k, 0], body_pair[k, 1]
+        if contact.primitive_kind[a] >= 0 or contact.primitive_kind[b] >= 0:  # primitive_search.py's pairs
+            continue
         na = _cull(pos, radius, start[a], start[a + 1], lo, hi, b, side_a)
         if na == 0:
             continue

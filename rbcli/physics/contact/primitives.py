@@ -1,7 +1,7 @@
 """Contact of primitives as their exact surfaces: sphere, capsule and box against each other and against
 a plane, each pair a compiled kernel writing a manifold of up to 4 points (manifold.py: point halfway
-between the surfaces, unit normal from b to a, depth > 0, feature id). Not yet used by the contact stage:
-docs/contact.md "Primitive contact".
+between the surfaces, unit normal from b to a, depth > 0, feature id). Used against planes by search.py
+and between bodies by primitive_search.py: docs/contact.md "Primitive contact".
 
 A primitive is given as MuJoCo gives a geom (engine_collision_primitive.c): its centre c [m, world], its
 rotation R (3, 3) (columns: its axes in the world frame, rotation_kernels.quat_to_matrix_nb) and its

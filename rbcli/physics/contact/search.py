@@ -50,22 +50,16 @@ from numba.extending import overload
 
 from rbcli.physics.contact.body_phase import body_phase, excluded, place_spheres, whole_grid_hashed
 from rbcli.physics.contact.broad_phase import HALF_SHELL, bucket_of, build_grid_of
+from rbcli.physics.contact.found import contact_found
 from rbcli.physics.contact.manifold import Manifold
 from rbcli.physics.contact.narrow import pair_candidates, pair_candidates_threaded
+from rbcli.physics.contact.primitive_search import primitive_pairs
 from rbcli.physics.contact.primitives import primitive_plane
 from rbcli.physics.contact.tables import ACTIVE_PLANE, PLANE_PARTNER_BASE, SWEEP_SPHERES
 from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.step import STEP_KERNEL
 
 _OPTIONS: Any = STEP_KERNEL  # typed Any: numba's stubs type jit_options as a TypedDict without `_nrt`
-
-
-def contact_found(sink, contact, work, owner, partner, ba, bb, n0, n1, n2, overlap, c0, c1, c2, k, zeta, mu):  # noqa: ANN001, ANN201
-    """One contact for `sink` (kernels only; implemented per sink type by an overload in the sink's
-    module): owner and partner (sphere indices; a plane: PLANE_PARTNER_BASE - p), their bodies ba and bb
-    (bb = -1: a plane), the unit normal n towards the owner, the overlap d [m], the contact point c [m,
-    world], the mixed stiffness k [N/m], damping ratio zeta [1] and friction mu [1]."""
-    raise TypeError("contact_found runs in compiled kernels only, with a sink type that registers it")
 
 
 @numba.njit(cache=True, inline="always")
@@ -105,16 +99,29 @@ def pairs_of_bodies(contact, work, sink, gridded, threaded) -> int:  # noqa: ANN
     the sink in the walk's order; returns the tests made, or -1 when the walk must run instead. Kernels
     only; compiled to -1 where the work has no pair buffers (the body level off), so those scenes
     compile none of it, and for sinks that do not ask for it (class attribute PAIRS_OF_BODIES:
-    sink.ContactSink asks, whatever its purpose; the threaded search's record blocks do not)."""
+    sink.ContactSink asks, whatever its purpose; the threaded search's record blocks do not). In a scene
+    with primitives it first hands on the contacts of the body pairs with a primitive (primitive_search.py),
+    whichever way the sphere pairs are then found."""
     raise TypeError("pairs_of_bodies runs in compiled kernels only")
 
 
 @overload(pairs_of_bodies, jit_options=_OPTIONS, prefer_literal=True)
 def _pairs_of_bodies(contact, work, sink, gridded, threaded):  # noqa: ANN001, ANN202
-    found = dict(zip(work.fields, work.types, strict=True))["pair_found"]
+    fields = dict(zip(work.fields, work.types, strict=True))
+    found = fields["pair_found"]
     wanted = getattr(getattr(sink, "instance_class", None), "PAIRS_OF_BODIES", False)
+    # the body pairs with a primitive go first (primitive_search.py); here, so that a scene without
+    # primitives compiles no function for them
+    primitives = not isinstance(fields["primitive_centre"], types.NoneType)
     if isinstance(found, types.NoneType) or not wanted:
-        return lambda contact, work, sink, gridded, threaded: -1
+        if not primitives:
+            return lambda contact, work, sink, gridded, threaded: -1
+
+        def primitives_only(contact, work, sink, gridded, threaded):  # noqa: ANN001, ANN202
+            primitive_pairs(contact, work, sink)
+            return -1
+
+        return primitives_only
     search = pair_candidates_threaded if getattr(threaded, "literal_value", False) else pair_candidates
 
     def search_and_emit(contact, work, sink, gridded, threaded):  # noqa: ANN001, ANN202
@@ -124,7 +131,18 @@ def _pairs_of_bodies(contact, work, sink, gridded, threaded):  # noqa: ANN001, A
         emit_pairs(contact, work, sink, 0, found)
         return work.pair_tests[0]
 
-    return search_and_emit
+    if not primitives:
+        return search_and_emit
+
+    def primitives_then_search(contact, work, sink, gridded, threaded):  # noqa: ANN001, ANN202
+        primitive_pairs(contact, work, sink)
+        found = search(contact, work, gridded)
+        if found < 0:
+            return -1
+        emit_pairs(contact, work, sink, 0, found)
+        return work.pair_tests[0]
+
+    return primitives_then_search
 
 
 @numba.njit(cache=True, inline="always")
@@ -241,9 +259,9 @@ def plane_contacts(contact, work, sink) -> None:  # noqa: ANN001
 
 
 def place_primitives(contact, work, x, q) -> None:  # noqa: ANN001
-    """The world centre c = x_b + R r0 and rotation R R0 of the primitive of every body flagged near a
-    plane (work.primitive_centre, primitive_frame), once per evaluation. Kernels only; compiled to nothing
-    where the work has no primitive arrays (a scene without primitives)."""
+    """The world centre c = x_b + R r0 and rotation R R0 of the primitive of every flagged body (near a
+    plane or in a body pair: work.primitive_centre, primitive_frame), once per evaluation. Kernels only;
+    compiled to nothing where the work has no primitive arrays (a scene without primitives)."""
     raise TypeError("place_primitives runs in compiled kernels only")
 
 
@@ -256,7 +274,7 @@ def _place_primitives(contact, work, x, q):  # noqa: ANN001, ANN202
         centre, frame = work.primitive_centre, work.primitive_frame
         off, rot = contact.primitive_offset, contact.primitive_rotation
         for b in range(work.body_active.shape[0]):
-            if not work.body_active[b] & ACTIVE_PLANE or contact.primitive_kind[b] < 0:
+            if work.body_active[b] == 0 or contact.primitive_kind[b] < 0:  # planes and body pairs read it
                 continue
             w, i, j, k = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
             r00, r01, r02 = 1.0 - 2.0 * (j * j + k * k), 2.0 * (i * j - w * k), 2.0 * (i * k + w * j)

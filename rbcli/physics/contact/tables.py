@@ -86,9 +86,10 @@ class ContactTable(NamedTuple):
     # [1/kg] (body_count,): support / M, the inverse of the mass one contact sphere carries when the body
     # rests on its `support` spheres (parameters.support_count); 0 for a static body. The dashpot of a
     # contact uses it, so a body resting on n spheres has the damping ratio its material asks for
-    # (with the whole mass per sphere, n contacts would damp like sqrt(n) zeta: overdamped, unstable)
+    # (with the whole mass per sphere, n contacts would damp like sqrt(n) zeta: overdamped, unstable). A
+    # body touching as its primitive: 1 / M (primitive_search.py shares it among a manifold's points)
     body_inv_contact_mass: np.ndarray
-    body_stiffness: np.ndarray  # k [N/m] (body_count,) per contact sphere
+    body_stiffness: np.ndarray  # k [N/m] (body_count,) per contact sphere (a primitive: per manifold point)
     body_plane_stiffness: np.ndarray  # k [N/m] (body_count,) per contact sphere against a plane
     body_damping_ratio: np.ndarray  # zeta [1] (body_count,)
     body_friction: np.ndarray  # mu [1] (body_count,)
@@ -125,9 +126,10 @@ class ContactTable(NamedTuple):
     # for a body that touches planes as its primitive: points / M, its manifold points sharing its mass
     # (docs/contact.md "Primitive contact")
     body_plane_inv_contact_mass: np.ndarray = np.zeros(0)
-    # a shape body's primitive (docs/contact.md "Primitive contact"), against planes in place of its contact
-    # spheres: kind (int64 (body_count,): primitives.PRIMITIVE_*, -1 none), centre [m] (body_count, 3) and
-    # rotation (body_count, 3, 3; columns: its axes) in the principal frame, size [m] (body_count, 3)
+    # a shape body's primitive (docs/contact.md "Primitive contact"), against planes and bodies in place of
+    # its contact spheres (its mass only): kind (int64 (body_count,): primitives.PRIMITIVE_*, -1 none),
+    # centre [m] (body_count, 3) and rotation (body_count, 3, 3; columns: its axes) in the principal frame,
+    # size [m] (body_count, 3)
     primitive_kind: np.ndarray = np.zeros(0, dtype=np.int64)
     primitive_offset: np.ndarray = np.zeros((0, 3))
     primitive_rotation: np.ndarray = np.zeros((0, 3, 3))
@@ -222,15 +224,18 @@ class ContactWork(NamedTuple):
     record_float: np.ndarray | None = None
     record_count: np.ndarray | None = None
     record_candidates: np.ndarray | None = None
-    # the primitives' plane contacts (search.py; None in a scene without primitives: numba then compiles
-    # none of it): each primitive's world centre [m] (body_count, 3) and rotation (body_count, 3, 3) of the
-    # evaluation, and a manifold's rows (manifold.py: point, normal, depth, feature)
+    # the primitives' contacts (search.py, primitive_search.py; None in a scene without primitives: numba
+    # then compiles none of it): each primitive's world centre [m] (body_count, 3) and rotation
+    # (body_count, 3, 3) of the evaluation, and a manifold's rows (manifold.py: point, normal, depth, feature)
     primitive_centre: np.ndarray | None = None
     primitive_frame: np.ndarray | None = None
     manifold_point: np.ndarray | None = None
     manifold_normal: np.ndarray | None = None
     manifold_depth: np.ndarray | None = None
     manifold_feature: np.ndarray | None = None
+    # [m] (body_count + 1, 3): ContactTable.primitive_size, writable (primitive_search.py passes each pair's
+    # sizes from one array type, so primitive_pair compiles once), and a last row for a cloud sphere's (r, 0, 0)
+    primitive_shape: np.ndarray | None = None
 
 
 def _ro(values: object, dtype: type, *shape: int) -> np.ndarray:
@@ -308,7 +313,8 @@ def contact_table(
         body_bound_radius=_ro(rho, np.float64),
         body_large=_ro(large, np.bool_),
         body_cell_size=body_cell,
-        body_level_off=bool(spheres <= 2 * int(finite.sum())),
+        # a primitive's pairs come from the body pairs (primitive_search.py): never off with primitives
+        body_level_off=bool(spheres <= 2 * int(finite.sum())) and not bool((kind >= 0).any()),
         cell_size=float(2.0 * radius.max()) if spheres else 1.0,
         sphere_radius_min=float(radius.min()) if spheres else 0.0,
         tangential_ratio=float(tangential_ratio),
@@ -499,4 +505,5 @@ def primitive_work(contact: ContactTable, body_count: int) -> dict[str, np.ndarr
         manifold_normal=np.zeros((rows, 3)),
         manifold_depth=np.zeros(rows),
         manifold_feature=np.zeros(rows, dtype=np.int64),
+        primitive_shape=np.concatenate([contact.primitive_size, np.zeros((1, 3))]),
     )

@@ -1,0 +1,97 @@
+"""Body-body contact of primitives (docs/contact.md "Primitive contact"): each body pair of the body level
+(body_phase.py) in which a body touches as its primitive, handed to the sink point by point.
+
+    both primitives   primitives.primitive_pair of the two (sphere, capsule, box in either order): each
+                      manifold point a contact of its own, normal from b to a (a < b, the owner)
+    one primitive     each contact sphere of the other body (a cloud, a sphere shape, a mesh) whose
+                      sphere meets the primitive's body box, as a sphere against the primitive (sphere-X)
+
+The same force law, friction history, statistics and points as a sphere contact (search.contact_found).
+History: a manifold point of bodies a < b is kept in a's sphere row start[a] + key % n_a with partner
+b's row start[b] + (key // n_a) % n_b (key: `_feature_key`, < FEATURE_KEYS), so each (body pair,
+feature) keeps its own tangential spring, unique while n_a n_b >= FEATURE_KEYS (a box's lattice has far
+more); the primitive's own rows hold no sphere contacts (its spheres touch nothing: body_phase.is_primitive).
+A cloud sphere i against primitive b: owner i, partner start[b].
+Materials mix as for two spheres (tables.py): a primitive body's body_stiffness is its stiffness per
+manifold point and its body_inv_contact_mass 1 / M (scene/compile_contact.py); a manifold of n points
+shares the pair's reduced mass, so each point's damping ratio is zeta / sqrt(n): n springs k with dashpots
+2 (zeta / sqrt(n)) sqrt(k M_r) damp the pair's n k, M_r at zeta.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+
+from rbcli.physics.contact.body_phase import excluded
+from rbcli.physics.contact.found import contact_found
+from rbcli.physics.contact.manifold import INLINE_KERNEL, Manifold
+from rbcli.physics.contact.primitives import PRIMITIVE_SPHERE, primitive_pair
+from rbcli.physics.contact.tables import SWEEP_PAIRS
+from rbcli.physics.step import STEP_KERNEL
+
+# box-box features (box_box.py: 64 face + code < 32, 1024 + 12 edge_a + edge_b) packed densely below this
+FEATURE_KEYS = 528
+
+
+@numba.njit(**INLINE_KERNEL)
+def feature_key(feature):  # noqa: ANN001, ANN201
+    """A manifold feature (manifold.py; box-box's up to 1167) as a key 0 .. FEATURE_KEYS - 1, one to one:
+    face features 32 face + code, edge features 384 + 12 edge_a + edge_b; the others (< 64) unchanged."""
+    if feature >= 1024:
+        return 384 + feature - 1024
+    if feature >= 64:
+        return (feature >> 6) * 32 + (feature & 31)
+    return feature
+
+
+@numba.njit(**STEP_KERNEL)
+def primitive_pairs(contact, work, sink) -> None:  # noqa: ANN001
+    """The contacts of the body pairs with a primitive (module docstring) handed to the sink. Called by
+    search.pairs_of_bodies only where the work has primitive arrays (a scene without primitives compiles
+    none of it)."""
+    out = Manifold(work.manifold_point, work.manifold_normal, work.manifold_depth, work.manifold_feature)
+    start, kind, shape = contact.body_sphere_start, contact.primitive_kind, work.primitive_shape
+    centre, frame, lo, hi = work.primitive_centre, work.primitive_frame, work.body_lo, work.body_hi
+    sphere = shape.shape[0] - 1  # the scratch row of a cloud sphere's size (r, 0, 0)
+    for p in range(min(work.body_sweep[SWEEP_PAIRS], work.body_pair.shape[0])):
+        a, b = work.body_pair[p, 0], work.body_pair[p, 1]
+        if kind[a] < 0 and kind[b] < 0:
+            continue
+        if contact.excluded_pair.shape[0] and excluded(contact, a, b):
+            continue
+        ka, kb = contact.body_stiffness[a], contact.body_stiffness[b]
+        k = ka if ka == kb else 2.0 * ka * kb / (ka + kb)
+        zeta = min(contact.body_damping_ratio[a], contact.body_damping_ratio[b])
+        mu = contact.body_friction_root[a] * contact.body_friction_root[b]
+        if kind[a] >= 0 and kind[b] >= 0:
+            count = primitive_pair(kind[a], centre[a], frame[a], shape[a], kind[b], centre[b], frame[b],
+                                   shape[b], out)  # fmt: skip
+            if count == 0:
+                continue
+            shared = zeta / math.sqrt(count)
+            na, nb = start[a + 1] - start[a], start[b + 1] - start[b]
+            for i in range(count):
+                key = feature_key(out.feature[i])
+                contact_found(sink, contact, work, start[a] + key % na, start[b] + (key // na) % nb, a, b,
+                              out.normal[i, 0], out.normal[i, 1], out.normal[i, 2], out.depth[i],
+                              out.point[i, 0], out.point[i, 1], out.point[i, 2], k, shared, mu)  # fmt: skip
+            continue
+        cloud, prim = (a, b) if kind[a] < 0 else (b, a)
+        pos, radius = work.sphere_position, contact.sphere_radius
+        for i in range(start[cloud], start[cloud + 1]):
+            r = radius[i]
+            if not (
+                (pos[i, 0] + r >= lo[prim, 0]) & (pos[i, 0] - r <= hi[prim, 0])
+                & (pos[i, 1] + r >= lo[prim, 1]) & (pos[i, 1] - r <= hi[prim, 1])
+                & (pos[i, 2] + r >= lo[prim, 2]) & (pos[i, 2] - r <= hi[prim, 2])
+            ):  # fmt: skip
+                continue
+            shape[sphere, 0] = r
+            count = primitive_pair(PRIMITIVE_SPHERE, pos[i], frame[prim], shape[sphere], kind[prim],
+                                   centre[prim], frame[prim], shape[prim], out)  # fmt: skip
+            if count:  # sphere-X: one point, normal from the primitive to the sphere (the owner)
+                contact_found(sink, contact, work, i, start[prim], cloud, prim,
+                              out.normal[0, 0], out.normal[0, 1], out.normal[0, 2], out.depth[0],
+                              out.point[0, 0], out.point[0, 1], out.point[0, 2], k, zeta, mu)  # fmt: skip
