@@ -124,6 +124,7 @@ def _run_lines(spec) -> list[str]:  # noqa: ANN001 - a SceneSpec
     after (docs/performance.md, "Start-up")."""
     from rbcli.api import force_terms
     from rbcli.scene.compile import compile_scene
+    from rbcli.scene.compile_contact import touching_spheres
 
     try:
         compiled = compile_scene(spec)
@@ -134,7 +135,12 @@ def _run_lines(spec) -> list[str]:  # noqa: ANN001 - a SceneSpec
     kernel_tables = compiled.model.kernel()  # None for each table the loop compiles without
     size = [f"{bodies:,} bod{'y' if bodies == 1 else 'ies'}", f"{particles:,} particles"]
     if kernel_tables.contact is not None:
-        size.append(f"{compiled.model.contact.sphere_radius.shape[0]:,} contact spheres")
+        touching = touching_spheres(compiled.model.contact)  # a shape's lattice spheres: its mass only
+        shapes = int((compiled.model.contact.primitive_kind >= 0).sum())
+        if touching or not shapes:
+            size.append(f"{touching:,} contact spheres")
+        if shapes:
+            size.append(f"{shapes:,} contact shape{'s' * (shapes != 1)}")
     steps = f"{settings.steps:,} steps of {settings.dt:g} s"
     if settings.substeps > 1:
         steps += f" x {settings.substeps} sub-steps"

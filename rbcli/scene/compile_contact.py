@@ -52,17 +52,21 @@ class ContactSummary:
     impact: ImpactBound | None = None  # how fast spheres can meet (scene/contact_speed.py), set by compile_model
     boxes: int = 0  # shape bodies that touch planes and walls as their exact box (compile_primitives)
     capsules: int = 0  # ... as their exact capsule
+    shape_spheres: int = 0  # the lattice spheres of those shape bodies: their mass only, they touch nothing
 
     def describe(self, substeps: int | None = None) -> str:
         """One line for `rbsim validate` and the run summary."""
         planes = f"{self.plane_count} plane" + "s" * (self.plane_count != 1)
         kinds = (("box", "boxes", self.boxes), ("capsule", "capsules", self.capsules))
         shapes = " and ".join(f"{n} {one if n == 1 else many}" for one, many, n in kinds if n)
-        text = f"contact: {self.sphere_count:,} contact spheres, {planes}"
-        if shapes:  # their spheres are their mass only (docs/contact.md "Primitive contact")
-            meets = "touches planes, walls and bodies as its exact shape"
-            many = "touch planes, walls and bodies as their exact shapes"
-            text += f" ({shapes} {meets if self.boxes + self.capsules == 1 else many})"
+        spheres = self.sphere_count - self.shape_spheres  # a shape's lattice spheres are its mass only
+        parts = [f"{spheres:,} contact spheres"] if spheres or not shapes else []
+        if shapes:  # (docs/contact.md "Primitive contact")
+            one = self.boxes + self.capsules == 1
+            touch = "it touches" if one else "they touch"
+            parts.append(f"{shapes} ({touch} planes, walls and bodies as {'its' if one else 'their'} exact shape"
+                         f"{'' if one else 's'})")  # fmt: skip
+        text = f"contact: {', '.join(parts)}, {planes}"
         if self.static_count:
             text += f", {self.static_count} static bod" + ("y" if self.static_count == 1 else "ies")
         if self.kinematic_count:
@@ -235,8 +239,17 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
         stiffness=float(stiffness[worst]) if worst >= 0 else math.nan,
         boxes=int(np.count_nonzero(primitive.kind == PRIMITIVE_BOX)),
         capsules=int(np.count_nonzero(primitive.kind == PRIMITIVE_CAPSULE)),
+        shape_spheres=int(table.sphere_radius.shape[0]) - touching_spheres(table),
     )
     return table, summary
+
+
+def touching_spheres(table: ContactTable) -> int:
+    """The contact spheres that touch: those of bodies that do not touch as their primitive shape."""
+    body = np.asarray(table.sphere_body)
+    if body.shape[0] == 0:
+        return 0
+    return int(np.count_nonzero(np.asarray(table.primitive_kind)[body] < 0))
 
 
 @dataclass(frozen=True)

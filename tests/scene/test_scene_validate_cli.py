@@ -188,10 +188,10 @@ def test_verbose_counts_contact_spheres_and_sub_steps_in_the_cost(tmp_path):
     steps = round(sim["duration"] / sim["dt"])
     lines = verbose_lines(write(tmp_path, "box.yaml", text))
     (contact,) = [line for line in lines if line.startswith("  contact: ")]
-    spheres = contact.split()[1]  # the contact line's own count: the compiled contact spheres
+    # the brick touches as its box: its lattice spheres are its mass only, and the cost counts one shape
+    assert contact.startswith("  contact: 1 box (it touches planes, walls and bodies as its exact shape)"), contact
     assert (
-        f"{spheres} contact spheres, {steps:,} steps of {sim['dt']:g} s x 4 sub-steps (split2): "
-        f"{steps * 4:,} body-steps"
+        f"1 contact shape, {steps:,} steps of {sim['dt']:g} s x 4 sub-steps (split2): {steps * 4:,} body-steps"
     ) in "\n".join(lines)
     (kernels,) = [line for line in lines if line.startswith("  kernels: ")]
     assert "+ contact (" in kernels and "joints" not in kernels
@@ -220,7 +220,13 @@ def test_the_contact_line_says_which_shapes_touch_as_themselves(tmp_path):
         result = runner.invoke(app, ["validate", str(path)])
         assert result.exit_code == 0, result.output
         lines[path.stem] = next(line for line in result.output.splitlines() if "contact:" in line)
-    assert "(1 box and 1 capsule touch planes, walls and bodies as their exact shapes)" in lines["on"], lines
+    # the sphere shape's lattice spheres still touch; the box's and the capsule's are their mass only
+    assert (
+        "contact spheres, 1 box and 1 capsule (they touch planes, walls and bodies as their exact shapes)"
+        in (lines["on"])
+    ), lines
+    spheres = {name: int(line.split("contact: ")[1].split()[0].replace(",", "")) for name, line in lines.items()}
+    assert 0 < spheres["on"] < spheres["off"], spheres
     assert "exact shape" not in lines["off"] and "1 plane" in lines["off"], lines
 
 
