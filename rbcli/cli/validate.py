@@ -124,7 +124,7 @@ def _run_lines(spec) -> list[str]:  # noqa: ANN001 - a SceneSpec
     after (docs/performance.md, "Start-up")."""
     from rbcli.api import force_terms
     from rbcli.scene.compile import compile_scene
-    from rbcli.scene.compile_contact import touching_spheres
+    from rbcli.scene.compile_contact import touching_spheres  # (physics, through the scene)
 
     try:
         compiled = compile_scene(spec)

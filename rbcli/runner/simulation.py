@@ -135,8 +135,11 @@ class Simulation:
             contact, joints = compiled.contact is not None, compiled.model.joint is not None
             self.threads = chunk_threads(plan.count, info.parallel, compiled.model.body_count, contact, joints)
             if contact:
-                spheres = compiled.model.contact.sphere_radius.shape[0]
-                self.contact_threads = contact_threads(plan.count, spheres)
+                from rbcli.physics.contact.tables import touching_spheres
+
+                # the spheres the search walks: a shape body's lattice is its mass only (a stack of boxes
+                # has thousands and walks none: no threaded search to compile for it)
+                self.contact_threads = contact_threads(plan.count, touching_spheres(compiled.model.contact))
             self.threads_why = plan.why
             if max(self.threads, self.contact_threads) > 1:  # numba launches at most NUMBA_NUM_THREADS
                 import numba  # (sweep workers: 1)

@@ -27,7 +27,7 @@ from rbcli.physics.contact.parameters import (
     stable_step,
     support_count,
 )
-from rbcli.physics.contact.tables import ContactTable, contact_table
+from rbcli.physics.contact.tables import ContactTable, contact_table, touching_spheres
 from rbcli.physics.forces.tables import ScheduleTable, schedule_values_numpy
 from rbcli.physics.kinematic_reference import kinematic_state_numpy
 from rbcli.physics.model import Model
@@ -242,14 +242,6 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
         shape_spheres=int(table.sphere_radius.shape[0]) - touching_spheres(table),
     )
     return table, summary
-
-
-def touching_spheres(table: ContactTable) -> int:
-    """The contact spheres that touch: those of bodies that do not touch as their primitive shape."""
-    body = np.asarray(table.sphere_body)
-    if body.shape[0] == 0:
-        return 0
-    return int(np.count_nonzero(np.asarray(table.primitive_kind)[body] < 0))
 
 
 @dataclass(frozen=True)

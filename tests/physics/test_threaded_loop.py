@@ -145,6 +145,10 @@ def test_small_scenes_contact_one_thread_and_other_integrators_keep_the_serial_l
     assert threads_module.chunk_threads(2, True, threads_module.PARALLEL_MIN_BODIES, joints=True) == 1
     pile = ROOT / "scenes/contact/sphere_pile.yaml"  # 1,000 balls: contact keeps the serial loop
     assert Simulation(pile, threads=2).threads == 1
+    assert Simulation(pile, threads=2).contact_threads == 2  # and searches on threads: 1,000 spheres
+    # ten boxes touching as boxes: their 3,080 lattice spheres are their mass only, the search walks none
+    stack = ROOT / "scenes/contact/box_stack.yaml"
+    assert Simulation(stack, threads=2).contact_threads == 1
 
 
 class _Alternating:

@@ -357,6 +357,15 @@ def primitive_boxes_numpy(
     return centre, half, rho
 
 
+def touching_spheres(contact: ContactTable) -> int:
+    """The contact spheres that touch anything: those of bodies that do not touch as their primitive shape
+    (a shape body's lattice spheres are its mass only: primitive_search.py)."""
+    body = np.asarray(contact.sphere_body)
+    if body.shape[0] == 0:
+        return 0
+    return int(np.count_nonzero(np.asarray(contact.primitive_kind)[body] < 0))
+
+
 def contact_present(contact: ContactTable | None) -> bool:
     """True when the scene has a contact stage: contact spheres or static bodies."""
     return contact is not None and bool(contact.sphere_body.shape[0] or contact.static_body.shape[0])
