@@ -23,7 +23,7 @@ velocities (`commit_contacts`). A tangential spring with a Coulomb cap lets a bo
 without creeping (a viscous tangential law creeps), which is why it is used; see docs/contact.md.
 
 Where the pieces are: the contacts come from the one contact search (search.py: planes, the grid walk,
-the mixed materials), the formulas from law.py, the force sink of the search from sink.py; this module is the stage
+the mixed materials), the formulas from law.py, the search's sink from sink.py; this module is the stage
 that applies them, and the stages around the update (the clock, the commit, static bodies held).
 """
 
