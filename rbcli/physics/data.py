@@ -40,6 +40,9 @@ from rbcli.physics.state import State
 
 # the joints' last (sub-)step impulses in a checkpoint: optional (logs written before it was carried lack it)
 JOINT_REACTIONS = "joint.joint_impulse"
+# the joints' last two position multipliers and their count: the next step's first Newton iterate
+# (joints/rattle.py); a log from before they were carried resumes with none (to round-off, not bitwise)
+JOINT_GUESS = ("joint.guess", "joint.guess_count")
 
 
 class KernelAdaptive(NamedTuple):
@@ -118,6 +121,7 @@ class Data:
                 arrays[f"adaptive.{name}"] = array
         if self.joint is not None:  # read by no step: the last step's reactions, for the first frame
             arrays[JOINT_REACTIONS] = self.joint.joint_impulse  # a resumed run records (joint_forces)
+            arrays[JOINT_GUESS[0]], arrays[JOINT_GUESS[1]] = self.joint.guess, self.joint.guess_count
         return arrays
 
     def restore_carried(self, arrays: dict[str, np.ndarray]) -> None:
@@ -127,6 +131,10 @@ class Data:
         if JOINT_REACTIONS in mine and JOINT_REACTIONS not in arrays:  # a log from before it was carried
             mine[JOINT_REACTIONS][...] = 0.0
             del mine[JOINT_REACTIONS]
+        for name in JOINT_GUESS:
+            if name in mine and name not in arrays:  # likewise: the first step after it starts cold
+                mine[name][...] = 0.0
+                del mine[name]
         if set(arrays) != set(mine):
             missing, extra = sorted(set(mine) - set(arrays)), sorted(set(arrays) - set(mine))
             raise ValueError(f"checkpoint arrays do not fit this run: missing {missing}, unexpected {extra}")
@@ -152,6 +160,8 @@ class Data:
         if self.force.contact is not None:  # None: the scene has no contact stage
             self.force.contact.hist_count[:] = 0  # contacts form afresh from the new state
             self.force.contact.quiet_state[:] = 0
+        if self.joint is not None:  # the joints' Newton starts from the free drift (joints/rattle.py)
+            self.joint.guess_count[:] = 0.0
         if self.adaptive_work is not None:
             assert self.adaptive_control is not None
             self.adaptive_work[:] = 0.0

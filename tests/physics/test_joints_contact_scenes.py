@@ -93,14 +93,16 @@ def _point_speeds(sim: Simulation) -> np.ndarray:
 
 
 def test_the_ragdoll_lands_folds_keeps_its_limits_and_comes_to_rest():
-    """Dropped and toppling, after 5 s every body lies on the ground (centres between 0.04 and 0.15 m:
-    the spheres' radii are 0.05-0.1 m); from 4 s on every part moves below 1 cm/s (its fastest particle;
-    measured below 0.1 cm/s from 4 s, 0.4 cm/s at 3.8 s) and none sinks (centres within 0.1 mm of where
-    they were at 4 s); every hinge angle stayed within its limits to 1e-9 rad (the knees reach their lower
-    stop 0), the neck's and shoulders' cones and twists within theirs to 1e-9, and the joints held to
-    round-off. Before the neck and shoulders took cones and dampers the head and an arm kept rolling
-    around their ball joints on one contact each (1.2 and 4.3 cm/s at 8 s: rolling without slip loses
-    nothing here, docs/joints.md)."""
+    """Dropped and toppling, after 6 s every body lies on the ground (centres between 0.04 and 0.15 m:
+    the spheres' radii are 0.05-0.1 m); from 5 s on every part moves below 1 cm/s (its fastest particle)
+    and none sinks (centres within 0.1 mm of where they were at 5 s); every hinge angle stayed within its
+    limits to 1e-9 rad (the knees reach their lower stop 0), the neck's and shoulders' cones and twists
+    within theirs to 1e-9, and the joints held to round-off. The fall is chaotic: a body moved by 1e-13 m
+    at the start, or the joints' Newton stopping one round-off step elsewhere, changes which way the
+    ragdoll rolls, and when it comes to rest with it: the last time any part moved at 1 cm/s was 3.1-4.5 s
+    in 16 such runs (benchmarks/bench_ragdoll_rest.py), so the test asks for rest from 5 s. Before the
+    neck and shoulders took cones and dampers the head and an arm kept rolling around their ball joints
+    on one contact each (1.2 and 4.3 cm/s at 8 s: rolling without slip loses nothing here, docs/joints.md)."""
     sim = Simulation(SCENES / "ragdoll.yaml")
     table = sim.model.joint
     hinges = [j for j in range(table.body_a.shape[0]) if table.kind[j] == JOINT_HINGE]
@@ -108,7 +110,7 @@ def test_the_ragdoll_lands_folds_keeps_its_limits_and_comes_to_rest():
     assert len(hinges) == 4 and len(balls) == 3 and np.all(table.cone[balls, 8:] > 0)
     worst = beyond = 0.0
     rest, z_rest = 0.0, None
-    for _ in range(100):
+    for _ in range(120):
         sim.step(100)
         worst = max(worst, _rows(sim))
         x, q = sim.data.state.x, sim.data.state.q
@@ -118,10 +120,10 @@ def test_the_ragdoll_lands_folds_keeps_its_limits_and_comes_to_rest():
         for j in balls:
             twist, swing = limit_row(table, j, False, x, q)[0], limit_row(table, j, True, x, q)[0]
             beyond = max(beyond, table.limit_lower[j] - twist, twist - table.limit_upper[j], swing - 1.0)
-        if sim.time >= 4.0 - 1e-9:
+        if sim.time >= 5.0 - 1e-9:
             rest = max(rest, float(_point_speeds(sim).max()))
             z_rest = sim.state.x[:, 2].copy() if z_rest is None else z_rest
-    assert sim.time > 4.99
+    assert sim.time > 5.99
     z = sim.state.x[:, 2]
     assert np.all((z > 0.04) & (z < 0.15)), z
     assert rest < 0.01, rest

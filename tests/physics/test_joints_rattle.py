@@ -23,6 +23,7 @@ from joint_scenes import (
     tilted_hinge_text,
 )
 
+from rbcli.physics.joints.tables import STAT_ITERATIONS, STAT_RESTARTS
 from rbcli.physics.rotation import quat_rotate_inverse
 from rbcli.runner.simulation import Simulation
 from rbcli.scene.load import load_scene_text
@@ -158,3 +159,30 @@ def test_the_3d_double_pendulums_energy_error_has_no_trend():
     benchmarks/bench_joint_energy.py). The midpoint step's fell by 3.9e-2 of it, and steadily."""
     errors = energy_errors(hanging_double_pendulum_3d_text(1e-3), 100_000, 10)
     assert abs(trend_over_amplitude(errors)) < 1e-2, trend_over_amplitude(errors)
+
+
+def test_the_extrapolated_first_iterate_saves_iterations_and_reaches_the_same_step():
+    """The Newton's first iterate is the line through the last two steps' multipliers (joints/rattle.py).
+    It is a starting point only: the tumbling chain run with it, and run with it forgotten before every
+    step (the Newton then starts from the free drift), reaches the same states to round-off (1e-12 of
+    the motion's scale over 400 steps, where chaos has not yet amplified the round-off), without a
+    restart, in fewer iterations (measured 3.1 against 4.2 a step)."""
+    runs = []
+    for forget in (False, True):
+        sim = Simulation(load_scene_text(CHAIN))
+        sim.step(1)
+        start = sim.data.state.x.copy()
+        work, iterations = sim.data.joint, 0.0
+        for _ in range(400):
+            if forget:
+                work.guess_count[:] = 0.0
+            sim.step(1)
+            iterations += work.stats[STAT_ITERATIONS]
+        assert work.stats[STAT_RESTARTS] == 0.0
+        s = sim.data.state
+        runs.append((s.x.copy(), s.q.copy(), s.L.copy(), iterations / 400, float(np.abs(s.x - start).max())))
+    (x, q, L, guessed, moved), (x_cold, q_cold, L_cold, cold, _) = runs
+    assert np.abs(x - x_cold).max() <= 1e-12 * moved
+    assert np.abs(q - q_cold).max() <= 1e-12
+    assert np.abs(L - L_cold).max() <= 1e-12 * np.abs(L_cold).max()
+    assert guessed < cold - 0.5, (guessed, cold)

@@ -50,7 +50,15 @@ def body_omega(model, q, L, b):  # noqa: ANN001, ANN202
 def gather_impulses(table, work, multipliers) -> None:  # noqa: ANN001
     """impulse_body = G^T multipliers per body (ground bodies and the world get nothing); each joint's part
     is also added to work.joint_impulse (its bodies' momentum change by this joint, for the reactions)."""
-    impulse, by_joint = work.impulse_body, work.joint_impulse
+    body_impulses(table, work, multipliers)
+    joint_impulses(table, work, multipliers)
+
+
+@numba.njit(cache=True)
+def body_impulses(table, work, multipliers) -> None:  # noqa: ANN001
+    """impulse_body = G^T multipliers per body, without the per-joint parts (`gather_impulses` adds those):
+    the position stage's Newton iterations, whose sum goes to the joints once (joints/rattle.py)."""
+    impulse = work.impulse_body
     impulse[:, :] = 0.0
     for j in range(table.kind.shape[0]):
         a, b = table.body_a[j], table.body_b[j]
@@ -58,9 +66,21 @@ def gather_impulses(table, work, multipliers) -> None:  # noqa: ANN001
             m = multipliers[r]
             for c in range(6):
                 impulse[a, c] += work.jac_a[r, c] * m
-                by_joint[j, c] += work.jac_a[r, c] * m
                 if b >= 0:
                     impulse[b, c] += work.jac_b[r, c] * m
+
+
+@numba.njit(cache=True)
+def joint_impulses(table, work, multipliers) -> None:  # noqa: ANN001
+    """work.joint_impulse += each joint's part of G^T multipliers on its two bodies (the reactions)."""
+    by_joint = work.joint_impulse
+    for j in range(table.kind.shape[0]):
+        b = table.body_b[j]
+        for r in range(table.row_start[j], table.row_start[j] + table.row_count[j]):
+            m = multipliers[r]
+            for c in range(6):
+                by_joint[j, c] += work.jac_a[r, c] * m
+                if b >= 0:
                     by_joint[j, 6 + c] += work.jac_b[r, c] * m
 
 

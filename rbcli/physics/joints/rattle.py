@@ -25,8 +25,15 @@ each iteration re-running the drift of every body the impulse moved from the sta
 momenta, until |g| is at round-off (ROUNDOFF_ULPS ulps of the largest body position) or stops falling
 (each iteration gains a factor ~ h |omega|). A is the factor the last velocity stage built at this very
 configuration (stages.factor_at reuses it when the state is bitwise that configuration), so a step
-factors once. A limit beyond its bound at the end is pushed back by an impulse along its coordinate's
-row at the start, h k lambda = bound - c, alternating with the joints' Newton (drives.limit_positions).
+factors once. The first iterate is the line through the last two steps' Lambda (`_first_iterate`):
+measured on the 10-link chains of bench_joints, it starts ~1/100 of the free drift's residual away and
+saves one iteration of ~5 (a chain whipping about changes Lambda too fast for the line to gain more);
+one that does not reach round-off (an impact, a limit) is dropped and the Newton runs again from the
+free drift. The iterate does not change the step's map: the Newton stops at the same root, to
+round-off (the reversibility and energy tests hold either way).
+
+A limit beyond its bound at the end is pushed back by an impulse along its coordinate's row at the
+start, h k lambda = bound - c, alternating with the joints' Newton (drives.limit_positions).
 
 Kinematic bodies are put at their exact end pose (kinematic_end) before the Newton, so the rows close
 on the prescribed pose; static and kinematic bodies take no impulse (W = 0). Dampers and drag (the
@@ -44,11 +51,17 @@ from rbcli.physics.forces.damping import dissipation_flow, dissipation_present
 from rbcli.physics.forces.wrench import accumulate_wrench
 from rbcli.physics.integrators.split2 import free_drift
 from rbcli.physics.joints.drives import limit_positions
-from rbcli.physics.joints.impulses import gather_impulses
+from rbcli.physics.joints.impulses import apply_body_impulses, body_impulses, gather_impulses, joint_impulses
 from rbcli.physics.joints.rows import joint_rows
 from rbcli.physics.joints.solver import solve_rows
 from rbcli.physics.joints.stages import factor_at
-from rbcli.physics.joints.tables import STAT_FLOOR, STAT_ITERATIONS, STAT_POSITION, STAT_REDUNDANT
+from rbcli.physics.joints.tables import (
+    STAT_FLOOR,
+    STAT_ITERATIONS,
+    STAT_POSITION,
+    STAT_REDUNDANT,
+    STAT_RESTARTS,
+)
 from rbcli.physics.kernel_link import empty_without, separately_compiled
 from rbcli.physics.stages import kinematic_end_stage
 from rbcli.physics.step import STEP_KERNEL
@@ -90,10 +103,13 @@ def joint_update(
             work.x_start[b, c] = x[b, c]
         for c in range(4):
             work.q_start[b, c] = q[b, c]
+    redundant = factor_at(model, table, work, work.x_start, work.q_start)
+    guessed = _first_iterate(table, work, P, L)
     for b in range(x.shape[0]):
         free_drift(model, b, h, work.x_start, work.q_start, P, L, x, q)
     kinematic_end_stage(model, kinematic, schedule, t + h, x, q, P, L)
-    joint_position(model, table, work, h, x, q, P, L)
+    joint_position(model, table, work, h, x, q, P, L, guessed)
+    work.stats[STAT_REDUNDANT] = redundant
     accumulate_wrench(model, forces, contact, force_data, t + h, x, q, P, L, F, tau, not dissipative)
     if dissipative:
         dissipation_flow(model, forces.spring, forces.drag, 0.5 * h, x, q, P, L)
@@ -114,38 +130,84 @@ def _kick(has_torque, s, P, L, F, tau) -> None:  # noqa: ANN001
             L[b, 2] += s * tau[b, 2]
 
 
-@separately_compiled
 @numba.njit(**STEP_KERNEL)
-def joint_position(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
-    """The joints' impulse at the start configuration (work.x_start, work.q_start) that puts the end of
-    the drift on g = 0, then each limit beyond its bound pushed back the same way (drives.py); (x, q) is
-    the drift's end without it, (P, L) the momenta after the start kick."""
-    redundant = factor_at(model, table, work, work.x_start, work.q_start)
+def _first_iterate(table, work, P, L) -> bool:  # noqa: ANN001
+    """The Newton's first iterate: Lambda extrapolated from the last two steps' (2 Lambda_1 - Lambda_2, or
+    Lambda_1 after one step), applied to (P, L) along G at the start configuration (the factor's rows);
+    the kicked momenta are kept in work.P_kicked, L_kicked for a restart. False, applying nothing, on a
+    run's first step. Lambda ~ h x the joints' force changes by ~ h |d lambda/dt| a step, so the line
+    through the last two leaves ~ (h |omega|)^2 of the free drift's residual: the Newton, which gains
+    ~ h |omega| an iteration, starts two iterations nearer round-off (module docstring)."""
     work.impulse[:] = 0.0
     work.joint_impulse[:, :] = 0.0
     work.limit_hit[:, :] = 0.0
+    count = work.guess_count[0]
+    if count == 0.0:
+        return False
+    for r in range(work.delta.shape[0]):
+        last = work.guess[0, r]
+        work.delta[r] = 2.0 * last - work.guess[1, r] if count >= 2.0 else last
+        work.impulse[r] = work.delta[r]
+    for b in range(P.shape[0]):
+        for c in range(3):
+            work.P_kicked[b, c] = P[b, c]
+            work.L_kicked[b, c] = L[b, c]
+    body_impulses(table, work, work.delta)
+    apply_body_impulses(table, work, P, L)
+    return True
+
+
+@separately_compiled
+@numba.njit(**STEP_KERNEL)
+def joint_position(model, table, work, h, x, q, P, L, guessed) -> None:  # noqa: ANN001
+    """The joints' impulse at the start configuration (work.x_start, work.q_start, whose factor is in
+    work.solver) that puts the end of the drift on g = 0, then each limit beyond its bound pushed back the
+    same way (drives.py); (x, q) is the drift's end with the first iterate's impulse (already in work.impulse
+    and (P, L): `_first_iterate`). A first iterate that does not converge to round-off (a step unlike the
+    two before it: an impact, a limit reached) is dropped and the Newton runs again from the free drift,
+    as a run's first step does; the converged Lambda is then the next step's guess."""
     scale = 0.0
     for b in range(x.shape[0]):
         scale = max(scale, abs(x[b, 0]), abs(x[b, 1]), abs(x[b, 2]))
-    work.stats[STAT_FLOOR] = ROUNDOFF_ULPS * EPS * scale
-    worst, iterations = _newton(model, table, work, h, x, q, P, L)
+    floor = ROUNDOFF_ULPS * EPS * scale
+    work.stats[STAT_FLOOR] = floor
+    worst, iterations = _newton(model, table, work, h, x, q, P, L, False)
+    if guessed and worst > floor:  # the guess misled the simplified Newton: from the free drift instead
+        work.stats[STAT_RESTARTS] += 1.0
+        work.impulse[:] = 0.0
+        work.joint_impulse[:, :] = 0.0
+        for b in range(x.shape[0]):
+            if table.body_ground[b]:
+                continue
+            for c in range(3):
+                P[b, c] = work.P_kicked[b, c]
+                L[b, c] = work.L_kicked[b, c]
+            free_drift(model, b, h, work.x_start, work.q_start, P, L, x, q)
+        worst, more = _newton(model, table, work, h, x, q, P, L, False)
+        iterations += more
+    joint_impulses(table, work, work.impulse)  # the rows' Lambda on each joint's bodies, once
+    for r in range(work.impulse.shape[0]):  # the joints' Lambda alone (the limits' pushes are not rows)
+        work.guess[1, r] = work.guess[0, r]
+        work.guess[0, r] = work.impulse[r]
+    work.guess_count[0] = min(work.guess_count[0] + 1.0, 2.0)
     for sweep in range(LIMIT_ROUNDS):  # limits reached in this step: onto the bound, then the joints again
         if not limit_positions(table, work, h, x, q, P, L, sweep < LIMIT_ONTO_ROUNDS):
             break
         for b in range(x.shape[0]):
             if not table.body_ground[b]:
                 free_drift(model, b, h, work.x_start, work.q_start, P, L, x, q)
-        worst, more = _newton(model, table, work, h, x, q, P, L)
+        worst, more = _newton(model, table, work, h, x, q, P, L, True)
         iterations += more
     work.stats[STAT_ITERATIONS] = iterations
     work.stats[STAT_POSITION] = worst
-    work.stats[STAT_REDUNDANT] = redundant
 
 
 @separately_compiled
 @numba.njit(**STEP_KERNEL)
-def _newton(model, table, work, h, x, q, P, L):  # noqa: ANN001, ANN202
-    """Simplified Newton on the end configuration's residual with the start factor; (max |g|, iterations)."""
+def _newton(model, table, work, h, x, q, P, L, per_joint):  # noqa: ANN001, ANN202
+    """Simplified Newton on the end configuration's residual with the start factor; (max |g|, iterations).
+    Each iteration's multipliers go to work.impulse, and with `per_joint` to each joint's reaction too
+    (else the caller adds the sum once: `joint_impulses`)."""
     worst = joint_rows(table, x, q, work.jac_a, work.jac_b, work.residual, False)
     iterations = 0
     scale = -1.0 / h
@@ -157,7 +219,10 @@ def _newton(model, table, work, h, x, q, P, L):  # noqa: ANN001, ANN202
                    work.rhs, work.delta)  # fmt: skip
         for r in range(work.delta.shape[0]):
             work.impulse[r] += work.delta[r]
-        gather_impulses(table, work, work.delta)
+        if per_joint:
+            gather_impulses(table, work, work.delta)
+        else:
+            body_impulses(table, work, work.delta)
         for b in range(x.shape[0]):  # each body the impulse moved: its new momenta, its drift again
             if table.body_ground[b]:
                 continue

@@ -58,6 +58,10 @@ def joint_velocity(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
     _project(model, table, work, x, q, P, L)
     drive_velocities(model, table, work, h, x, q, P, L)
     work.stats[STAT_VELOCITY] = row_velocities(model, table, work, q, P, L)
+    for b in range(P.shape[0]):
+        for c in range(3):
+            work.P_left[b, c] = P[b, c]
+            work.L_left[b, c] = L[b, c]
 
 
 @separately_compiled
@@ -68,12 +72,16 @@ def joint_begin(model, table, work, x, q, P, L) -> None:  # noqa: ANN001
     ideal joints that projection is the exact impulsive reaction (the W-orthogonal projection of the
     velocity onto the joints' tangent space: the momenta change only along G^T), so a kick on a jointed
     body acts as the joints would take it. Otherwise (every step after the first) it checks G V only,
-    with the last velocity stage's rows when the state is still at their configuration."""
+    with the last velocity stage's rows when the state is still at their configuration, and not even
+    that when the momenta too are bitwise those that stage left (its G V is then in the stats: ~0.3 us
+    of a 10-link chain's ~17 us step)."""
     if table is None or work is None:
         return
     if not _at_factor(work, x, q):
         work.factor_state[0] = 0.0  # the rows below are not the factor's any more
         joint_rows(table, x, q, work.jac_a, work.jac_b, work.residual, True)
+    elif work.stats[STAT_VELOCITY] <= VELOCITY_SLACK and _momenta_left(work, P, L):
+        return  # bitwise the state the last velocity stage left, with G V within the slack
     if row_velocities(model, table, work, q, P, L) > VELOCITY_SLACK:
         _project(model, table, work, x, q, P, L)
 
@@ -89,6 +97,16 @@ def _at_factor(work, x, q) -> bool:  # noqa: ANN001
                 return False
         for c in range(4):
             if q[b, c] != work.q_factor[b, c]:
+                return False
+    return True
+
+
+@numba.njit(**STEP_KERNEL)
+def _momenta_left(work, P, L) -> bool:  # noqa: ANN001
+    """Whether (P, L) are bitwise the momenta the last velocity stage left (work.P_left, L_left)."""
+    for b in range(P.shape[0]):
+        for c in range(3):
+            if P[b, c] != work.P_left[b, c] or L[b, c] != work.L_left[b, c]:
                 return False
     return True
 

@@ -46,9 +46,11 @@ JOINT_ROWS = {JOINT_BALL: 3, JOINT_HINGE: 5, JOINT_FIXED: 6, JOINT_SLIDER: 5, JO
 
 # columns of JointWork.stats: Newton iterations of the last position stage, the largest |g| it left
 # [m or rad], the largest |G V| the velocity stage left [m/s or rad/s], rows found redundant (dropped),
-# and the round-off level at which the position stage's Newton iteration stopped [m] (stages.py)
-STAT_ITERATIONS, STAT_POSITION, STAT_VELOCITY, STAT_REDUNDANT, STAT_FLOOR = range(5)
-STAT_COUNT = 5
+# the round-off level at which the position stage's Newton iteration stopped [m] (stages.py), and
+# steps whose extrapolated first iterate did not converge, so that the Newton ran again from the free
+# drift (counted over the run: rattle.py)
+STAT_ITERATIONS, STAT_POSITION, STAT_VELOCITY, STAT_REDUNDANT, STAT_FLOOR, STAT_RESTARTS = range(6)
+STAT_COUNT = 6
 # columns of JointTable.cone
 CONE_FRAME_A, CONE_FRAME_B, CONE_SWING = 0, 4, 8
 
@@ -115,6 +117,20 @@ class JointWork(NamedTuple):
     x_factor: np.ndarray  # [m] (N, 3)
     q_factor: np.ndarray  # (N, 4)
     factor_state: np.ndarray  # (2,)
+    # the position stage's multipliers Lambda of the last two steps (rows 0: the last, 1: the one before)
+    # and how many of them are set (0-2, in guess_count[0]): the next step's first Newton iterate is their
+    # linear extrapolation (rattle.py `_first_iterate`); carried by checkpoints so a resumed run continues
+    # bitwise, forgotten by Data.clear_work
+    guess: np.ndarray  # [N s or N m s] (2, R)
+    guess_count: np.ndarray  # (1,)
+    # the momenta after the start kick, before the guess's impulse: the Newton restarts from them when
+    # the guess does not converge (rattle.py)
+    P_kicked: np.ndarray  # [N s] (N, 3)
+    L_kicked: np.ndarray  # [N m s] (N, 3)
+    # the momenta the last velocity stage left: the next step's joint_begin finds G V as that stage left
+    # it when the state is bitwise still there (stages.py), without computing G V again
+    P_left: np.ndarray  # [N s] (N, 3)
+    L_left: np.ndarray  # [N m s] (N, 3)
 
 
 def joint_table(
@@ -194,4 +210,6 @@ def make_joint_work(table: JointTable) -> JointWork:
         np.zeros((bodies, 3)), np.zeros((bodies, 4)), np.zeros(bodies), np.zeros((bodies, 3, 3)),
         np.zeros((bodies, 6)), np.zeros((table.kind.shape[0], 2)), np.zeros((table.kind.shape[0], 12)),
         np.zeros(STAT_COUNT), make_solver_work(table.graph), np.zeros((bodies, 3)), np.zeros((bodies, 4)), np.zeros(2),
+        np.zeros((2, rows)), np.zeros(1), np.zeros((bodies, 3)), np.zeros((bodies, 3)), np.zeros((bodies, 3)),
+        np.zeros((bodies, 3)),
     )  # fmt: skip

@@ -1,0 +1,69 @@
+"""When does the shipped ragdoll come to rest? The spread of its settling time over round-off-sized changes.
+
+    python benchmarks/bench_ragdoll_rest.py [--runs N] [--seconds S]
+
+scenes/joints/ragdoll.yaml dropped as it ships (run 0), and with one body's centre moved by
+1e-13 m x run (runs 1 .. N-1: a different body and axis each). Prints for each run the last time any
+part's fastest particle moved at 1 cm/s or more, checked every 20 steps up to S seconds.
+
+Why: the fall is chaotic (the ragdoll topples over its limits and rolls on its contacts), so a change
+far below any tolerance (a body moved by 1e-13 m, or the joints' Newton stopping one round-off step
+elsewhere) changes which way it rolls and when it settles. A test of "at rest from time T" must leave a
+margin over this spread (tests/physics/test_joints_contact_scenes.py). Measured (issue 46, 16 runs:
+8 before the Newton's extrapolated first iterate, 8 after): 3.1-4.5 s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from rbcli import Simulation  # noqa: E402
+from rbcli.physics.rotation import quat_rotate  # noqa: E402
+
+REST_SPEED = 0.01  # [m/s]
+
+
+def fastest_particle_speeds(sim: Simulation) -> np.ndarray:
+    """Each body's fastest particle [m/s]: max |v + omega x r| over its particles."""
+    model, state, view = sim.model, sim.data.state, sim.state
+    speeds = np.zeros(model.body_mass.shape[0])
+    for b in range(speeds.shape[0]):
+        start, count = model.body_particle_start[b], model.body_particle_count[b]
+        r = quat_rotate(state.q[b], model.particle_offset[start : start + count])
+        speeds[b] = np.linalg.norm(view.v[b] + np.cross(view.omega[b], r), axis=1).max()
+    return speeds
+
+
+def last_motion(run: int, seconds: float) -> float:
+    """The last time [s] (on the 20-step grid) any part moved at REST_SPEED or more."""
+    sim = Simulation(ROOT / "scenes" / "joints" / "ragdoll.yaml")
+    if run:
+        x = sim.data.state.x
+        x[run % x.shape[0], run % 3] += 1e-13 * run
+    last = 0.0
+    while sim.time < seconds - 1e-9:
+        sim.step(20)
+        if fastest_particle_speeds(sim).max() >= REST_SPEED:
+            last = sim.time
+    return last
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", type=int, default=8)
+    parser.add_argument("--seconds", type=float, default=6.0)
+    options = parser.parse_args()
+    times = [last_motion(run, options.seconds) for run in range(options.runs)]
+    print("last time any part moved at >= 1 cm/s [s]:", ", ".join(f"{t:.2f}" for t in times))
+    print(f"spread {min(times):.2f} - {max(times):.2f} s over {len(times)} runs")
+
+
+if __name__ == "__main__":
+    main()
