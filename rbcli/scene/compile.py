@@ -169,7 +169,7 @@ def compile_model(spec: SceneSpec, *, merge_welds: bool = True) -> CompiledModel
     state = initial_state(spec, model)
     _check_initial_state(spec, state)
     body_index = {name: i for i, name in enumerate(model.body_names)}
-    contact, summary = compile_contact(spec, model, centres) if spec.contact is not None else (None, None)
+    contact, summary = compile_contact(spec, model, centres, state) if spec.contact is not None else (None, None)
     if contact is not None and spec.joints:  # a joint's two bodies do not collide unless it asks
         contact = contact._replace(excluded_pair=_jointed_pairs(spec, body_index, model.body_mass.shape[0]))
     motions = kinematic_rows(spec, model, state) if spec.contact is not None else []

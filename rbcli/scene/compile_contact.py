@@ -20,9 +20,11 @@ import numpy as np
 from rbcli.physics.contact.parameters import (
     DEFAULT_FRICTION,
     DEFAULT_RESTITUTION,
+    IMPACT_DEPTH,
     PENETRATION_AT_REST,
     damping_ratio_for_restitution,
     default_body_stiffness,
+    peak_compression,
     plane_stiffness,
     stable_step,
     support_count,
@@ -34,7 +36,7 @@ from rbcli.physics.model import Model
 from rbcli.physics.rotation import quat_to_matrix
 from rbcli.physics.state import State
 from rbcli.scene.compile_forces import KinematicRow
-from rbcli.scene.contact_speed import ImpactBound
+from rbcli.scene.contact_speed import ImpactBound, assembly_mass, speed_bounds
 from rbcli.scene.spec import BodySpec, MaterialSpec, SceneError, SceneIssue, SceneSpec
 
 
@@ -118,8 +120,11 @@ def spheres_of(
     return offsets, radii
 
 
-def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> tuple[ContactTable, ContactSummary]:
-    """The ContactTable of a scene with a `contact:` section (spec.contact is not None)."""
+def compile_contact(
+    spec: SceneSpec, model: Model, centres_user: np.ndarray, state: State
+) -> tuple[ContactTable, ContactSummary]:
+    """The ContactTable of a scene with a `contact:` section (spec.contact is not None), from the initial
+    `state` too (a primitive's default stiffness follows its speed bound: `compile_primitives`)."""
     contact = spec.contact
     assert contact is not None
     n = model.body_count
@@ -181,9 +186,27 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
         plane_k[b] = stiffness[b]
         if material.stiffness is None:  # carried at rest by fewer spheres than `support` (parameters.py)
             plane_k[b] = plane_stiffness(stiffness[b], int(support[b]), rest)
+    planes = contact.planes
+    plane_point = np.array([p.point for p in planes], dtype=float).reshape(-1, 3)
+    plane_normal = np.array([p.normal for p in planes], dtype=float).reshape(-1, 3)
+    all_body = np.concatenate(sphere_body) if sphere_body else np.zeros(0, dtype=np.int64)
+    all_offset = np.concatenate(offsets) if offsets else np.zeros((0, 3))
     primitive = compile_primitives(spec, model, centres_user, frames, np.asarray([len(r) for r in radii]),
                                    [b for b, body in enumerate(spec.bodies) if body.collide], g)  # fmt: skip
-    lattice_k = stiffness * support  # its carpet's stiffness at rest (the stable step below)
+    # the landing rule (compile_primitives' docstring): the speed bounds, a primitive's fall ending at its size
+    clearance = np.where(primitive.kind >= 0, primitive.scale, 0.0)
+    speed = speed_bounds(spec, model, state, all_body, all_offset, plane_point, plane_normal, clearance)[0]
+    carried = assembly_mass(spec, model)
+    for b in range(n):
+        if spec.bodies[b].material.over(base).stiffness is not None or not np.isfinite(min_radius[b]):
+            continue
+        if primitive.kind[b] >= 0:
+            landing = impact_stiffness(carried[b], speed[b], zeta[b], primitive.scale[b])
+            primitive.stiffness[b] = max(primitive.stiffness[b], landing)
+        elif carried[b] > model.body_mass[b]:  # held by joints, touching through spheres: per sphere
+            k_impact = impact_stiffness(carried[b], speed[b], zeta[b], min_radius[b])
+            stiffness[b] = max(stiffness[b], k_impact)
+            plane_k[b] = max(plane_k[b], k_impact)
     for b in np.flatnonzero(primitive.kind >= 0).tolist():  # planes touch its primitive, its own stiffness
         material = spec.bodies[b].material.over(base)
         plane_k[b] = material.stiffness if material.stiffness is not None else primitive.stiffness[b]
@@ -196,21 +219,20 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
     # static and kinematic bodies: infinite mass for contact, their wrench held at zero (they keep P and L)
     static = np.array([b.static or b.kinematic for b in spec.bodies], dtype=bool)
     inv_mass = np.where(static, 0.0, np.where(primitive.kind >= 0, 1.0, support) / model.body_mass)
-    # what carries it on another body; the stable step keeps its carpet's stiffness where that is stiffer (a
-    # lattice of spheres smaller than the primitive: conservative, and what slice 2's runs stepped by)
+    # what carries it on another body and on a plane: a primitive's manifold points (its lattice spheres
+    # touch nothing: the stable step is its own), a cloud's supporting spheres
     pair_support = np.where(primitive.kind >= 0, primitive.points, support)
-    plane_support = np.where(primitive.kind >= 0, primitive.points, support)  # what carries it on a plane
-    planes = contact.planes
+    plane_support = pair_support
     plane_zeta = [damping_ratio(e)
                   for e in (p.material.over(base).restitution or DEFAULT_RESTITUTION for p in planes)]  # fmt: skip
     movable = colliding & ~static
     with np.errstate(all="ignore"):  # a huge stiffness over a tiny mass: dt_crit 0 (a warning of its own)
-        pair_k = np.maximum(lattice_k, stiffness * pair_support)
+        pair_k = stiffness * pair_support
         dt_crit, worst = stable_step(model.body_mass, pair_k, np.where(colliding, zeta, 0.0), movable,
                                      planes=bool(planes), plane_stiffness=plane_k * plane_support)  # fmt: skip
     table = contact_table(
-        sphere_body=np.concatenate(sphere_body) if sphere_body else [],
-        sphere_offset=np.concatenate(offsets) if offsets else np.zeros((0, 3)),
+        sphere_body=all_body,
+        sphere_offset=all_offset,
         sphere_radius=np.concatenate(radii) if radii else [],
         body_inv_contact_mass=inv_mass,
         body_stiffness=stiffness,
@@ -218,8 +240,8 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
         body_damping_ratio=zeta,
         body_friction=friction,
         static_body=np.flatnonzero(static),
-        plane_point=[p.point for p in planes] or np.zeros((0, 3)),
-        plane_normal=[p.normal for p in planes] or np.zeros((0, 3)),
+        plane_point=plane_point,
+        plane_normal=plane_normal,
         plane_damping_ratio=plane_zeta,
         plane_friction=[p.material.over(base).friction for p in planes],
         stable_step=dt_crit,
@@ -247,7 +269,8 @@ def compile_contact(spec: SceneSpec, model: Model, centres_user: np.ndarray) -> 
 @dataclass(frozen=True)
 class Primitives:
     """The bodies' primitives for ContactTable (kind -1: none), each one's plane stiffness per manifold
-    point by default [N/m] and the points it rests on (`compile_primitives`)."""
+    point by default [N/m] (the rest rule; compile_contact raises it to the landing rule), the points it
+    rests on and its size scale [m] (a box's smallest half extent, a capsule's radius) (`compile_primitives`)."""
 
     kind: np.ndarray
     offset: np.ndarray
@@ -255,6 +278,7 @@ class Primitives:
     size: np.ndarray
     stiffness: np.ndarray
     points: np.ndarray
+    scale: np.ndarray
 
 
 # primitives.PRIMITIVE_CAPSULE, PRIMITIVE_BOX (not imported: `rbsim validate` imports no numba; tested equal)
@@ -268,14 +292,19 @@ def compile_primitives(spec: SceneSpec, model: Model, centres_user: np.ndarray, 
     """Each box and capsule shape body's primitive (docs/contact.md "Primitive contact"), in a scene with
     contact (`contact.primitives`, the default): its centre and axes in the principal frame
     (r = E^T (p_user - centre_user), R = E^T R_user), its size (box: half extents; capsule: radius,
-    half-length) and its stiffness from geometry: resting on its `points` manifold points (a box on a face
-    4, a lying capsule 2) it sinks PENETRATION_AT_REST of its size (box: its smallest half extent; capsule:
-    its radius), k = M g / (PENETRATION_AT_REST size) / points per point, as a sphere sinks that fraction of
-    its radius. A body with fewer contact spheres than its features (a box's 8 vertices: each feature keeps
-    its tangential spring in the history row of one of the body's spheres) keeps its spheres."""
+    half-length) and its stiffness from geometry, per manifold point, the larger of two rules (the
+    second applied by `compile_contact`, which knows the speed bounds):
+    - at rest on its `points` manifold points (a box on a face 4, a lying capsule 2) it sinks
+      PENETRATION_AT_REST of its size (box: its smallest half extent; capsule: its radius),
+      k = M g / (PENETRATION_AT_REST size) / points, as a sphere sinks that fraction of its radius;
+    - landing at its speed bound v with the mass m it carries (its assembly's) on one point, the clamped
+      spring-dashpot goes no deeper than IMPACT_DEPTH of its size:
+      k = m (peak_compression(zeta) v / (IMPACT_DEPTH size))^2 (physics/contact/parameters.py).
+    A body with fewer contact spheres than its features (a box's 8 vertices: each feature keeps its
+    tangential spring in the history row of one of the body's spheres) keeps its spheres."""
     n = model.body_count
     out = Primitives(np.full(n, -1, dtype=np.int64), np.zeros((n, 3)), np.tile(np.eye(3), (n, 1, 1)),
-                     np.zeros((n, 3)), np.zeros(n), np.ones(n))  # fmt: skip
+                     np.zeros((n, 3)), np.zeros(n), np.ones(n), np.zeros(n))  # fmt: skip
     contact = spec.contact
     if contact is None or not contact.primitives:
         return out
@@ -298,10 +327,22 @@ def compile_primitives(spec: SceneSpec, model: Model, centres_user: np.ndarray, 
         out.rotation[b] = E.T @ rotation
         out.size[b] = extent
         out.points[b] = points
+        out.scale[b] = scale
         with np.errstate(all="ignore"):
             k_body = float(default_body_stiffness(model.body_mass[b : b + 1], np.array([scale]), g)[0])
         out.stiffness[b] = k_body / points
     return out
+
+
+def impact_stiffness(carried: float, speed: float, zeta: float, size: float) -> float:
+    """[N/m] The stiffness of one contact point that stops `carried` [kg] landing on it at `speed` [m/s]
+    within IMPACT_DEPTH of `size` [m]: the clamped spring-dashpot's deepest compression is
+    peak_compression(zeta) v sqrt(m / k) (physics/contact/parameters.py), so
+    k = m (peak_compression(zeta) v / (IMPACT_DEPTH size))^2; 0 for a body that cannot move."""
+    with np.errstate(all="ignore"):
+        landing = peak_compression(float(zeta)) * float(speed) / (IMPACT_DEPTH * float(size))
+        k = float(carried) * landing * landing
+    return k if math.isfinite(k) else 0.0
 
 
 def kinematic_rows(spec: SceneSpec, model: Model, state: State) -> list[KinematicRow]:

@@ -31,9 +31,10 @@ Depth of an impact at speed v against a plane or a static body: the linear sprin
 to peak_compression(zeta) v / w (parameters.py), w = sqrt(k / m). The estimate takes the first sphere
 to touch as carrying the whole body mass M (its effective mass is at most M, and the next spheres of a
 lattice take part only once it is deep), so it is an upper bound until then: a tilted brick landing on
-a corner sphere. It is compared with DEPTH_FRACTION of that sphere's radius, or for a body that touches
-planes as its primitive (a box or capsule shape), with DEPTH_FRACTION of the primitive's size, its first
-manifold point carrying the whole mass at its per-point stiffness.
+a corner sphere. For a body held by joints, M is its assembly's mass (`assembly_mass`: a ragdoll's arm
+lands with the torso behind it). It is compared with DEPTH_FRACTION of that sphere's radius, or for a
+body that touches planes as its primitive (a box or capsule shape), with DEPTH_FRACTION of the
+primitive's size, its first manifold point carrying the whole mass at its per-point stiffness.
 """
 
 from __future__ import annotations
@@ -94,14 +95,49 @@ def impact_bound(spec: SceneSpec, model: Model, state: State, table: ContactTabl
     sphere_body = table.sphere_body
     if not sphere_body.shape[0]:
         return None
+    radius = np.full(model.body_count, np.inf)
+    np.minimum.at(radius, sphere_body, table.sphere_radius)
+    kind = table.primitive_kind
+    clearance = np.where(kind >= 0, _depth_scale(table, radius), 0.0) if kind.shape[0] else None
+    speed, fall, colliding, movable = speed_bounds(spec, model, state, sphere_body, table.sphere_offset,
+                                                   table.plane_point, table.plane_normal, clearance)  # fmt: skip
+    static = np.array([b.static for b in spec.bodies], dtype=bool)
+    fastest = int(np.argmax(speed))
+    top = np.sort(speed[colliding & ~static])[::-1]
+    approach = float(top[0] + top[1]) if top.shape[0] > 1 else float(top[0]) if top.shape[0] else 0.0
+    return ImpactBound(
+        approach_speed=approach,
+        radius=float(table.sphere_radius.min()),
+        body=model.body_names[fastest],
+        speed=float(speed[fastest]),
+        fall=float(fall[fastest]),
+        deep=_deepest(model, table, speed, _depth_scale(table, radius), movable, assembly_mass(spec, model)),
+    )
+
+
+def speed_bounds(
+    spec: SceneSpec,
+    model: Model,
+    state: State,
+    sphere_body: np.ndarray,
+    sphere_offset: np.ndarray,
+    plane_point: np.ndarray,
+    plane_normal: np.ndarray,
+    clearance: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per body: (its contact spheres' speed bound [m/s], its fall height [m], whether it has contact
+    spheres, whether it is movable) from the module docstring's rules, given the contact spheres (body,
+    offset in the principal frame) and planes: what `impact_bound` reports and what a primitive's default
+    stiffness is set from (scene/compile_contact.py). `clearance` [m] per body is taken off its fall: a
+    primitive's centre stays at least its smallest size (a box's smallest half extent, a capsule's
+    radius) above what it lands on, so a box resting on its face has no fall left."""
     n = model.body_count
     mass = model.body_mass
     colliding = np.zeros(n, dtype=bool)
     colliding[sphere_body] = True
     reach = np.zeros(n)
-    np.maximum.at(reach, sphere_body, np.linalg.norm(table.sphere_offset, axis=1))
-    radius = np.full(n, np.inf)
-    np.minimum.at(radius, sphere_body, table.sphere_radius)
+    if sphere_body.shape[0]:
+        np.maximum.at(reach, sphere_body, np.linalg.norm(sphere_offset, axis=1))
     static = np.array([b.static for b in spec.bodies], dtype=bool)
     kinematic = np.array([b.kinematic for b in spec.bodies], dtype=bool)
     movable = colliding & ~static & ~kinematic
@@ -111,7 +147,10 @@ def impact_bound(spec: SceneSpec, model: Model, state: State, table: ContactTabl
         m = np.einsum("kji,kj->ki", quat_to_matrix(state.q), state.L)
         w0 = np.linalg.norm(m / model.body_inertia, axis=1)
         rotation = 0.5 * np.sum(m * m / model.body_inertia, axis=1)
-        fall = _fall_height(spec, model, state, table, static | kinematic)
+        fall = _fall_height(spec, model, state, sphere_body, sphere_offset, plane_point, plane_normal,
+                            static | kinematic)  # fmt: skip
+        if clearance is not None:
+            fall = np.maximum(0.0, fall - clearance)
         g = float(np.linalg.norm(spec.gravity)) if spec.gravity is not None else 0.0
         speed = np.sqrt(v0 * v0 + 2.0 * g * fall) + np.sqrt(2.0 * rotation / model.body_inertia.min(axis=1)) * reach
     for b, body in enumerate(spec.bodies):  # kinematic bodies only: a handful per scene
@@ -129,37 +168,54 @@ def impact_bound(spec: SceneSpec, model: Model, state: State, table: ContactTabl
     kinematic_top = float(speed[kinematic & colliding].max()) if (kinematic & colliding).any() else 0.0
     speed[movable] += 2.0 * kinematic_top
     speed[~colliding | static] = 0.0
-    fastest = int(np.argmax(speed))
-    top = np.sort(speed[colliding & ~static])[::-1]
-    approach = float(top[0] + top[1]) if top.shape[0] > 1 else float(top[0]) if top.shape[0] else 0.0
-    return ImpactBound(
-        approach_speed=approach,
-        radius=float(table.sphere_radius.min()),
-        body=model.body_names[fastest],
-        speed=float(speed[fastest]),
-        fall=float(fall[fastest]),
-        deep=_deepest(model, table, speed, _depth_scale(table, radius), movable),
-    )
+    return speed, fall, colliding, movable
 
 
-def _fall_height(spec: SceneSpec, model: Model, state: State, table: ContactTable, held: np.ndarray) -> np.ndarray:
+def assembly_mass(spec: SceneSpec, model: Model) -> np.ndarray:
+    """[kg] per body, the mass an impact of it may carry: its own, or for a body held by joints to other
+    movable bodies, the whole assembly's (the bodies its joints connect it to, through any chain of them;
+    static and kinematic bodies and the world end a chain). A ragdoll's arm lands with the torso behind
+    it: measured on a capsule ragdoll dropped 1 m, stiffness set from the arm's own 2.5 kg let it sink
+    0.96 of its radius."""
+    n = model.body_count
+    parent = list(range(n))
+
+    def root(b: int) -> int:
+        while parent[b] != b:
+            parent[b] = parent[parent[b]]
+            b = parent[b]
+        return b
+
+    index = {name: i for i, name in enumerate(model.body_names)}
+    held = {i for i, body in enumerate(spec.bodies) if body.static or body.kinematic}
+    for joint in spec.joints:
+        ends = [index.get(name, -1) for name in joint.bodies]
+        if len(ends) == 2 and all(e >= 0 and e not in held for e in ends):
+            parent[root(ends[0])] = root(ends[1])
+    roots = np.array([root(b) for b in range(n)])
+    total = np.zeros(n)
+    np.add.at(total, roots, model.body_mass)
+    return total[roots]
+
+
+def _fall_height(spec: SceneSpec, model: Model, state: State, sphere_body: np.ndarray, sphere_offset: np.ndarray,
+                 point: np.ndarray, normal: np.ndarray, held: np.ndarray) -> np.ndarray:  # fmt: skip
     """h per body [m] (module docstring): the height above the floor along gravity, or the depth of the
     lowest held (static or kinematic) sphere below it; 0 without gravity or anything to land on."""
     n = model.body_count
     if spec.gravity is None or not np.linalg.norm(spec.gravity) > 0.0:
         return np.zeros(n)
     down = np.asarray(spec.gravity, dtype=float) / np.linalg.norm(spec.gravity)
-    normal, point = table.plane_normal, table.plane_point
     if normal.shape[0]:
         up = -(normal @ down)
         p = int(np.argmax(up))
         if up[p] > 1e-9:
             return np.maximum(0.0, (state.x - point[p]) @ normal[p]) / up[p]
-    spheres = np.flatnonzero(held[table.sphere_body])
+    spheres = np.flatnonzero(held[sphere_body])
     if not spheres.shape[0]:
         return np.zeros(n)
-    body = table.sphere_body[spheres]
-    world = state.x[body] + np.einsum("kij,kj->ki", quat_to_matrix(state.q[body]), table.sphere_offset[spheres])
+    body = sphere_body[spheres]
+    world = state.x[body] + np.einsum("kij,kj->ki", quat_to_matrix(state.q[body]), sphere_offset[spheres])
     lowest = float((world @ down).max())  # the deepest held sphere along gravity
     return np.maximum(0.0, lowest - state.x @ down)
 
@@ -177,8 +233,9 @@ def _depth_scale(table: ContactTable, radius: np.ndarray) -> np.ndarray:
 
 
 def _deepest(model: Model, table: ContactTable, speed: np.ndarray, radius: np.ndarray,
-             movable: np.ndarray) -> DeepImpact | None:  # fmt: skip
-    """The estimated impact depth per movable body against a plane or a static body (module docstring)."""
+             movable: np.ndarray, carried: np.ndarray) -> DeepImpact | None:  # fmt: skip
+    """The estimated impact depth per movable body against a plane or a static body (module docstring),
+    the body carrying `carried` [kg] (its assembly's mass: `assembly_mass`)."""
     bodies = np.flatnonzero(movable & (speed > 0.0))
     if not bodies.shape[0]:
         return None
@@ -186,7 +243,7 @@ def _deepest(model: Model, table: ContactTable, speed: np.ndarray, radius: np.nd
     if not table.plane_point.shape[0]:
         k = table.body_stiffness[bodies]
     shape = np.array([peak_compression(float(z)) for z in table.body_damping_ratio[bodies]])
-    mass = model.body_mass[bodies]
+    mass = carried[bodies]
     with np.errstate(all="ignore"):
         depth = shape * speed[bodies] * np.sqrt(mass / k) / radius[bodies]
     deep = depth > DEPTH_FRACTION

@@ -356,7 +356,8 @@ def test_box_dropped_with_spin_settles_flat():
     box = ("  - {name: box, shape: {type: box, size: [0.2, 0.1, 0.05]}, spacing: 0.025, density: 600, "
            "position: [0, 0, 0.3], orientation: {axis_angle: {axis: [1, 1, 0], angle: 40, degrees: true}}, "
            "angular_velocity: [2, -3, 5]}")  # fmt: skip
-    sim = scene([box], dt=1e-3, steps=4000, contact="  ground: 0\n  material: {restitution: 0.3, friction: 0.6}\n")
+    contact = "  ground: 0\n  material: {restitution: 0.3, friction: 0.6}\n  substeps: auto\n"
+    sim = scene([box], dt=1e-3, steps=4000, contact=contact)
     sim.step(4000)
     R = quat_to_matrix(sim.state.q[0])
     up = np.abs(R[2])  # |z| of each body axis in the world

@@ -18,7 +18,9 @@ import pytest
 import rbcli
 from rbcli.physics.contact.parameters import (
     DEPTH_FRACTION,
+    IMPACT_DEPTH,
     MAX_AUTO_SUBSTEPS,
+    PENETRATION_AT_REST,
     TRAVEL_FRACTION,
     peak_compression,
     substeps_for,
@@ -126,11 +128,15 @@ def test_auto_substeps_find_a_contact_within_the_travel_fraction_of_its_touch():
     assert auto.state.v[0, 0] == pytest.approx(-9.0, rel=0.05) and abs(auto.state.P.sum(axis=0)).max() < 1e-15
 
 
-def _brick(velocity: float, stiffness: str | None, dt: float = 1e-5, duration: float = 0.04) -> str:
-    """scenes/contact/box_drop.yaml thrown down at `velocity` [m/s], sub-steps auto."""
+def _brick(velocity: float, stiffness: str | None, dt: float = 1e-5, duration: float = 0.04,
+           primitives: bool = True) -> str:  # fmt: skip
+    """scenes/contact/box_drop.yaml (sub-steps auto) thrown down at `velocity` [m/s]; with `primitives`
+    false its brick touches through its lattice's carpet of spheres."""
     text = (ROOT / "scenes/contact/box_drop.yaml").read_text()
+    assert "\n  substeps: auto" in text
     material = "{restitution: 0.3, friction: 0.6" + (f", stiffness: {stiffness}" if stiffness else "") + "}"
-    text = text.replace("  material: {restitution: 0.3, friction: 0.6}", f"  material: {material}\n  substeps: auto")
+    carpet = "" if primitives else "\n  primitives: false"
+    text = text.replace("  material: {restitution: 0.3, friction: 0.6}", f"  material: {material}{carpet}")
     text = text.replace(
         "angular_velocity: [2, -3, 5]", f"angular_velocity: [2, -3, 5]\n    velocity: [0, 0, {-velocity}]"
     )
@@ -151,19 +157,39 @@ def _deepest(text: str) -> tuple[float, list[str]]:
 
 
 def test_a_brick_at_20_m_s_goes_no_deeper_than_half_a_radius_with_the_stiffness_validation_names():
-    """The default stiffness (0.25 % sink at rest) cannot stop a 20 m/s brick within 0.5 r, and no
-    sub-stepping changes that (the spring's own peak, 5.4 r: measured at 2 to 100 sub-steps). Validation
-    says so, naming the speed; with the stiffness it names, the deepest recorded overlap is within 0.5 r."""
-    text = _brick(20.0, None)
+    """Touching through its lattice's spheres (`primitives: false`), the brick's default stiffness (0.25 %
+    sink at rest) cannot stop it at 20 m/s within 0.5 r, and no sub-stepping changes that (the spring's
+    own peak: measured at 2 to 100 sub-steps). Validation says so, naming the speed; with the stiffness it
+    names, the deepest recorded overlap is within 0.5 r."""
+    text = _brick(20.0, None, primitives=False)
     spec = load_scene_text(text, file="brick.yaml")
     deep = spec.compiled_model.contact.impact.deep
     assert deep is not None and deep.body == "brick" and 20.0 < deep.speed < 22.0
     depth, warnings = _deepest(text)
-    assert depth > 2 * DEPTH_FRACTION  # the warning is true (1.2 of the box's half thickness as a primitive)
+    assert depth > 2 * DEPTH_FRACTION  # the warning is true
     assert any(f"{deep.speed:.3g} m/s" in w and f"{deep.stiffness_needed:.3g} N/m" in w for w in warnings), warnings
-    depth, warnings = _deepest(_brick(20.0, f"{deep.stiffness_needed:.3g}"))
+    depth, warnings = _deepest(_brick(20.0, f"{deep.stiffness_needed:.3g}", primitives=False))
     assert depth <= DEPTH_FRACTION, depth
     assert not [w for w in warnings if "deep" in w or "sub-steps" in w], warnings
+
+
+def test_a_primitive_bricks_default_stiffness_stops_it_at_20_m_s_within_the_impact_depth():
+    """As its box, the brick's default stiffness follows its landing (scene/compile_contact.py: one
+    corner stops its mass at its speed bound within IMPACT_DEPTH of its half thickness): at 20 m/s the
+    deepest recorded overlap stays within IMPACT_DEPTH (the bound is an upper one: the first corner
+    carries the whole mass only at the first instant), with no warning; with the rest rule alone (the
+    stiffness it would have had, given) it goes past DEPTH_FRACTION."""
+    text = _brick(20.0, None)
+    spec = load_scene_text(text, file="brick.yaml")
+    assert spec.compiled_model.contact.impact.deep is None
+    depth, warnings = _deepest(text)
+    assert depth <= IMPACT_DEPTH, depth
+    assert not [w for w in warnings if "deep" in w or "sub-steps" in w], warnings
+    contact, mass = spec.compiled_model.model.contact, float(spec.compiled_model.model.body_mass[0])
+    rest = mass * 9.81 / (PENETRATION_AT_REST * float(contact.primitive_size[0].min())) / 4
+    assert contact.body_plane_stiffness[0] > 10 * rest
+    depth, _ = _deepest(_brick(20.0, f"{rest!r}"))
+    assert depth > DEPTH_FRACTION, depth
 
 
 def test_a_speed_the_sub_steps_cannot_take_is_named():

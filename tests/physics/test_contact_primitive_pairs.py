@@ -58,9 +58,11 @@ def points(sim: rbcli.Simulation) -> tuple[np.ndarray, np.ndarray]:
 @pytest.mark.parametrize("shift", [0.0, 0.03])
 def test_box_on_a_box_rests_on_four_points_carrying_its_weight(shift):
     """Aligned (their edges coincide: box_box takes the outline's points once) and shifted: 4 points on the
-    ground and 4 between the boxes, the reaction there the top box's weight, the heights the sinks
-    k d = M g / 4 when aligned (per-point k = M g / (PENETRATION_AT_REST h) / 4: d = PENETRATION_AT_REST h
-    for the top box, twice that under the bottom one), and no drift."""
+    ground and 4 between the boxes, the reaction there the top box's weight, the heights the sinks when
+    aligned: 2 M g = 4 k_0 d under the bottom box (k_0 its per-point plane stiffness) and M g = 4 k d
+    between them (k = 2 k_0 k_1 / (k_0 + k_1), the two per-point stiffnesses in series; the top box's
+    is its landing rule's, stiffer than the rest rule's k = M g / (PENETRATION_AT_REST h) / 4, as it could
+    fall to the ground), and no drift."""
     sim = scene(stack(2, shift))
     assert sim.model.contact.primitive_kind.tolist() == [PRIMITIVE_BOX] * 2
     sim.step(1000)
@@ -70,9 +72,12 @@ def test_box_on_a_box_rests_on_four_points_carrying_its_weight(shift):
     assert np.abs(sim.state.x - settled).max() < 1e-6
     assert np.abs(sim.state.v).max() < 1e-5
     if shift == 0.0:  # shifted, the points carry unequal loads (the boxes tilt by a few microradians)
-        sink = PENETRATION_AT_REST * H
-        assert sim.state.x[0, 2] == pytest.approx(H - 2 * sink, abs=1e-3 * sink)
-        assert sim.state.x[1, 2] == pytest.approx(3 * H - 3 * sink, abs=2e-3 * sink)
+        weight = float(sim.model.body_mass[1]) * G
+        assert sim.model.contact.body_plane_stiffness[0] == pytest.approx(weight / (PENETRATION_AT_REST * H) / 4)
+        k0, k1 = sim.model.contact.body_stiffness
+        ground, between = 2 * weight / (4 * k0), weight / (4 * (2 * k0 * k1 / (k0 + k1)))
+        assert sim.state.x[0, 2] == pytest.approx(H - ground, abs=1e-3 * ground)
+        assert sim.state.x[1, 2] == pytest.approx(3 * H - ground - between, abs=2e-3 * between)
     point, force = points(sim)
     between = np.abs(point[:, 2] - 2 * H) < 0.1 * H
     weight = float(sim.model.body_mass[1]) * G

@@ -161,14 +161,17 @@ def test_resting_sinks_the_fraction_of_its_size_and_stays_put(body, size, points
 
 def test_box_landing_on_an_edge_settles_flat():
     box = f"  - {{name: box, {BOX}, position: [0, 0, 0.15], orientation: {{axis_angle: {{axis: [1, 0, 0], angle: 40, degrees: true}}}}}}"  # noqa: E501
-    sim = scene(box, "  ground: 0\n  material: {restitution: 0.3, friction: 0.6}\n", dt=1e-3)
+    sim = scene(box, "  ground: 0\n  material: {restitution: 0.3, friction: 0.6}\n  substeps: auto\n", dt=1e-3)
     sim.step(3000)
     R = quat_to_matrix(sim.state.q[0])
     up = np.abs(R[2])  # |z| of each body axis in the world
     assert up.max() > math.cos(math.radians(1.0))  # one axis vertical: on a face
     half = [0.1, 0.05, 0.025][int(np.argmax(up))]
-    # its sink is PENETRATION_AT_REST of its smallest half extent on any face (one stiffness per body)
-    assert sim.state.x[0, 2] == pytest.approx(half - PENETRATION_AT_REST * 0.025, abs=2e-6)
+    # on any face its 4 corners carry it, k d = M g / 4 (one stiffness per body: its landing rule's, it fell)
+    k = float(sim.model.contact.body_plane_stiffness[0])
+    assert k > float(sim.model.body_mass[0]) * 9.81 / (PENETRATION_AT_REST * 0.025) / 4
+    sink = float(sim.model.body_mass[0]) * 9.81 / (4 * k)
+    assert sim.state.x[0, 2] == pytest.approx(half - sink, abs=2e-6)
     assert np.linalg.norm(sim.state.v[0]) < 1e-3
     assert stats(sim)[STAT_CONTACTS] == 4
 

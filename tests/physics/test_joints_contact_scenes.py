@@ -130,3 +130,57 @@ def test_the_ragdoll_lands_folds_keeps_its_limits_and_comes_to_rest():
     assert np.all(z >= z_rest - 1e-4), z - z_rest
     assert beyond <= 1e-9, beyond
     assert worst <= 1e-12, worst
+
+
+def _deepest_sink(sim: Simulation) -> np.ndarray:
+    """Per body, how deep [1, of its radius] its lowest point is below the scene's one plane: a capsule's
+    from its segment (primitive_offset, axis R[:, 2], size (radius, half-length)), another body's from its
+    contact spheres; 0 when above."""
+    table, s = sim.model.contact, sim.data.state
+    normal, point = table.plane_normal[0], table.plane_point[0]
+    sink = np.zeros(s.x.shape[0])
+    for b in range(s.x.shape[0]):
+        if table.primitive_kind[b] == 1:
+            centre = s.x[b] + quat_rotate(s.q[b], table.primitive_offset[b])
+            axis = quat_rotate(s.q[b], table.primitive_rotation[b][:, 2])
+            radius, half = table.primitive_size[b, 0], table.primitive_size[b, 1]
+            low = normal @ (centre - point) - abs(normal @ axis) * half - radius
+        else:
+            mine = np.flatnonzero(table.sphere_body == b)
+            centres = s.x[b] + quat_rotate(s.q[b], table.sphere_offset[mine])
+            lows = (centres - point) @ normal - table.sphere_radius[mine]
+            low, radius = lows.min(), table.sphere_radius[mine][int(np.argmin(lows))]
+        sink[b] = max(0.0, -low / radius)
+    return sink
+
+
+def test_the_capsule_ragdoll_lands_on_its_capsules_without_sinking_and_keeps_its_joints():
+    """Issue 47's capsule ragdoll (scenes/joints/capsule_ragdoll.yaml, no stiffness given), dropped 1 m on a
+    plane tilted 10 degrees, 3 s: validate warns of nothing; no part's lowest point goes below the plane
+    by more than 10 % of its radius (the target; the default stiffness aims at 5 %, measured 6.5 % at
+    most), the joints hold to 1e-12 and the hinge limits and the neck's and shoulders' cones and twists
+    to 1e-9. With the stiffness set from each part's own weight alone (before), an arm sank 0.96 of its
+    radius: it lands with the torso behind it."""
+    assert not check_scene(SCENES / "capsule_ragdoll.yaml")
+    sim = Simulation(SCENES / "capsule_ragdoll.yaml")
+    table = sim.model.joint
+    assert np.count_nonzero(sim.model.contact.primitive_kind == 1) == 7
+    hinges = [j for j in range(table.body_a.shape[0]) if table.kind[j] == JOINT_HINGE]
+    balls = [j for j in range(table.body_a.shape[0]) if table.kind[j] == JOINT_BALL]
+    sink, worst, beyond = np.zeros(sim.model.body_count), 0.0, 0.0
+    for _ in range(300):
+        sim.step(10)
+        sink = np.maximum(sink, _deepest_sink(sim))
+        worst = max(worst, _rows(sim))
+        x, q = sim.data.state.x, sim.data.state.q
+        for j in hinges:
+            angle = _hinge_angle(table, j, q)
+            beyond = max(beyond, table.limit_lower[j] - angle, angle - table.limit_upper[j])
+        for j in balls:
+            twist, swing = limit_row(table, j, False, x, q)[0], limit_row(table, j, True, x, q)[0]
+            beyond = max(beyond, table.limit_lower[j] - twist, twist - table.limit_upper[j], swing - 1.0)
+    assert sim.time > 2.99
+    assert sink.max() <= 0.1, sink
+    assert sink.max() > 0.0  # it landed
+    assert worst <= 1e-12, worst
+    assert beyond <= 1e-9, beyond

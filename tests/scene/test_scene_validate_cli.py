@@ -181,7 +181,7 @@ def test_verbose_tells_the_cost_of_a_free_body_scene_and_no_joints():
 def test_verbose_counts_contact_spheres_and_sub_steps_in_the_cost(tmp_path):
     """box_drop with 4 sub-steps: body-steps = steps x sub-steps x bodies, as `rbsim run` counts them."""
     text = (REPO / "scenes" / "contact" / "box_drop.yaml").read_text()
-    text = text.replace("\ncontact:\n", "\ncontact:\n  substeps: 4\n")
+    text = text.replace("\n  substeps: auto", "\n  substeps: 4  #")
     assert "substeps: 4" in text
     sim = yaml.safe_load(text)["simulation"]
     assert "integrator" not in sim  # split2, the default with contact
