@@ -148,6 +148,10 @@ def run(
         compiled, target = _prepare_run(scene, output, options, allow_large)
         for warning in compiled.warnings:
             messages.issue(warning, scene)
+        if not quiet:  # what it will cost (scene/run_cost.py; over a minute, a warning above says why)
+            from rbcli.scene.run_cost import run_cost
+
+            messages.status(run_cost(compiled).describe())
         _end_if_stopped(stops, "before the run started")
         sim = Simulation(compiled, threads=threads)  # the one that runs: its kernels are loaded first
         _load_kernels(sim, quiet, stops)

@@ -56,10 +56,19 @@ def validate(
         particles = sum(len(b.particle_mass) for b in spec.bodies)
         bodies = len(spec.bodies)
         typer.echo(f"{file}: ok ({bodies} bod{'y' if bodies == 1 else 'ies'}, {particles} particles)")
+        compiled = _compiled(spec)
         contact = getattr(spec.compiled_model, "contact", None)
         if contact is not None:
-            substeps = spec.contact.substeps if spec.contact is not None else None
-            typer.echo(f"  {contact.describe(substeps)}" + ("; sub-steps: auto" if substeps is None else ""))
+            auto = spec.contact is not None and spec.contact.substeps is None
+            substeps = compiled.settings.substeps if not isinstance(compiled, str) else None
+            line = contact.describe(substeps)
+            if auto:  # say how many auto chose (describe prints a count above 1)
+                line += " (auto)" if substeps is not None and substeps > 1 else "; sub-steps: auto"
+            typer.echo(f"  {line}")
+        if not isinstance(compiled, str):
+            from rbcli.scene.run_cost import run_cost
+
+            typer.echo(f"  {run_cost(compiled).describe()}")
         if verbose:
             if spec.joints:
                 typer.echo(f"  {_joints_line(spec)}")
@@ -76,6 +85,17 @@ def validate(
         typer.echo(f"{len(files) - failed} of {len(files)} scene files valid")
     if failed:
         raise typer.Exit(ExitCode.INVALID)
+
+
+def _compiled(spec):  # noqa: ANN001, ANN202 - a SceneSpec -> CompiledScene, or why its run cannot be planned
+    """The scene compiled with its own run settings (its sub-steps and cost), or the reason it cannot be
+    run as it stands (a str: `_run_lines` says it)."""
+    from rbcli.scene.compile import compile_scene
+
+    try:
+        return compile_scene(spec)
+    except ValueError as exc:
+        return str(exc)
 
 
 def _validate_sweep(file: Path) -> bool:

@@ -129,8 +129,9 @@ class CompiledScene:
         """The scene's load-time warnings and those of the settings that actually run (a spring's
         stability limit against the effective dt, whatever the scene's own dt was)."""
         from rbcli.scene.checks import stability_warnings
+        from rbcli.scene.run_cost import run_cost_warnings
 
-        issues = [*self.spec.warnings, *self.weld_warnings, *stability_warnings(self)]
+        issues = [*self.spec.warnings, *self.weld_warnings, *stability_warnings(self), *run_cost_warnings(self)]
         simulated = self.simulated_spec
         if simulated.joints:
             from rbcli.scene.compile_joints import redundant_row_warnings

@@ -197,16 +197,10 @@ def compile_contact(
     clearance = np.where(primitive.kind >= 0, primitive.scale, 0.0)
     speed = speed_bounds(spec, model, state, all_body, all_offset, plane_point, plane_normal, clearance)[0]
     carried = assembly_mass(spec, model)
-    for b in range(n):
-        if spec.bodies[b].material.over(base).stiffness is not None or not np.isfinite(min_radius[b]):
-            continue
-        if primitive.kind[b] >= 0:
+    for b in np.flatnonzero(primitive.kind >= 0).tolist():
+        if spec.bodies[b].material.over(base).stiffness is None:
             landing = impact_stiffness(carried[b], speed[b], zeta[b], primitive.scale[b])
             primitive.stiffness[b] = max(primitive.stiffness[b], landing)
-        elif carried[b] > model.body_mass[b]:  # held by joints, touching through spheres: per sphere
-            k_impact = impact_stiffness(carried[b], speed[b], zeta[b], min_radius[b])
-            stiffness[b] = max(stiffness[b], k_impact)
-            plane_k[b] = max(plane_k[b], k_impact)
     for b in np.flatnonzero(primitive.kind >= 0).tolist():  # planes touch its primitive, its own stiffness
         material = spec.bodies[b].material.over(base)
         plane_k[b] = material.stiffness if material.stiffness is not None else primitive.stiffness[b]

@@ -235,3 +235,50 @@ def test_verbose_says_a_scene_with_forces_runs_the_loop_of_every_mix_of_force_ty
     lines = verbose_lines(REPO / "scenes" / "forces" / "spring_chain.yaml")
     (kernels,) = [line for line in lines if line.startswith("  kernels: ")]
     assert "forces (gravity, spring, drag: the loop of every mix of force types)" in kernels, kernels
+
+
+def test_validate_says_the_sub_steps_auto_chose_and_what_the_run_will_cost(tmp_path):
+    """The capsule ragdoll (issue 47 item 3): the contact line counts the sub-steps `substeps: auto` chose
+    (settings.substeps, from the stable step), and an estimate line adds the measured costs (scene/run_cost.py)
+    of its joint rows, shapes, spheres and bodies over steps x sub-steps; nothing warns under a minute."""
+    from rbcli.api import prepare
+    from rbcli.scene.run_cost import COST_BODY, COST_ROW, COST_SHAPE, COST_SPHERE
+
+    path = REPO / "scenes" / "joints" / "capsule_ragdoll.yaml"
+    compiled = prepare(path)
+    settings, model = compiled.settings, compiled.model
+    assert settings.substeps > 1
+    result = runner.invoke(app, ["validate", str(path)])
+    assert result.exit_code == 0, result.output
+    lines = result.output.splitlines()
+    assert lines[1].endswith(f"; {settings.substeps} sub-steps per step (auto)"), lines[1]
+    sub_steps = settings.steps * settings.substeps  # split2: 1 force evaluation a step
+    rows, shapes = int(model.joint.row_count.sum()), 7
+    expected = sub_steps * (COST_ROW * rows + COST_SHAPE * shapes + COST_SPHERE * 1 + COST_BODY * 8)
+    head = f"  estimated run: ~{expected:.2g} s of CPU once compiled ({settings.steps:,} steps x {settings.substeps}"
+    assert lines[2].startswith(f"{head} sub-steps; joint rows {sub_steps * COST_ROW * rows:.2g} s"), lines[2]
+    assert "warning" not in result.output
+
+
+def test_a_run_over_a_minute_is_warned_about_naming_what_drives_it(tmp_path):
+    """The box stack (5 sub-steps a step) run for 2,000 s instead of 10: the estimate, 200 times the 10-s
+    run's, is over a minute; the warning names it, the shapes that drive it and the sub-steps with the
+    body and stiffness that set them, and what would change it. The 10-s run does not warn."""
+    from rbcli.api import prepare
+    from rbcli.scene.run_cost import LONG_RUN, run_cost
+
+    path = REPO / "scenes" / "contact" / "box_stack.yaml"
+    short = run_cost(prepare(path))
+    assert short.seconds < LONG_RUN and not [w for w in prepare(path).warnings if "estimated" in w.message]
+    text = path.read_text().replace("duration: 10.0", "duration: 2000.0")
+    assert "duration: 2000.0" in text
+    long = write(tmp_path, "long.yaml", text)
+    cost = run_cost(prepare(long))
+    assert cost.seconds == pytest.approx(200 * short.seconds, rel=1e-9) and cost.seconds > LONG_RUN
+    result = runner.invoke(app, ["validate", str(long)])
+    assert result.exit_code == 0, result.output
+    (warning,) = [line for line in result.output.splitlines() if "warning:" in line]
+    assert 60 < cost.seconds < 120  # said in seconds below two minutes
+    assert f"the run is estimated at ~{cost.seconds:.0f} s of CPU once compiled" in warning, warning
+    assert "mostly contact shapes (10:" in warning and "over 5 sub-steps a step" in warning, warning
+    assert "body 'box9'" in warning and "a shorter duration or a larger dt" in warning, warning

@@ -62,11 +62,10 @@ DEPTH_FRACTION = 0.5
 # at a million sub-steps a step
 MAX_AUTO_SUBSTEPS = 1000
 
-# the default stiffness of a primitive, and of a body held by joints to others (scene/compile_contact.py),
-# also keeps its deepest impact at its speed bound (scene/contact_speed.py, its assembly's mass behind one
-# contact point) within this fraction of its size: the rest rule alone let a capsule ragdoll dropped 1 m
-# sink 0.96 of an arm's radius, and at 0.1 a shin pinned under the falling torso (more than the bound
-# covers) still sank 0.14 of its radius
+# the default stiffness of a primitive (scene/compile_contact.py) also keeps its deepest impact at its
+# speed bound (scene/contact_speed.py, its assembly's mass behind one contact point) within this fraction
+# of its size: the rest rule alone let a capsule ragdoll dropped 1 m sink 0.96 of an arm's radius, and at
+# 0.1 a shin pinned under the falling torso (more than the bound covers) still sank 0.14 of its radius
 IMPACT_DEPTH = 0.05
 # restitutions below this need zeta > 4 (stable steps 8x shorter than undamped): refused at load
 LOWEST_RESTITUTION = 0.01
