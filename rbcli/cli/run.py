@@ -148,10 +148,12 @@ def run(
         compiled, target = _prepare_run(scene, output, options, allow_large)
         for warning in compiled.warnings:
             messages.issue(warning, scene)
-        if not quiet:  # what it will cost (scene/run_cost.py; over a minute, a warning above says why)
-            from rbcli.scene.run_cost import run_cost
+        if not quiet:  # what it will cost, from a second on (scene/run_cost.py; over a minute a warning says why)
+            from rbcli.scene.run_cost import SAY_FROM, run_cost
 
-            messages.status(run_cost(compiled).describe())
+            cost = run_cost(compiled)
+            if cost.seconds >= SAY_FROM:
+                messages.status(cost.describe())
         _end_if_stopped(stops, "before the run started")
         sim = Simulation(compiled, threads=threads)  # the one that runs: its kernels are loaded first
         _load_kernels(sim, quiet, stops)
@@ -185,7 +187,9 @@ def _prepare_run(
         messages.issues(exc.issues, scene)
         raise typer.Exit(ExitCode.INVALID) from None
     except (KeyError, ValueError) as exc:
-        raise messages.fail(_name_the_option(str(exc.args[0] if exc.args else exc), options.given())) from None
+        where = exc.where if isinstance(exc, _TooMuchWork) else None
+        message = _name_the_option(str(exc.args[0] if exc.args else exc), options.given())
+        raise messages.fail(message, where=where) from None
     return compiled, target
 
 
@@ -292,9 +296,18 @@ def _name_the_option(message: str, given: dict[str, object]) -> str:
     return message
 
 
+class _TooMuchWork(ValueError):
+    """`_check_planned_work`'s refusal, located at the scene's dt when the scene's dt and duration set it."""
+
+    def __init__(self, message: str, where: object | None) -> None:
+        super().__init__(message)
+        self.where = where
+
+
 def _check_planned_work(compiled: CompiledScene, options: RunOptions, also: str = "") -> None:
-    """ValueError when the run plans more than MAX_BODY_STEPS body-steps (steps x sub-steps x bodies),
-    naming the options that set the step count; `also`: another refusal to add to the same line."""
+    """_TooMuchWork (a ValueError) when the run plans more than MAX_BODY_STEPS body-steps (steps x
+    sub-steps x bodies), naming the options that set the step count, or located at the scene's dt when
+    they are the scene's; `also`: another refusal to add to the same line."""
     settings, bodies = compiled.settings, compiled.model.body_count
     planned = settings.steps * settings.substeps * bodies
     if planned <= MAX_BODY_STEPS:
@@ -302,11 +315,12 @@ def _check_planned_work(compiled: CompiledScene, options: RunOptions, also: str 
     steps_from = (("dt", options.dt), ("duration", options.duration))
     named = [f"--{name} {value:g}" for name, value in steps_from if value is not None]
     source = " and ".join(named) if named else "the scene's dt and duration"
-    raise ValueError(
+    raise _TooMuchWork(
         f"{source}: the run plans {settings.steps:.3g} steps x {bodies:,} bod{'y' if bodies == 1 else 'ies'}"
         + (f" x {settings.substeps} sub-steps" if settings.substeps > 1 else "")
         + f" = {planned:.3g} body-steps, more than the {MAX_BODY_STEPS:.0e} rbsim runs without asking; "
-        "check the units of dt and duration, or pass --allow-large to run it anyway" + (f"; {also}" if also else "")
+        "check the units of dt and duration, or pass --allow-large to run it anyway" + (f"; {also}" if also else ""),
+        None if named else compiled.spec.simulation.location,
     )
 
 

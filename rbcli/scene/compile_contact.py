@@ -193,14 +193,21 @@ def compile_contact(
     all_offset = np.concatenate(offsets) if offsets else np.zeros((0, 3))
     primitive = compile_primitives(spec, model, centres_user, frames, np.asarray([len(r) for r in radii]),
                                    [b for b, body in enumerate(spec.bodies) if body.collide], g)  # fmt: skip
-    # the landing rule (compile_primitives' docstring): the speed bounds, a primitive's fall ending at its size
-    clearance = np.where(primitive.kind >= 0, primitive.scale, 0.0)
-    speed = speed_bounds(spec, model, state, all_body, all_offset, plane_point, plane_normal, clearance)[0]
+    # the landing rule (compile_primitives' docstring): the speed bounds, a shape's fall ending at its size
     carried = assembly_mass(spec, model)
-    for b in np.flatnonzero(primitive.kind >= 0).tolist():
-        if spec.bodies[b].material.over(base).stiffness is None:
+    exact = landing_spheres(spec, carried, model.body_mass)
+    size = np.where(primitive.kind >= 0, primitive.scale, np.where(exact, min_radius, 0.0))
+    speed = speed_bounds(spec, model, state, all_body, all_offset, plane_point, plane_normal, size)[0]
+    for b in range(n):
+        if spec.bodies[b].material.over(base).stiffness is not None:
+            continue
+        if primitive.kind[b] >= 0:
             landing = impact_stiffness(carried[b], speed[b], zeta[b], primitive.scale[b])
             primitive.stiffness[b] = max(primitive.stiffness[b], landing)
+        elif exact[b]:  # a `sphere` shape held by joints: its one exact sphere lands as a primitive does
+            landing = impact_stiffness(carried[b], speed[b], zeta[b], min_radius[b])
+            stiffness[b] = max(stiffness[b], landing)
+            plane_k[b] = max(plane_k[b], landing)
     for b in np.flatnonzero(primitive.kind >= 0).tolist():  # planes touch its primitive, its own stiffness
         material = spec.bodies[b].material.over(base)
         plane_k[b] = material.stiffness if material.stiffness is not None else primitive.stiffness[b]
@@ -326,6 +333,14 @@ def compile_primitives(spec: SceneSpec, model: Model, centres_user: np.ndarray, 
             k_body = float(default_body_stiffness(model.body_mass[b : b + 1], np.array([scale]), g)[0])
         out.stiffness[b] = k_body / points
     return out
+
+
+def landing_spheres(spec: SceneSpec, carried: np.ndarray, mass: np.ndarray) -> np.ndarray:
+    """bool per body: a `sphere` shape (one exact contact sphere) held by joints to other movable bodies,
+    which takes the landing rule as a primitive does (the capsule ragdoll's head sank 0.16 of its radius
+    with the rest rule). A lone sphere keeps the rest rule: the piles' balls are stepped as they were."""
+    shape = np.array([body.contact_geometry == "sphere" and body.contact_spheres is None for body in spec.bodies])
+    return shape & (np.asarray(carried) > np.asarray(mass))
 
 
 def impact_stiffness(carried: float, speed: float, zeta: float, size: float) -> float:

@@ -97,8 +97,8 @@ def impact_bound(spec: SceneSpec, model: Model, state: State, table: ContactTabl
         return None
     radius = np.full(model.body_count, np.inf)
     np.minimum.at(radius, sphere_body, table.sphere_radius)
-    kind = table.primitive_kind
-    clearance = np.where(kind >= 0, _depth_scale(table, radius), 0.0) if kind.shape[0] else None
+    shaped = _landing_shapes(spec, model, table)
+    clearance = np.where(shaped, _depth_scale(table, radius), 0.0)
     speed, fall, colliding, movable = speed_bounds(spec, model, state, sphere_body, table.sphere_offset,
                                                    table.plane_point, table.plane_normal, clearance)  # fmt: skip
     static = np.array([b.static for b in spec.bodies], dtype=bool)
@@ -171,17 +171,24 @@ def speed_bounds(
     return speed, fall, colliding, movable
 
 
-def _carried(spec: SceneSpec, model: Model, table: ContactTable) -> np.ndarray:
-    """[kg] per body, the mass the deep-impact estimate puts behind its first contact: a primitive's
-    assembly's (its default stiffness is set from it: scene/compile_contact.py), another body's own. A
-    body of spheres held by joints lands with its assembly too (the particle ragdoll's arms sink 0.74 of
-    a radius, measured), but its default stiffness stays the rest rule's: stiffer by the landing rule, the
-    ragdoll came to rest in only 5 of 12 runs (an arm swung on for seconds), so it is not warned about
-    either (docs/contact.md)."""
+def _landing_shapes(spec: SceneSpec, model: Model, table: ContactTable) -> np.ndarray:
+    """bool per body: the bodies whose default stiffness follows their landing (scene/compile_contact.py):
+    primitives, and `sphere` shapes held by joints (`landing_spheres`). Their fall ends at their size."""
+    from rbcli.scene.compile_contact import landing_spheres  # (it imports this module)
+
     kind = table.primitive_kind
-    if not kind.shape[0] or not (kind >= 0).any():
-        return model.body_mass
-    return np.where(kind >= 0, assembly_mass(spec, model), model.body_mass)
+    primitive = kind >= 0 if kind.shape[0] else np.zeros(model.body_count, dtype=bool)
+    return primitive | landing_spheres(spec, assembly_mass(spec, model), model.body_mass)
+
+
+def _carried(spec: SceneSpec, model: Model, table: ContactTable) -> np.ndarray:
+    """[kg] per body, the mass the deep-impact estimate puts behind its first contact: for the bodies whose
+    stiffness follows their landing (`_landing_shapes`) their assembly's, for another body its own. A
+    cloud held by joints lands with its assembly too (the particle ragdoll's arms sink 0.74 of a radius,
+    measured), but its default stiffness stays the rest rule's: stiffer by the landing rule, that ragdoll
+    came to rest in only 5 of 12 runs (an arm swung on for seconds), so it is not warned about either
+    (docs/contact.md)."""
+    return np.where(_landing_shapes(spec, model, table), assembly_mass(spec, model), model.body_mass)
 
 
 def assembly_mass(spec: SceneSpec, model: Model) -> np.ndarray:

@@ -461,6 +461,7 @@ def _simulation(sim: dict[str, Any], issues: IssueCollector) -> SimulationSpec |
         record=record,
         output=sim.get("output"),
         seed=int(sim.get("seed", 0)),
+        location=issues.locate((*path, "dt")),
     )
 
 

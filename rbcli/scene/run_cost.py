@@ -13,10 +13,12 @@ the 2-core machine rbsim is developed on, warm, one thread (benchmarks/bench_run
 estimate beside the measured time of each): a free body's split2 step ~0.1 us, a touching contact
 sphere ~0.2 us (the 1,000-ball pile), a contact shape ~0.8 us (the box stack), a joint row ~0.7 us (the
 RATTLE step's Newton, 0.45 us a row on a 10-link hinge chain to ~1 us with contact on the capsule
-ragdoll). They say which minute a run takes, not its second: measured within a factor 2 to 3 on the
-shipped scenes. An adaptive run's steps are chosen as it goes: the estimate is its output grid's, a floor.
+ragdoll). They say which minute a run takes, not its second: measured at 0.46-2.25 times the estimate
+on nine shipped scenes (docs/contact.md, "What a run will cost"). An adaptive run's steps are chosen as
+it goes: the estimate is its output grid's, a floor.
 
-A run estimated above LONG_RUN seconds is warned about at validation and at the start of `rbsim run`,
+`rbsim validate` prints the estimate of every scene, `rbsim run` of a run estimated at SAY_FROM seconds
+or more. A run estimated above LONG_RUN seconds is warned about at validation and at the start of `rbsim run`,
 naming the largest term (the sub-steps and what sets them, the contact spheres, the shapes, the joint
 rows or the steps themselves) and what would change it.
 """
@@ -38,6 +40,7 @@ COST_SPHERE = 0.2e-6  # [s] per touching contact sphere per force evaluation
 COST_SHAPE = 0.8e-6  # [s] per contact shape (box, capsule) per force evaluation
 COST_ROW = 0.7e-6  # [s] per joint constraint row per (sub-)step
 LONG_RUN = 60.0  # [s] of CPU: a run estimated above it is warned about
+SAY_FROM = 1.0  # [s] of CPU: `rbsim run` says its estimate as it starts from this on (validate always does)
 
 
 @dataclass(frozen=True)
@@ -132,6 +135,6 @@ def run_cost_warnings(compiled: CompiledScene) -> list[SceneIssue]:
         f"the run is estimated at {floor}~{_duration(cost.seconds)} of CPU once compiled ({cost.steps:,} steps "
         f"x {cost.substeps} sub-steps), mostly {drives}"
     )
-    section = compiled.spec.contact  # the sub-steps' and contacts' section; the file where there is none
-    location = section.location if section is not None else None
+    section = compiled.spec.contact  # the sub-steps' and contacts' section, else the scene's dt
+    location = section.location if section is not None else compiled.spec.simulation.location
     return [SceneIssue(location, message, "; or ".join(changes), severity="warning")]

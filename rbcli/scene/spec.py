@@ -75,6 +75,7 @@ class SimulationSpec:
     record: RecordSpec = field(default_factory=RecordSpec)
     output: str | None = None  # output path; format from the extension (.mcap or .rrd)
     seed: int = 0
+    location: SourceLocation | None = None  # of its `dt`: what a run's length and cost are told at
 
 
 @dataclass(frozen=True)
