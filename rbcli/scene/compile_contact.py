@@ -36,7 +36,7 @@ from rbcli.physics.model import Model
 from rbcli.physics.rotation import quat_to_matrix
 from rbcli.physics.state import State
 from rbcli.scene.compile_forces import KinematicRow
-from rbcli.scene.contact_speed import ImpactBound, assembly_mass, speed_bounds
+from rbcli.scene.contact_speed import ImpactBound, assembly_mass, landing_spheres, speed_bounds
 from rbcli.scene.spec import BodySpec, MaterialSpec, SceneError, SceneIssue, SceneSpec
 
 
@@ -333,14 +333,6 @@ def compile_primitives(spec: SceneSpec, model: Model, centres_user: np.ndarray, 
             k_body = float(default_body_stiffness(model.body_mass[b : b + 1], np.array([scale]), g)[0])
         out.stiffness[b] = k_body / points
     return out
-
-
-def landing_spheres(spec: SceneSpec, carried: np.ndarray, mass: np.ndarray) -> np.ndarray:
-    """bool per body: a `sphere` shape (one exact contact sphere) held by joints to other movable bodies,
-    which takes the landing rule as a primitive does (the capsule ragdoll's head sank 0.16 of its radius
-    with the rest rule). A lone sphere keeps the rest rule: the piles' balls are stepped as they were."""
-    shape = np.array([body.contact_geometry == "sphere" and body.contact_spheres is None for body in spec.bodies])
-    return shape & (np.asarray(carried) > np.asarray(mass))
 
 
 def impact_stiffness(carried: float, speed: float, zeta: float, size: float) -> float:

@@ -174,8 +174,6 @@ def speed_bounds(
 def _landing_shapes(spec: SceneSpec, model: Model, table: ContactTable) -> np.ndarray:
     """bool per body: the bodies whose default stiffness follows their landing (scene/compile_contact.py):
     primitives, and `sphere` shapes held by joints (`landing_spheres`). Their fall ends at their size."""
-    from rbcli.scene.compile_contact import landing_spheres  # (it imports this module)
-
     kind = table.primitive_kind
     primitive = kind >= 0 if kind.shape[0] else np.zeros(model.body_count, dtype=bool)
     return primitive | landing_spheres(spec, assembly_mass(spec, model), model.body_mass)
@@ -189,6 +187,14 @@ def _carried(spec: SceneSpec, model: Model, table: ContactTable) -> np.ndarray:
     came to rest in only 5 of 12 runs (an arm swung on for seconds), so it is not warned about either
     (docs/contact.md)."""
     return np.where(_landing_shapes(spec, model, table), assembly_mass(spec, model), model.body_mass)
+
+
+def landing_spheres(spec: SceneSpec, carried: np.ndarray, mass: np.ndarray) -> np.ndarray:
+    """bool per body: a `sphere` shape (one exact contact sphere) held by joints to other movable bodies,
+    which takes the landing rule as a primitive does (the capsule ragdoll's head sank 0.16 of its radius
+    with the rest rule). A lone sphere keeps the rest rule: the piles' balls are stepped as they were."""
+    shape = np.array([body.contact_geometry == "sphere" and body.contact_spheres is None for body in spec.bodies])
+    return shape & (np.asarray(carried) > np.asarray(mass))
 
 
 def assembly_mass(spec: SceneSpec, model: Model) -> np.ndarray:

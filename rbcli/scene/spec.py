@@ -75,7 +75,8 @@ class SimulationSpec:
     record: RecordSpec = field(default_factory=RecordSpec)
     output: str | None = None  # output path; format from the extension (.mcap or .rrd)
     seed: int = 0
-    location: SourceLocation | None = None  # of its `dt`: what a run's length and cost are told at
+    # of its `dt`: where a run's length and cost are told (not part of what the settings are: compare=False)
+    location: SourceLocation | None = field(default=None, compare=False)
 
 
 @dataclass(frozen=True)
