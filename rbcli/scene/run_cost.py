@@ -105,8 +105,8 @@ def run_cost(compiled: CompiledScene) -> RunCost:
 
 
 def run_cost_warnings(compiled: CompiledScene) -> list[SceneIssue]:
-    """A warning, at the scene's `simulation` section, when the run is estimated above LONG_RUN seconds:
-    the estimate, its largest term and what would change it."""
+    """A warning, at the scene's `contact` section (its sub-steps and stiffness) or else at its `dt`, when
+    the run is estimated above LONG_RUN seconds: the estimate, its largest term and what would change it."""
     cost = run_cost(compiled)
     if not cost.seconds > LONG_RUN:
         return []
