@@ -33,33 +33,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from rbcli import Simulation  # noqa: E402
+from rbcli.analysis.contact_depth import depth_below_plane  # noqa: E402
 from rbcli.physics.joints.reference import joint_rows_numpy  # noqa: E402
-from rbcli.physics.rotation import quat_rotate  # noqa: E402
 
 SCENE = ROOT / "scenes" / "joints" / "capsule_ragdoll.yaml"
 SECONDS = 3.0
 TILT = math.radians(10.0)
-
-
-def deepest_sink(sim: Simulation) -> float:
-    """The deepest part below the plane [1, of its radius] (capsules from their segment, the head from its
-    contact sphere)."""
-    table, s = sim.model.contact, sim.data.state
-    normal, point = table.plane_normal[0], table.plane_point[0]
-    worst = 0.0
-    for b in range(s.x.shape[0]):
-        if table.primitive_kind[b] == 1:
-            centre = s.x[b] + quat_rotate(s.q[b], table.primitive_offset[b])
-            axis = quat_rotate(s.q[b], table.primitive_rotation[b][:, 2])
-            radius, half = table.primitive_size[b, 0], table.primitive_size[b, 1]
-            low = normal @ (centre - point) - abs(normal @ axis) * half - radius
-        else:
-            mine = np.flatnonzero(table.sphere_body == b)
-            centres = s.x[b] + quat_rotate(s.q[b], table.sphere_offset[mine])
-            lows = (centres - point) @ normal - table.sphere_radius[mine]
-            low, radius = float(lows.min()), float(table.sphere_radius[mine][int(np.argmin(lows))])
-        worst = max(worst, -low / radius)
-    return worst
 
 
 def run_rbsim(repeats: int) -> tuple[float, float, float, int]:
@@ -77,7 +56,7 @@ def run_rbsim(repeats: int) -> tuple[float, float, float, int]:
     sink = gap = 0.0
     for _ in range(steps // 10):
         sim.step(10)
-        sink = max(sink, deepest_sink(sim))
+        sink = max(sink, float(depth_below_plane(sim.model.contact, sim.data.state.x, sim.data.state.q).max()))
         s = sim.data.state
         gap = max(gap, float(np.abs(joint_rows_numpy(sim.model.joint, s.x, s.q)[0]).max()))
     return best, sink, gap, sim.settings.substeps

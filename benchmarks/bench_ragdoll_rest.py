@@ -19,26 +19,13 @@ import argparse
 import sys
 from pathlib import Path
 
-import numpy as np
-
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from rbcli import Simulation  # noqa: E402
-from rbcli.physics.rotation import quat_rotate  # noqa: E402
+from rbcli.analysis.contact_depth import fastest_particle_speeds  # noqa: E402
 
 REST_SPEED = 0.01  # [m/s]
-
-
-def fastest_particle_speeds(sim: Simulation) -> np.ndarray:
-    """Each body's fastest particle [m/s]: max |v + omega x r| over its particles."""
-    model, state, view = sim.model, sim.data.state, sim.state
-    speeds = np.zeros(model.body_mass.shape[0])
-    for b in range(speeds.shape[0]):
-        start, count = model.body_particle_start[b], model.body_particle_count[b]
-        r = quat_rotate(state.q[b], model.particle_offset[start : start + count])
-        speeds[b] = np.linalg.norm(view.v[b] + np.cross(view.omega[b], r), axis=1).max()
-    return speeds
 
 
 def last_motion(run: int, seconds: float) -> float:
@@ -50,7 +37,8 @@ def last_motion(run: int, seconds: float) -> float:
     last = 0.0
     while sim.time < seconds - 1e-9:
         sim.step(20)
-        if fastest_particle_speeds(sim).max() >= REST_SPEED:
+        view = sim.state
+        if fastest_particle_speeds(sim.model, sim.data.state.q, view.v, view.omega).max() >= REST_SPEED:
             last = sim.time
     return last
 

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
+from rbcli.analysis.contact_depth import depth_below_plane, fastest_particle_speeds
 from rbcli.physics.joints.drives import limit_row
 from rbcli.physics.joints.reference import joint_rows_numpy
 from rbcli.physics.joints.tables import JOINT_BALL, JOINT_HINGE
-from rbcli.physics.rotation import quat_rotate
 from rbcli.runner.simulation import Simulation
 from rbcli.scene.load import check_scene
 
@@ -83,13 +83,21 @@ def _hinge_angle(table, j: int, q: np.ndarray) -> float:  # noqa: ANN001
 
 def _point_speeds(sim: Simulation) -> np.ndarray:
     """Each body's fastest particle [m/s]: max |v + omega x r| over its particles."""
-    model, s, view = sim.model, sim.data.state, sim.state
-    speeds = np.zeros(model.body_mass.shape[0])
-    for b in range(speeds.shape[0]):
-        start, count = model.body_particle_start[b], model.body_particle_count[b]
-        r = quat_rotate(s.q[b], model.particle_offset[start : start + count])
-        speeds[b] = np.linalg.norm(view.v[b] + np.cross(view.omega[b], r), axis=1).max()
-    return speeds
+    view = sim.state
+    return fastest_particle_speeds(sim.model, sim.data.state.q, view.v, view.omega)
+
+
+def _beyond_limits(table, x: np.ndarray, q: np.ndarray) -> float:  # noqa: ANN001
+    """How far [rad] any hinge angle, ball twist or cone swing (1 at the cone) is past its limit (<= 0 inside)."""
+    beyond = -math.inf
+    for j in range(table.body_a.shape[0]):
+        if table.kind[j] == JOINT_HINGE:
+            angle = _hinge_angle(table, j, q)
+            beyond = max(beyond, table.limit_lower[j] - angle, angle - table.limit_upper[j])
+        elif table.kind[j] == JOINT_BALL:
+            twist, swing = limit_row(table, j, False, x, q)[0], limit_row(table, j, True, x, q)[0]
+            beyond = max(beyond, table.limit_lower[j] - twist, twist - table.limit_upper[j], swing - 1.0)
+    return beyond
 
 
 def test_the_ragdoll_lands_folds_keeps_its_limits_and_comes_to_rest():
@@ -113,13 +121,7 @@ def test_the_ragdoll_lands_folds_keeps_its_limits_and_comes_to_rest():
     for _ in range(120):
         sim.step(100)
         worst = max(worst, _rows(sim))
-        x, q = sim.data.state.x, sim.data.state.q
-        for j in hinges:
-            angle = _hinge_angle(table, j, q)
-            beyond = max(beyond, table.limit_lower[j] - angle, angle - table.limit_upper[j])
-        for j in balls:
-            twist, swing = limit_row(table, j, False, x, q)[0], limit_row(table, j, True, x, q)[0]
-            beyond = max(beyond, table.limit_lower[j] - twist, twist - table.limit_upper[j], swing - 1.0)
+        beyond = max(beyond, _beyond_limits(table, sim.data.state.x, sim.data.state.q))
         if sim.time >= 5.0 - 1e-9:
             rest = max(rest, float(_point_speeds(sim).max()))
             z_rest = sim.state.x[:, 2].copy() if z_rest is None else z_rest
@@ -130,28 +132,6 @@ def test_the_ragdoll_lands_folds_keeps_its_limits_and_comes_to_rest():
     assert np.all(z >= z_rest - 1e-4), z - z_rest
     assert beyond <= 1e-9, beyond
     assert worst <= 1e-12, worst
-
-
-def _deepest_sink(sim: Simulation) -> np.ndarray:
-    """Per body, how deep [1, of its radius] its lowest point is below the scene's one plane: a capsule's
-    from its segment (primitive_offset, axis R[:, 2], size (radius, half-length)), another body's from its
-    contact spheres; 0 when above."""
-    table, s = sim.model.contact, sim.data.state
-    normal, point = table.plane_normal[0], table.plane_point[0]
-    sink = np.zeros(s.x.shape[0])
-    for b in range(s.x.shape[0]):
-        if table.primitive_kind[b] == 1:
-            centre = s.x[b] + quat_rotate(s.q[b], table.primitive_offset[b])
-            axis = quat_rotate(s.q[b], table.primitive_rotation[b][:, 2])
-            radius, half = table.primitive_size[b, 0], table.primitive_size[b, 1]
-            low = normal @ (centre - point) - abs(normal @ axis) * half - radius
-        else:
-            mine = np.flatnonzero(table.sphere_body == b)
-            centres = s.x[b] + quat_rotate(s.q[b], table.sphere_offset[mine])
-            lows = (centres - point) @ normal - table.sphere_radius[mine]
-            low, radius = lows.min(), table.sphere_radius[mine][int(np.argmin(lows))]
-        sink[b] = max(0.0, -low / radius)
-    return sink
 
 
 def test_the_capsule_ragdoll_lands_on_its_capsules_without_sinking_and_keeps_its_joints():
@@ -165,20 +145,13 @@ def test_the_capsule_ragdoll_lands_on_its_capsules_without_sinking_and_keeps_its
     sim = Simulation(SCENES / "capsule_ragdoll.yaml")
     table = sim.model.joint
     assert np.count_nonzero(sim.model.contact.primitive_kind == 1) == 7
-    hinges = [j for j in range(table.body_a.shape[0]) if table.kind[j] == JOINT_HINGE]
-    balls = [j for j in range(table.body_a.shape[0]) if table.kind[j] == JOINT_BALL]
     sink, worst, beyond = np.zeros(sim.model.body_count), 0.0, 0.0
     for _ in range(300):
         sim.step(10)
-        sink = np.maximum(sink, _deepest_sink(sim))
-        worst = max(worst, _rows(sim))
         x, q = sim.data.state.x, sim.data.state.q
-        for j in hinges:
-            angle = _hinge_angle(table, j, q)
-            beyond = max(beyond, table.limit_lower[j] - angle, angle - table.limit_upper[j])
-        for j in balls:
-            twist, swing = limit_row(table, j, False, x, q)[0], limit_row(table, j, True, x, q)[0]
-            beyond = max(beyond, table.limit_lower[j] - twist, twist - table.limit_upper[j], swing - 1.0)
+        sink = np.maximum(sink, depth_below_plane(sim.model.contact, x, q))
+        worst = max(worst, _rows(sim))
+        beyond = max(beyond, _beyond_limits(table, x, q))
     assert sim.time > 2.99
     assert sink.max() <= 0.1, sink
     assert sink.max() > 0.0  # it landed
