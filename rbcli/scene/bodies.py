@@ -317,6 +317,11 @@ class BodyResolver:
                         key=True,
                     )
             return self._explicit(entry["particles"], (*path, "particles"))
+        if not any(k in entry for k in SAMPLED_SOURCES):  # the schema says it first, unless a malformed
+            self.issues.error(  # `defaults` stopped it before the bodies (found by fuzzing: StopIteration)
+                path, "missing one of 'particles', 'shape', 'mesh', 'compound'", "exactly one of them", key=True
+            )
+            return None
         spacing = self._spacing(entry, path)
         if spacing is None:
             return None

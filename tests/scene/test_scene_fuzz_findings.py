@@ -134,3 +134,13 @@ def test_a_record_every_beyond_int64_is_refused_naming_the_option(tmp_path):
     result = CliRunner().invoke(app, ["run", str(scene), "--record-every", str(2**63 - 1), "-o", out, "-q"])
     assert result.exit_code == 0, result.stderr  # the largest int64 runs: it records the first and last step
     assert list(rbcli.read_recording(out).step) == [0, 5]
+
+
+@pytest.mark.parametrize("defaults", ["[{spacing: 0.1}]", "[]"])
+def test_a_body_without_a_source_after_malformed_defaults_is_a_located_error(defaults):
+    """Found by fuzzing (test_mutated_data_never_crashes_the_loader): `defaults` given as a list stopped the
+    schema before the bodies, and a body with none of particles, shape, mesh or compound reached the
+    lattice's spacing rule, which raised StopIteration. It is the schema's own error, located at the body."""
+    text = f"simulation: {{steps: 10, dt: 0.01}}\ndefaults: {defaults}\nbodies:\n  - {{name: c, mass: 2.0}}\n"
+    found = [(i.location.line, i.message) for i in errors(text)]
+    assert (4, "bodies[0]: missing one of 'particles', 'shape', 'mesh', 'compound'") in found, found
