@@ -298,6 +298,10 @@ class SchemaErrorFormatter:
 
     def _on_not(self, path, value, instance, schema, error) -> list[_Found]:
         keys = value.get("required") if isinstance(value, dict) else None
+        if keys and not isinstance(instance, dict):
+            # `required` holds for anything that is not a mapping, so its `not` fails there: the wrong type
+            # is reported on its own (a `defaults` given as a list read as "velocity and momentum both")
+            return []
         if keys and len(keys) == 2:
             a, b = keys
             # point at whichever of the two comes second in the file

@@ -144,3 +144,6 @@ def test_a_body_without_a_source_after_malformed_defaults_is_a_located_error(def
     text = f"simulation: {{steps: 10, dt: 0.01}}\ndefaults: {defaults}\nbodies:\n  - {{name: c, mass: 2.0}}\n"
     found = [(i.location.line, i.message) for i in errors(text)]
     assert (4, "bodies[0]: missing one of 'particles', 'shape', 'mesh', 'compound'") in found, found
+    # and the list is one wrong type, not also "velocity and momentum both" (a `not: {required}` rule holds
+    # vacuously on a list)
+    assert not [message for _, message in found if "give either" in message], found
