@@ -50,7 +50,6 @@ class RunCost:
     seconds: float
     steps: int
     substeps: int
-    evaluations: int  # force evaluations per step of the integrator
     parts: dict[str, float]  # [s] per driver: "bodies", "contact spheres", "contact shapes", "joint rows"
     counts: dict[str, int]  # the same drivers' counts
     adaptive: bool  # an adaptive run: the estimate is its output grid's, a floor
@@ -97,7 +96,6 @@ def run_cost(compiled: CompiledScene) -> RunCost:
         seconds=float(sum(parts.values())),
         steps=settings.steps,
         substeps=settings.substeps,
-        evaluations=evaluations,
         parts=parts,
         counts=counts,
         adaptive=settings.tolerance is not None,
