@@ -1,6 +1,7 @@
 """Jointed chains: rbsim's multiplier solver against MuJoCo 4.0 (Euler), measured in the same run.
 
     python benchmarks/bench_joints.py [--quick] [--link-steps N] [--repeats N] [--full-step]
+                                      [--integrators split2,reduced-euler,reduced-rk4]
 
 The issue's chains (issue 27): hinge or ball chains of 10, 100, 400 (and, for rbsim, 10,000) capsule
 links, 0.1 m long (the segment between the two joint anchors), radius 0.01 m, density 1000 kg/m^3, hinge
@@ -229,14 +230,14 @@ class MujocoRun:
         return elapsed
 
 
-def chain_scene_yaml(links: int, joint: str, duration: float) -> str:
+def chain_scene_yaml(links: int, joint: str, duration: float, integrator: str = "split2") -> str:
     """The chain as an rbsim scene (the joints format of docs/joints.md): capsule links filled with ~30
     particles each (mass set to the capsule's: the lattice only shapes the inertia), released horizontal."""
     mass = capsule_mass_properties()[0]
     axis = ", axis: [0, 1, 0]" if joint == "hinge" else ""
     lines = [
         f"name: {joint}_chain_{links}",
-        f"simulation: {{dt: {DT}, duration: {duration}, integrator: split2, record: {{every: 1000000}}}}",
+        f"simulation: {{dt: {DT}, duration: {duration}, integrator: {integrator}, record: {{every: 1000000}}}}",
         "gravity: [0, 0, -9.81]",
         "bodies:",
     ]
@@ -262,8 +263,9 @@ def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
 FULL_STEP_REFUSED: list[str] = []  # why the scene loader refused the chain (printed once)
 
 
-def full_step_chain(links: int, joint: str, steps: int) -> tuple[float, float] | None:
-    """The chain as an rbsim scene run by split2 with its joint stages: (link-steps per CPU second, the
+def full_step_chain(links: int, joint: str, steps: int, integrator: str = "split2") -> tuple[float, float] | None:
+    """The chain as an rbsim scene run by `integrator` (split2 with its joint stages, or one in joint
+    coordinates: reduced-euler, reduced-rk4): (link-steps per CPU second, the
     largest anchor gap [m] after the run, or the hinge axes' misalignment [rad] if larger). None when this
     checkout's scene format has no joints yet (the hook waits for the joints integration to merge)."""
     import tempfile
@@ -272,7 +274,7 @@ def full_step_chain(links: int, joint: str, steps: int) -> tuple[float, float] |
 
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "chain.yaml"
-        path.write_text(chain_scene_yaml(links, joint, duration=(steps + 1) * DT))
+        path.write_text(chain_scene_yaml(links, joint, duration=(steps + 1) * DT, integrator=integrator))
         try:
             simulation = rbcli.Simulation(path)
         except Exception as error:  # noqa: BLE001 - a loader without joints refuses the section
@@ -315,7 +317,14 @@ def main() -> None:
     parser.add_argument(
         "--full-step", action="store_true", help="also run the chains as rbsim scenes (split2 + joint stages)"
     )
+    parser.add_argument(
+        "--integrators",
+        default="split2",
+        help="comma list of the whole steps --full-step runs [default: split2; "
+        "reduced-euler, reduced-rk4: the chain in joint coordinates, docs/trees.md]",
+    )
     options = parser.parse_args()
+    whole_steps = [name for name in options.integrators.split(",") if name]
     budget, repeats = (2e5, 3) if options.quick else (options.link_steps, options.repeats)
     mujoco_present = have_mujoco()
     print(f"load average {os.getloadavg()[0]:.2f} at the start, {os.cpu_count()} cores; CPU time of this process")
@@ -324,7 +333,7 @@ def main() -> None:
     print(
         f"{'chain':>6} {'links':>6} {'MuJoCo':>9} {'(issue)':>9} {'rbsim':>9} {'ratio':>6} {'target':>6}"
         f" {'ns/link':>8} {'factor':>7} {'error':>8} {'spread':>11}"
-        + (f" {'split2':>9} {'gap':>8} {'ratio':>6}" if options.full_step else "")
+        + "".join(f" {name:>13} {'gap':>8} {'ratio':>6}" for name in whole_steps if options.full_step)
     )
     for joint in ("hinge", "ball"):
         cost = {}
@@ -344,12 +353,13 @@ def main() -> None:
             mj_rate = links * mj_steps / min(mj_times) if mj_times else float("nan")
             ratio = rate / mj_rate
             spreads = f"{spread(times):4.0%}" + (f" / {spread(mj_times):4.0%}" if mj_times else "")
-            full = full_step_chain(links, joint, steps) if options.full_step and links in TARGET_RATIO else None
+            wanted = options.full_step and links in TARGET_RATIO
+            fulls = [full_step_chain(links, joint, steps, name) for name in whole_steps] if wanted else []
             print(
                 f"{joint:>6} {links:>6} {mj_rate:9.3g} {ISSUE_MUJOCO.get((joint, links), float('nan')):9.2g}"
                 f" {rate:9.3g} {ratio:6.2f} {TARGET_RATIO.get(links, float('nan')):6.1f} {cost[links]:8.0f}"
                 f" {min(factor_times) / min(times):7.0%} {solver.constraint_error():8.1e} {spreads:>11}"
-                + (f" {full[0]:9.3g} {full[1]:8.1e} {full[0] / mj_rate:6.2f}" if full else "")
+                + "".join(f" {full[0]:13.3g} {full[1]:8.1e} {full[0] / mj_rate:6.2f}" for full in fulls if full)
             )
         flat = cost[RBSIM_SIZES[-1]] / cost[RBSIM_SIZES[0]]
         print(

@@ -16,7 +16,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Unpack
 
 from rbcli.physics import integrators as _integrators
-from rbcli.physics.integrators import INTEGRATORS, IntegratorInfo, IntegratorRefusal, get_integrator
+from rbcli.physics.integrators import (
+    INTEGRATORS,
+    REDUCED_INTEGRATORS,
+    IntegratorInfo,
+    IntegratorRefusal,
+    get_integrator,
+)
 from rbcli.record.frame import RunSummary, Sink
 from rbcli.record.memory_sink import SinkMemory, Trajectory
 from rbcli.runner.simulation import BodyState, Simulation, SimulationDiverged
@@ -42,8 +48,9 @@ def load_scene(path: str | Path) -> SceneSpec:
 
 def list_integrators() -> tuple[IntegratorInfo, ...]:
     """The integrators rbsim offers, in the registry's order: name, order, symplectic, what each conserves,
-    force evaluations per step, adaptive (metadata only: no kernel is imported or compiled)."""
-    return tuple(INTEGRATORS.values())
+    force evaluations per step, adaptive (metadata only: no kernel is imported or compiled); the ones in
+    joint coordinates (`reduced`: articulated trees, docs/trees.md) last."""
+    return (*INTEGRATORS.values(), *REDUCED_INTEGRATORS.values())
 
 
 def check_integrator(name: str, *, tolerance: bool = False) -> IntegratorRefusal | None:

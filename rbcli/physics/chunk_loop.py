@@ -5,11 +5,13 @@ Where the loops of two integrators differ, `run_chunk` names a module-level cons
 `integrator_step` (the integrator module's `step`, or `step_parallel` for the loop on threads),
 `HOLDS_JOINTS` (split2, the one integrator that holds joints: the joint stages `joint_begin` ...
 `joint_record` run, bound only into its loop, and a scene with joints steps by `joint_update`, RATTLE,
-instead of the plain update) and `DEFERS` with `integrator_materialise` (exact, which
-defers the state of torque-free bodies: its `materialise` runs). `fixed_step_loop` compiles the
-function with its own copy of the module's globals, those names bound for one integrator, so numba sees
-constants: it prunes the other integrators' `if HOLDS_JOINTS:` and `if DEFERS:` branches before it
-types the loop (its dead-branch pruning of global constants) and inlines the one `step` (STEP_ENTRY,
+instead of the plain update), `DEFERS` with `integrator_materialise` (exact, which
+defers the state of torque-free bodies: its `materialise` runs) and `HOLDS_TREE` with `tree_step` (the
+reduced integrators, physics/tree/: the trees' step in joint coordinates replaces the update).
+`fixed_step_loop` compiles the function with its own copy of the module's globals, those names bound
+for one integrator, so numba sees constants: it prunes the other integrators' `if HOLDS_JOINTS:`, `if DEFERS:`
+and `if HOLDS_TREE:` branches before it types the loop (its dead-branch pruning of global constants) and
+inlines the one `step` (STEP_ENTRY,
 physics/step.py), exactly as in a loop written for that integrator alone. A scene's first run compiles
 its own integrator and nothing of the others, and each integrator's loop has cache files of its own
 (its qualified name: `run_chunk[split2]`, ...).
@@ -64,6 +66,10 @@ joint_begin: Any = _unbound
 joint_update: Any = _unbound
 joint_velocity: Any = _unbound
 joint_record: Any = _unbound
+# the reduced integrators (physics/tree/: the state of the trees is their joint coordinates and rates):
+# their step replaces the update, and the joint stages do not run (the joints hold by construction)
+HOLDS_TREE = False
+tree_step: Any = _unbound
 
 
 def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, filled):  # noqa: ANN001, ANN201
@@ -82,6 +88,7 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
     force_data = data.force
     contact, joint, kinematic, schedule = model.contact, model.joint, model.kinematic, forces.schedule
     contact_work, joint_work = force_data.contact, data.joint
+    tree, tree_data = model.tree, data.tree
     # from here on `model` is the model's body arrays alone (KernelBodies): one numba type for every
     # kind of scene, so each stage kernel below is compiled once for all of them; tables go by name
     model = model_bodies(model)
@@ -107,7 +114,10 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
                 # joint_update: with joints the step is RATTLE, joints/rattle.py (else False: update runs)
                 stepped = joint_update(model, forces, contact, force_data, joint, joint_work, kinematic, schedule,
                                        ts, h, x, q, P, L, F, tau)  # fmt: skip
-            if not stepped:
+            if HOLDS_TREE:
+                # tree_update: the trees' step in joint coordinates, the links' x, q, P, L by forward kinematics
+                tree_step(model, forces, contact, force_data, tree, tree_data, ts, h, x, q, P, L, F, tau)
+            elif not stepped:
                 # update: the integrator's maths, its force evaluations through forces.wrench.accumulate_wrench
                 integrator_step(model, forces, contact, force_data, ts, h, x, q, P, L, F, tau, scratch)
             # kinematic_end: kinematic bodies at their exact state at the end of the (sub-)step (closed form)
@@ -145,16 +155,20 @@ class ChunkLoop(NamedTuple):
 
 
 @functools.cache  # one dispatcher per integrator and process: numba compiles or loads each loop once
-def fixed_step_loop(module: str, *, joints: bool = False, defers: bool = False, threaded: bool = False) -> ChunkLoop:
+def fixed_step_loop(
+    module: str, *, joints: bool = False, defers: bool = False, threaded: bool = False, reduced: bool = False
+) -> ChunkLoop:
     """`run_chunk` compiled for the integrator module `module` (integrators/__init__.py IntegratorInfo:
-    its `joints`, `defers`; threaded: its `step_parallel`): the function itself, with its own copy of
-    the module's globals in which the integrator's names (above run_chunk) are bound."""
+    its `joints`, `defers`, `reduced`; threaded: its `step_parallel`): the function itself, with its own
+    copy of the module's globals in which the integrator's names (above run_chunk) are bound."""
     integrator = importlib.import_module(module)
     bound = {
-        "integrator_step": integrator.step_parallel if threaded else integrator.step,
+        "integrator_step": _unbound if reduced else (integrator.step_parallel if threaded else integrator.step),
         "integrator_materialise": integrator.materialise if defers else _unbound,
         "HOLDS_JOINTS": joints,
         "DEFERS": defers,
+        "HOLDS_TREE": reduced,
+        "tree_step": integrator.step if reduced else _unbound,
     }
     if joints:
         from rbcli.physics.joints import rattle, stages

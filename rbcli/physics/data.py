@@ -15,7 +15,10 @@ is known when it starts:
                  (None without a contact stage, so the kernels compile none of it)
     joint        the joint stages' work (joints/tables.py JointWork): Jacobians, the solver's work, the
                  last step's multipliers and reactions; None without joints (the model's joint table
-                 None), so the joint stages compile to nothing
+                 None) or in reduced coordinates, so the joint stages compile to nothing
+    tree         reduced coordinates (the model's tree table, physics/tree/): the trees' joint
+                 coordinates and rates, which x, q, P, L are forward kinematics of, and the tree
+                 integrators' work (tree/table.py TreeData); None in maximal coordinates
     substeps     integrator steps per grid step (contact sub-stepping; 1 otherwise), a run setting
     adaptive     error-controlled runs only (physics/adaptive.py): stage work (body_count, dopri5
                  width), controller state `control` (2,) and step `counters` int64 (2,) that persist
@@ -37,6 +40,7 @@ from rbcli.physics.forces.tables import ForceData, make_force_data
 from rbcli.physics.joints.tables import JointWork, make_joint_work
 from rbcli.physics.model import KernelModel, Model
 from rbcli.physics.state import State
+from rbcli.physics.tree.table import TreeData, TreeTable, make_tree_data
 
 # the joints' last (sub-)step impulses in a checkpoint: optional (logs written before it was carried lack it)
 JOINT_REACTIONS = "joint.joint_impulse"
@@ -70,6 +74,7 @@ class KernelData(NamedTuple):
     joint: JointWork | None
     substeps: int
     adaptive: KernelAdaptive | None = None
+    tree: TreeData | None = None  # reduced coordinates: the trees' coordinates, rates and work
 
 
 @dataclass
@@ -88,6 +93,8 @@ class Data:
     adaptive_counters: np.ndarray | None = None
     adaptive_tolerance: float = 0.0
     adaptive_duration: float = 0.0
+    tree: TreeData | None = None
+    tree_table: TreeTable | None = None  # the model's, for clear_work: (coord, rate) from a state set outside
 
     def kernel(self) -> KernelData:
         s = self.state
@@ -99,7 +106,8 @@ class Data:
                 float(self.adaptive_tolerance), float(self.adaptive_duration),
             )  # fmt: skip
         return KernelData(
-            s.x, s.q, s.P, s.L, self.F, self.tau, self.scratch, self.force, self.joint, int(self.substeps), adaptive
+            s.x, s.q, s.P, s.L, self.F, self.tau, self.scratch, self.force, self.joint, int(self.substeps), adaptive,
+            self.tree,
         )  # fmt: skip
 
     def carried(self) -> dict[str, np.ndarray]:
@@ -119,6 +127,8 @@ class Data:
             array = getattr(self, f"adaptive_{name}")
             if array is not None:
                 arrays[f"adaptive.{name}"] = array
+        if self.tree is not None:  # the trees' state: x, q, P, L are forward kinematics of it
+            arrays["tree.coord"], arrays["tree.rate"] = self.tree.coord, self.tree.rate
         if self.joint is not None:  # read by no step: the last step's reactions, for the first frame
             arrays[JOINT_REACTIONS] = self.joint.joint_impulse  # a resumed run records (joint_forces)
             arrays[JOINT_GUESS[0]], arrays[JOINT_GUESS[1]] = self.joint.guess, self.joint.guess_count
@@ -147,6 +157,8 @@ class Data:
                 )
         for name, target in mine.items():
             target[...] = arrays[name]
+        if self.tree is not None:  # the state arrays are rewritten by the next step's forward kinematics
+            self.tree.fk_state[0] = 0.0
         if self.force.contact is not None:  # the restored history may sit on any body (body_phase.py)
             self.force.contact.body_history[:] = 1
             self.force.contact.quiet_state[:] = 0  # and the quiet skin is this run's (contact/quiet.py)
@@ -162,6 +174,11 @@ class Data:
             self.force.contact.quiet_state[:] = 0
         if self.joint is not None:  # the joints' Newton starts from the free drift (joints/rattle.py)
             self.joint.guess_count[:] = 0.0
+        if self.tree is not None and self.tree_table is not None:  # (coord, rate) from the state as it now is
+            from rbcli.physics.tree.coordinates import set_from_bodies
+
+            s = self.state
+            set_from_bodies(self.tree_table, self.tree, s.x, s.q, s.P, s.L)
         if self.adaptive_work is not None:
             assert self.adaptive_control is not None
             self.adaptive_work[:] = 0.0
@@ -189,8 +206,17 @@ def make_data(
     if substeps < 1:
         raise ValueError(f"substeps must be >= 1, got {substeps}")
     F, tau, scratch = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, scratch_width))
-    joint = make_joint_work(model.joint) if model.joint is not None and model.joint.body_a.shape[0] else None
+    tree = model.tree
+    # reduced coordinates hold the joints by construction: no joint stage runs, no joint work
+    joint = None
+    if model.joint is not None and model.joint.body_a.shape[0] and tree is None:
+        joint = make_joint_work(model.joint)
     data = Data(state, F, tau, scratch, make_force_data(model, contact_threads), joint, substeps=int(substeps))
+    if tree is not None:  # the trees' state from the bodies' (the velocities the joints allow: tree/coordinates.py)
+        from rbcli.physics.tree.coordinates import set_from_bodies
+
+        data.tree, data.tree_table = make_tree_data(tree), tree
+        set_from_bodies(tree, data.tree, state.x, state.q, state.P, state.L)
     if adaptive:
         from rbcli.physics.adaptive import adaptive_work
 

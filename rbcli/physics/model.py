@@ -24,6 +24,7 @@ from rbcli.physics.contact.tables import ContactTable, contact_present, contact_
 from rbcli.physics.joints.tables import JointTable
 from rbcli.physics.kinematic_table import KinematicTable, kinematic_table
 from rbcli.physics.rotation import matrix_to_quat, quat_to_matrix
+from rbcli.physics.tree.table import TreeTable
 
 # A principal moment below this fraction of the largest makes I0 singular (collinear or single-point
 # particle clouds); 1e-12 is far above round-off (~1e-16) and far below any real body's anisotropy.
@@ -101,6 +102,7 @@ class KernelModel(NamedTuple):
     contact: ContactTable | None  # None without contact spheres and static bodies (`contact_present`)
     joint: JointTable | None  # None without joints
     kinematic: KinematicTable | None  # None without kinematic bodies
+    tree: TreeTable | None = None  # None in maximal coordinates (the reduced integrators: physics/tree/)
 
 
 @dataclass(frozen=True)
@@ -111,7 +113,9 @@ class Model:
     particle_offset_user: (particle_count, 3) [m], user frame, about the centre of mass (for output).
     contact: contact spheres, materials, planes and static bodies (0 spheres and no static body: no
       contact stages). joint: the joints, None without joints. kinematic: the kinematic bodies' motions
-      (0 rows: no kinematic stages). Python code reads every Model alike (`model.contact.sphere_body`);
+      (0 rows: no kinematic stages). tree: the links of the articulated trees (physics/tree/table.py)
+      when a reduced integrator runs the scene (scene/compile_trees.py), else None. Python code reads
+      every Model alike (`model.contact.sphere_body`);
       kernels take `kernel()`, in which absent tables are None.
     """
 
@@ -128,6 +132,7 @@ class Model:
     contact: ContactTable = field(default_factory=contact_table)
     joint: JointTable | None = None
     kinematic: KinematicTable = field(default_factory=kinematic_table)
+    tree: TreeTable | None = None
 
     @property
     def body_count(self) -> int:
@@ -145,6 +150,7 @@ class Model:
             contact=self.contact if contact_present(self.contact) else None,
             joint=self.joint,  # None without joints (a table of welds alone has 0 rows: its stages skip)
             kinematic=self.kinematic if self.kinematic.body.shape[0] else None,
+            tree=self.tree,
         )
 
     def kernel_bodies(self) -> KernelBodies:

@@ -17,6 +17,9 @@ A step from grid index n (t = n dt) to n + 1 runs, in this order:
       joint_update    (split2, scenes with joints) the step is RATTLE instead of `update`: a half kick, the
                       joints' impulse by Newton through split2's exact drift so the end configuration
                       satisfies the joints to round-off, a half kick at the end        (joints/rattle.py)
+      tree_update     (reduced-euler, reduced-rk4) the step is the trees' own instead of `update`: their
+                      joint coordinates and rates advanced by ABA's accelerations, each force evaluation
+                      the force pass below at the links' x, q, P, L from forward kinematics (physics/tree/)
       update          the integrator's maths (integrators/<name>.py `step`); every force evaluation it
                       needs is the force pass `forces/wrench.accumulate_wrench`, the stages of its own
                       list of force stages (forces/stage_list.py FORCE_STAGES: gravity, fields, point
@@ -31,7 +34,8 @@ A step from grid index n (t = n dt) to n + 1 runs, in this order:
     record          on recording steps: the divergence check, then the state copied into the next frame
 
 Only some integrators' loops run a stage marked `only`: the integrators whose IntegratorInfo has that
-flag (`joints`: split2; `defers`: exact); chunk_loop.py compiles those stages out of the other loops.
+flag (`joints`: split2; `defers`: exact; `tree`: the reduced ones, IntegratorInfo.reduced); chunk_loop.py
+compiles those stages out of the other loops.
 Each optional stage is also present only when the scene needs it, decided when numba compiles the
 loop, not at run time: the loop takes `Model.kernel()` and `ForceTables.kernel()`, in which the model's
 contact, joint and kinematic tables and each force type's table are None when the scene has none of
@@ -83,6 +87,8 @@ STEP_STAGES: tuple[Stage, ...] = (
           "kinematic_begin_stage", "kinematic_begin_stage", substep=True),
     Stage("joint_update", "with joints the step is RATTLE, joints/rattle.py (else False: update runs)",
           "joint_update", None, substep=True, only="joints"),
+    Stage("tree_update", "the trees' step in joint coordinates, the links' x, q, P, L by forward kinematics",
+          "tree_step", None, substep=True, only="tree"),
     Stage("update", "the integrator's maths, its force evaluations through forces.wrench.accumulate_wrench",
           "integrator_step", "advance", substep=True),
     Stage("kinematic_end", "kinematic bodies at their exact state at the end of the (sub-)step (closed form)",

@@ -381,7 +381,7 @@ class Simulation:
             names = [joint.name for joint in self.compiled.spec.joints]
             reactions = self.scene_reactions()
             return {name: reaction.reshape(2, 6) for name, reaction in zip(names, reactions, strict=True)}
-        if self.data.joint is None:
+        if self.data.joint is None and (self.data.tree is None or self.model.joint is None):
             return {}
         names = [joint.name for joint in self.compiled.spec.joints]
         return {name: reaction.reshape(2, 6) for name, reaction in zip(names, self.last_reactions(), strict=True)}
@@ -408,9 +408,13 @@ class Simulation:
         return np.full((self.model.body_count, 13), np.nan)
 
     def last_reactions(self) -> np.ndarray:
-        """(J, 12): `joint_reactions` as one array in joint order (the joint_forces stream's layout)."""
+        """(J, 12): `joint_reactions` as one array in joint order (the joint_forces stream's layout); NaN in
+        joint coordinates (a reduced integrator: its joints' reactions are not computed yet, docs/trees.md)."""
         work = self.data.joint
         if work is None:
+            joints = self.model.joint
+            if self.data.tree is not None and joints is not None:
+                return np.full((joints.kind.shape[0], 12), np.nan)
             return np.zeros((0, 12))
         return work.joint_impulse / (self.settings.dt / self.data.substeps)
 

@@ -155,8 +155,22 @@ def compile_scene(
     settings = run_settings(
         spec, (options or RunOptions()).merged(overrides), contact=base.contact, jointed=base.model.joint is not None
     )
-    return CompiledScene(spec, base.model, base.forces, base.initial_state.copy(), settings, base.contact,
-                         base.parts, base.simulated, base.warnings)  # fmt: skip
+    model, state = base.model, base.initial_state.copy()
+    from rbcli.physics.integrators import REDUCED_INTEGRATORS
+
+    if settings.integrator in REDUCED_INTEGRATORS:  # the trees in joint coordinates (scene/compile_trees.py)
+        model = replace(model, tree=_trees(spec if base.simulated is None else base.simulated, base))
+    return CompiledScene(spec, model, base.forces, state, settings, base.contact, base.parts, base.simulated,
+                         base.warnings)  # fmt: skip
+
+
+def _trees(simulated: SceneSpec, base: CompiledModel):  # noqa: ANN202 - TreeTable
+    """The model's trees for a reduced integrator (scene/compile_trees.py), refused where they cannot hold
+    the scene."""
+    from rbcli.scene.compile_trees import compile_trees
+
+    impulses = sorted(set(base.forces.impulse.body.tolist()))
+    return compile_trees(base.model, base.initial_state, simulated.bodies, simulated.joints, impulses)
 
 
 def compile_model(spec: SceneSpec, *, merge_welds: bool = True) -> CompiledModel:

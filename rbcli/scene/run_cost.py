@@ -7,7 +7,9 @@ scene compiles first: docs/performance.md, "Start-up"):
     steps x sub-steps x (force evaluations x (COST_BODY B + COST_SPHERE S + COST_SHAPE P) + COST_ROW R)
 
 B bodies, S contact spheres that touch (a shape body's lattice is its mass only), P contact shapes
-(boxes and capsules that touch as themselves), R joint constraint rows; force evaluations per step of
+(boxes and capsules that touch as themselves), R joint constraint rows (in joint coordinates, a reduced
+integrator: COST_LINK per tree link and force evaluation instead of the rows and the links' COST_BODY,
+forward kinematics and ABA at ~0.1-0.15 us a link: docs/trees.md); force evaluations per step of
 the integrator (split2 1, rk4 4: its registry entry). The costs are what the shipped scenes measure on
 the 2-core machine rbsim is developed on, warm, one thread (benchmarks/bench_run_cost.py prints the
 estimate beside the measured time of each): a free body's split2 step ~0.1 us, a touching contact
@@ -39,6 +41,7 @@ COST_BODY = 0.1e-6  # [s] per body per force evaluation of a (sub-)step
 COST_SPHERE = 0.2e-6  # [s] per touching contact sphere per force evaluation
 COST_SHAPE = 0.8e-6  # [s] per contact shape (box, capsule) per force evaluation
 COST_ROW = 0.7e-6  # [s] per joint constraint row per (sub-)step
+COST_LINK = 0.15e-6  # [s] per tree link per force evaluation in joint coordinates (forward kinematics + ABA)
 LONG_RUN = 60.0  # [s] of CPU: a run estimated above it is warned about
 SAY_FROM = 1.0  # [s] of CPU: `rbsim run` says its estimate as it starts from this on (validate always does)
 
@@ -82,15 +85,19 @@ def run_cost(compiled: CompiledScene) -> RunCost:
 
     settings, model = compiled.settings, compiled.model
     evaluations = max(1, get_integrator(settings.integrator).force_evals)
-    counts = {"bodies": model.body_count, "contact spheres": 0, "contact shapes": 0, "joint rows": 0}
+    counts = {"bodies": model.body_count, "contact spheres": 0, "contact shapes": 0, "joint rows": 0, "tree links": 0}
     if model.contact is not None:
         counts["contact spheres"] = touching_spheres(model.contact)
         counts["contact shapes"] = int(np.count_nonzero(model.contact.primitive_kind >= 0))
-    if model.joint is not None:
+    if model.tree is not None:  # joint coordinates: every dynamic body a link, the joints hold by construction
+        counts["tree links"] = int(model.tree.parent.shape[0])
+        counts["bodies"] -= counts["tree links"]
+    elif model.joint is not None:
         counts["joint rows"] = int(model.joint.row_count.sum())
     sub_steps = settings.steps * settings.substeps
     per = {"bodies": COST_BODY * evaluations, "contact spheres": COST_SPHERE * evaluations,
-           "contact shapes": COST_SHAPE * evaluations, "joint rows": COST_ROW}  # fmt: skip
+           "contact shapes": COST_SHAPE * evaluations, "joint rows": COST_ROW,
+           "tree links": COST_LINK * evaluations}  # fmt: skip
     parts = {name: sub_steps * per[name] * counts[name] for name in counts}
     return RunCost(
         seconds=float(sum(parts.values())),
@@ -125,7 +132,7 @@ def run_cost_warnings(compiled: CompiledScene) -> list[SceneIssue]:
                        "capsules)")  # fmt: skip
     elif name == "joint rows":
         changes.append("fewer joints or bodies")
-    elif name == "bodies":
+    elif name in ("bodies", "tree links"):
         changes.append("fewer bodies")
     changes.append(f"a shorter duration or a larger dt than {settings.dt:g} s")
     floor = "at least " if cost.adaptive else ""

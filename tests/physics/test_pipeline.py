@@ -54,11 +54,11 @@ def _names(calls: list[ast.Call]) -> list[str]:
 
 
 def test_stage_list_is_impulses_contact_update_record():
-    names = ["impulses", "joint_begin", "contact_begin", "kinematic_begin", "joint_update", "update",
+    names = ["impulses", "joint_begin", "contact_begin", "kinematic_begin", "joint_update", "tree_update", "update",
              "kinematic_end", "joint_velocity", "contact_commit", "materialise", "contact_record",
              "joint_record", "record"]  # fmt: skip
     assert [stage.name for stage in STEP_STAGES] == names
-    assert [stage.name for stage in STEP_STAGES if stage.substep] == names[2:9]
+    assert [stage.name for stage in STEP_STAGES if stage.substep] == names[2:10]
     # materialise belongs to exact's loop alone (it writes the states exact defers), the joint stages to
     # split2's (the one integrator that holds joints: integrators.check_integrator); neither to the
     # adaptive loop (joints refuse a tolerance, dopri5 defers nothing)
@@ -66,8 +66,10 @@ def test_stage_list_is_impulses_contact_update_record():
     assert {stage.name: stage.only for stage in STEP_STAGES if stage.only} == {
         **dict.fromkeys(joint_stages, "joints"),
         "materialise": "defers",
+        "tree_update": "tree",
     }
-    assert [stage.name for stage in STEP_STAGES if stage.adaptive is None] == [*joint_stages[:3], "materialise",
+    assert [stage.name for stage in STEP_STAGES if stage.adaptive is None] == [*joint_stages[:2], "tree_update",
+                                                                               joint_stages[2], "materialise",
                                                                                "joint_record"]  # fmt: skip
     assert all(stage.fixed for stage in STEP_STAGES)
     assert [name for name, info in INTEGRATORS.items() if info.joints] == ["split2"]
@@ -84,9 +86,10 @@ def test_the_fixed_step_loop_calls_the_stages_in_the_list_order():
     substeps = [n for n in ast.walk(loop) if isinstance(n, ast.For) and "substeps" in ast.unparse(n.iter)]
     assert len(substeps) == 1
     assert _names(_stage_calls(substeps[0])) == [stage.fixed for stage in STEP_STAGES if stage.substep]
-    constants = {"joints": "HOLDS_JOINTS", "defers": "DEFERS"}
+    constants = {"joints": "HOLDS_JOINTS", "defers": "DEFERS", "tree": "HOLDS_TREE"}
     for flag, constant in constants.items():
-        gated = ast.Module([n for n in ast.walk(loop) if isinstance(n, ast.If) and ast.unparse(n.test) == constant], [])
+        gates = [n for n in ast.walk(loop) if isinstance(n, ast.If) and ast.unparse(n.test) == constant]
+        gated = ast.Module([statement for n in gates for statement in n.body], [])  # the If's body, not its else
         inside = _names(_stage_calls(gated))
         assert inside == [stage.fixed for stage in STEP_STAGES if stage.only == flag], flag
     lines = inspect.getsource(chunk_loop).splitlines()

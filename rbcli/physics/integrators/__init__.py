@@ -55,6 +55,10 @@ class IntegratorInfo:
     # its step defers the state of some bodies (exact: torque-free bodies under constant forces, written
     # from their anchors): its loop runs the module's `materialise` after each step
     defers: bool = False
+    # integrates articulated trees in joint coordinates (physics/tree/, docs/trees.md): every dynamic body is
+    # a link of a tree (a free root where no joint holds it), the joints hold by construction; its loop
+    # runs its module's `step` as the tree_update stage. Listed apart (REDUCED_INTEGRATORS)
+    reduced: bool = False
 
     def load(self) -> ModuleType:
         """Import the integrator's module: step, step_numpy, SCRATCH_WIDTH (pulls in numba)."""
@@ -65,7 +69,7 @@ class IntegratorInfo:
         record_every, frames, filled), compiled with this integrator's step, and SCRATCH_WIDTH."""
         from rbcli.physics.chunk_loop import fixed_step_loop
 
-        return fixed_step_loop(self.module, joints=self.joints, defers=self.defers)
+        return fixed_step_loop(self.module, joints=self.joints, defers=self.defers, reduced=self.reduced)
 
     def parallel_chunk(self) -> ChunkLoop:
         """The chunk loop that calls `step_parallel`: `chunk`'s interface; bitwise its results at any
@@ -196,6 +200,44 @@ INTEGRATORS: dict[str, IntegratorInfo] = {
     ]
 }
 
+# integrators in joint coordinates (docs/trees.md): apart from INTEGRATORS, whose every entry steps any
+# scene in maximal coordinates (x, q, P, L), as the tests over INTEGRATORS run them; `integrator_names`,
+# `get_integrator` and `check_integrator` know both
+REDUCED_INTEGRATORS: dict[str, IntegratorInfo] = {
+    info.name: info
+    for info in [
+        IntegratorInfo(
+            "reduced-euler",
+            "rbcli.physics.tree.reduced_euler",
+            order=1,
+            symplectic=False,
+            conserves="joints exactly (by construction); P, L of a free tree force-free only as dt -> 0",
+            force_evals=1,
+            summary="Articulated trees in joint coordinates (Featherstone's ABA, O(n)): semi-implicit Euler "
+            "on the joint rates and coordinates, MuJoCo's default method. One freedom per hinge.",
+            reduced=True,
+        ),
+        IntegratorInfo(
+            "reduced-rk4",
+            "rbcli.physics.tree.reduced_rk4",
+            order=4,
+            symplectic=False,
+            conserves="joints exactly (by construction); energy drifts at O(dt^4)",
+            force_evals=4,
+            summary="Articulated trees in joint coordinates (ABA): classical Runge-Kutta on the joint "
+            "coordinates and rates, quaternion coordinates normalised.",
+            reduced=True,
+        ),
+    ]
+}
+
+
+def _known(name: object) -> IntegratorInfo | None:
+    if not isinstance(name, str):
+        return None
+    return INTEGRATORS.get(name) or REDUCED_INTEGRATORS.get(name)
+
+
 DEFAULT_INTEGRATOR = "euler-matrix"
 
 
@@ -225,31 +267,34 @@ class IntegratorRefusal:
 def closest_integrator(name: object) -> str | None:
     """The known name a mistyped one most likely meant (difflib's ratio >= 0.6, the rule of the scene
     keys' "did you mean")."""
-    close = difflib.get_close_matches(str(name), list(INTEGRATORS), n=1, cutoff=0.6)
+    close = difflib.get_close_matches(str(name), list(integrator_names()), n=1, cutoff=0.6)
     return close[0] if close else None
 
 
 def joint_integrators() -> tuple[str, ...]:
-    """The integrators that hold joints (RATTLE in their loops, joints/rattle.py: docs/joints.md)."""
-    return tuple(name for name, info in INTEGRATORS.items() if info.joints)
+    """The integrators that hold joints: RATTLE in their loops (joints/rattle.py: docs/joints.md), or
+    joint coordinates (the reduced ones: docs/trees.md)."""
+    return tuple(name for name, info in INTEGRATORS.items() if info.joints) + tuple(REDUCED_INTEGRATORS)
 
 
 def check_integrator(name: object, *, tolerance: bool = False, joints: bool = False) -> IntegratorRefusal | None:
     """None when `name` is a known integrator that can run as asked (with a tolerance: an adaptive
     one; for a scene with joints: one that holds them, fixed-step), else the refusal. Checks names
     only: nothing is imported or compiled."""
-    if not isinstance(name, str) or name not in INTEGRATORS:
+    info = _known(name)
+    if info is None:
         hint = closest_integrator(name)
         guess = f" (did you mean {hint!r}?)" if hint else ""
-        return IntegratorRefusal("integrator", f"unknown integrator{guess}", "one of " + ", ".join(INTEGRATORS), hint)
-    if tolerance and not INTEGRATORS[name].adaptive:
+        known = ", ".join(integrator_names())
+        return IntegratorRefusal("integrator", f"unknown integrator{guess}", "one of " + known, hint)
+    if tolerance and not info.adaptive:
         adaptive = ", ".join(n for n, info in INTEGRATORS.items() if info.adaptive)
         return IntegratorRefusal(
             "tolerance",
             f"a tolerance needs an adaptive integrator ({adaptive}); {name!r} is fixed-step",
             f"integrator: one of {adaptive} with a tolerance, or no tolerance (fixed dt)",
         )
-    if joints and (tolerance or not INTEGRATORS[name].joints):
+    if joints and (tolerance or not (info.joints or info.reduced)):
         holding = ", ".join(joint_integrators())
         if tolerance:
             return IntegratorRefusal(
@@ -270,9 +315,12 @@ def get_integrator(name: str) -> IntegratorInfo:
     names."""
     refusal = check_integrator(name)
     if refusal is not None:
-        raise KeyError(f"{refusal.naming(name)}; known: {', '.join(INTEGRATORS)}")
-    return INTEGRATORS[name]
+        raise KeyError(f"{refusal.naming(name)}; known: {', '.join(integrator_names())}")
+    info = _known(name)
+    assert info is not None
+    return info
 
 
 def integrator_names() -> tuple[str, ...]:
-    return tuple(INTEGRATORS)
+    """Every integrator's name: the maximal ones (INTEGRATORS), then the reduced ones."""
+    return (*INTEGRATORS, *REDUCED_INTEGRATORS)

@@ -95,6 +95,33 @@ class TreeWork(NamedTuple):
     dinv: np.ndarray  # (dinv_start[n],): (S^T I^A S)^-1 per link, k x k row-major
 
 
+class TreeData(NamedTuple):
+    """A run's tree state and the tree integrators' arrays (integrate.py), in Data.tree: the state of the
+    trees is (coord, rate); the bodies' x, q, P, L are forward kinematics of it."""
+
+    work: TreeWork
+    coord: np.ndarray  # (C,): the joint coordinates (table.py's module docstring)
+    rate: np.ndarray  # (D,): the rates
+    qdd: np.ndarray  # (D,): the rates' derivatives of the last evaluation
+    joint_force: np.ndarray  # (D,): forces dual to the rates acting in the joints (none yet: zeros)
+    coord0: np.ndarray  # (C,): reduced-rk4's start of the step
+    rate0: np.ndarray  # (D,)
+    coord_sum: np.ndarray  # (C,): reduced-rk4's weighted sum of the stages' derivatives
+    rate_sum: np.ndarray  # (D,)
+    dcoord: np.ndarray  # (C,): a stage's d coord / dt
+    # (1,): 1 when the state arrays and `work` hold forward kinematics of (coord, rate) (integrate.py)
+    fk_state: np.ndarray
+
+
+def make_tree_data(tree: TreeTable) -> TreeData:
+    """Zeroed tree data for `tree` (coordinates at zero_coords; the runner sets them from the state)."""
+    C, D = tree_coord_count(tree), tree_dof_count(tree)
+    return TreeData(
+        make_tree_work(tree), zero_coords(tree), np.zeros(D), np.zeros(D), np.zeros(D), np.zeros(C), np.zeros(D),
+        np.zeros(C), np.zeros(D), np.zeros(C), np.zeros(1),
+    )  # fmt: skip
+
+
 def tree_table(
     parent,
     kind,

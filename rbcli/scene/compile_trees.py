@@ -1,0 +1,186 @@
+"""The articulated trees of a scene run in joint coordinates (a reduced integrator, docs/trees.md): the
+compiled JointTable's joints and the dynamic bodies become a TreeTable (physics/tree/table.py), with
+located errors for what the trees do not hold.
+
+Every dynamic body is a link. The joints' graph over the dynamic bodies (static bodies and the world one
+vertex, "the ground") splits into components:
+- a component with one joint to the ground is a tree rooted there (its root link's joint is that one);
+- a component with none floats: its heaviest body is the root, on a free joint (6 rates: its pose);
+- a body no joint holds is a one-link tree on a free joint.
+A component with more joints than a tree has (a loop, or two joints to the ground) is refused at the
+joint that closes the loop: loops stay with the maximal integrators (split2 and RATTLE). So are what the
+trees do not model yet: distance joints, limits, cones, dampers and motors, kinematic bodies in a tree,
+impulses on links. Links are numbered breadth first from each root, so parents come first.
+
+Joint frames. A joint joins body_a and body_b of the JointTable at anchor_a, anchor_b (principal frames
+about the centres of mass; a world point for the world). The child is the end farther from the root:
+its anchor and axis are anchor_child and axis (an axis given in body_a's frame is turned into body_b's
+at the initial poses where b is the child: a hinge's axis is fixed in both), the parent's anchor is
+anchor_parent (a static parent's turned into a world point). rest_q = q_parent0^* q_child0, so every
+coordinate is zero at the initial poses (angles and travels measured from there, as the maximal
+joints' limits are); the child's anchor is moved by the anchors' initial offset (zero but for a slider's
+initial travel and round-off), so the initial poses are exactly the trees' zero.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Sequence
+
+import numpy as np
+
+from rbcli.physics.joints.tables import JOINT_BALL, JOINT_DISTANCE, JOINT_FIXED, JOINT_HINGE, JOINT_SLIDER, WORLD
+from rbcli.physics.model import Model
+from rbcli.physics.rotation import quat_conjugate, quat_multiply, quat_to_matrix
+from rbcli.physics.state import State
+from rbcli.physics.tree.table import TREE_FREE, TreeTable, tree_table
+from rbcli.scene.joint_spec import JointSpec
+from rbcli.scene.spec import BodySpec, SceneError, SceneIssue, SourceLocation
+
+GROUND = -1  # the world and every static body: one vertex of the joints' graph
+REDUCED = "reduced-euler, reduced-rk4"
+MAXIMAL = "a maximal integrator (split2) for this scene, or the joint without it"
+
+
+def compile_trees(
+    model: Model,
+    state: State,
+    bodies: Sequence[BodySpec],
+    joints: Sequence[JointSpec],
+    impulse_bodies: Sequence[int] = (),
+) -> TreeTable:
+    """The TreeTable of the scene compiled as `model` (its JointTable, None without joints), at its initial
+    state; `bodies` and `joints` are the simulated scene's (welds merged), in the model's order, for the
+    errors' locations. impulse_bodies: bodies an impulse acts on (refused on links). SceneError lists
+    every joint refused."""
+    table = model.joint
+    static = np.array([b.static for b in bodies], dtype=bool)
+    kinematic = np.array([b.kinematic for b in bodies], dtype=bool)
+    issues: list[SceneIssue] = []
+
+    def refuse(j: int, key: str, reason: str, expected: str = MAXIMAL) -> None:
+        spec = joints[j]
+        where: SourceLocation | None = spec.locations.get(key, spec.location)
+        issues.append(SceneIssue(where, f"joint '{spec.name}': {reason} (in joint coordinates, {REDUCED})",
+                                 expected))  # fmt: skip
+
+    J = 0 if table is None else table.kind.shape[0]
+    usable = []
+    for j in range(J):
+        assert table is not None
+        a, b = int(table.body_a[j]), int(table.body_b[j])
+        kind = int(table.kind[j])
+        if kind == JOINT_DISTANCE:
+            refuse(j, "type", "a distance joint is a constraint between two links, not a tree's joint")
+        elif kinematic[a] or (b != WORLD and kinematic[b]):
+            refuse(j, "bodies", "a kinematic body in a tree is not modelled yet")
+        elif np.isfinite(table.limit_lower[j]) or np.isfinite(table.limit_upper[j]) or np.any(table.cone[j, 8:10]):
+            refuse(j, "limits", "joint limits are not modelled yet")
+        elif table.damping[j] != 0.0 or table.motor_cap[j] != 0.0:
+            refuse(j, "damping" if table.damping[j] != 0.0 else "motor", "dampers and motors are not modelled yet")
+        else:
+            usable.append(j)
+    n_bodies = model.body_count
+    for b in impulse_bodies:
+        if not (static[b] or kinematic[b]):
+            issues.append(SceneIssue(bodies[b].location, f"body '{bodies[b].name}': impulses on a body in joint "
+                                     f"coordinates ({REDUCED}) are not modelled yet", MAXIMAL))  # fmt: skip
+    if issues:
+        raise SceneError(issues)
+
+    def vertex(body: int) -> int:
+        return GROUND if body == WORLD or static[body] else body
+
+    # union-find over the dynamic bodies and the ground: a joint whose ends are already joined closes a loop
+    root_of = list(range(n_bodies + 1))  # index n_bodies: the ground
+
+    def find(v: int) -> int:
+        v = n_bodies if v == GROUND else v
+        while root_of[v] != v:
+            root_of[v] = root_of[root_of[v]]
+            v = root_of[v]
+        return v
+
+    adjacency: dict[int, list[tuple[int, int]]] = {v: [] for v in [GROUND, *range(n_bodies)]}
+    for j in usable:
+        assert table is not None
+        a, b = vertex(int(table.body_a[j])), vertex(int(table.body_b[j]))
+        ra, rb = find(a), find(b)
+        if ra == rb:
+            through = "the ground (two joints to the world or static bodies)" if GROUND in (a, b) or (
+                find(GROUND) == ra) else "its bodies"  # fmt: skip
+            refuse(j, "bodies", f"it closes a loop through {through}: a tree has one path from each body to its root",
+                   "a loop on a maximal integrator (split2 with RATTLE holds loops), or a tree")  # fmt: skip
+            continue
+        root_of[ra] = rb
+        adjacency[a].append((b, j))
+        adjacency[b].append((a, j))
+    if issues:
+        raise SceneError(issues)
+
+    # breadth first from the ground, then from each floating component's heaviest body
+    order: list[tuple[int, int, int]] = []  # (body, parent body or GROUND, joint or -1 for a free root)
+    seen = {GROUND}
+    queue: deque[int] = deque([GROUND])
+    dynamic = [v for v in range(n_bodies) if not (static[v] or kinematic[v])]
+
+    def sweep() -> None:
+        while queue:
+            v = queue.popleft()
+            for w, j in sorted(adjacency[v], key=lambda edge: edge[1]):
+                if w not in seen:
+                    seen.add(w)
+                    order.append((w, v, j))
+                    queue.append(w)
+
+    sweep()
+    components: dict[int, list[int]] = {}
+    for v in dynamic:
+        if v not in seen:
+            components.setdefault(find(v), []).append(v)
+    for members in sorted(components.values(), key=lambda m: min(m)):
+        heaviest = max(members, key=lambda v: (float(model.body_mass[v]), -v))
+        seen.add(heaviest)
+        order.append((heaviest, GROUND, -1))
+        queue.append(heaviest)
+        sweep()
+
+    link_of = {body: i for i, (body, _, _) in enumerate(order)}
+    n = len(order)
+    R0 = quat_to_matrix(state.q)
+    parent = np.full(n, -1, dtype=np.int64)
+    link_kind = np.zeros(n, dtype=np.int64)
+    anchor_parent, anchor_child, axis = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
+    rest_q = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+    for i, (child, parent_vertex, j) in enumerate(order):
+        if j < 0:
+            link_kind[i] = TREE_FREE
+            continue
+        assert table is not None
+        link_kind[i] = int(table.kind[j])
+        a, b = int(table.body_a[j]), int(table.body_b[j])
+        child_anchor, other_anchor = (
+            (table.anchor_a[j], table.anchor_b[j]) if child == a else (table.anchor_b[j], table.anchor_a[j])
+        )
+        other = b if child == a else a
+        if link_kind[i] in (JOINT_HINGE, JOINT_SLIDER):  # the axis in the child's principal frame
+            axis[i] = table.axis_a[j] if child == a else R0[b].T @ (R0[a] @ table.axis_a[j])
+        if parent_vertex == GROUND:
+            parent[i] = -1
+            # a world point (static bodies never move); rest_q from the world's frame
+            world_anchor = other_anchor if other == WORLD else state.x[other] + R0[other] @ other_anchor
+            anchor_parent[i] = world_anchor
+            rest_q[i] = state.q[child]
+            parent_point = world_anchor
+        else:
+            parent[i] = link_of[parent_vertex]
+            anchor_parent[i] = other_anchor
+            rest_q[i] = quat_multiply(quat_conjugate(state.q[parent_vertex]), state.q[child])
+            parent_point = state.x[parent_vertex] + R0[parent_vertex] @ other_anchor
+        # the child's anchor moved onto the parent's at the initial poses (a slider's initial travel)
+        offset = state.x[child] + R0[child] @ child_anchor - parent_point
+        anchor_child[i] = child_anchor - R0[child].T @ offset
+        assert link_kind[i] in (JOINT_HINGE, JOINT_SLIDER, JOINT_BALL, JOINT_FIXED)
+    body = np.array([v for v, _, _ in order], dtype=np.int64)
+    return tree_table(parent, link_kind, anchor_parent, anchor_child, axis, rest_q, model.body_mass[body],
+                      model.body_inertia[body], body=body)  # fmt: skip

@@ -1,0 +1,145 @@
+"""The integrators in joint coordinates (reduced-euler, reduced-rk4: physics/tree/integrate.py) through the
+runner, against exact solutions and against the maximal integrators.
+
+- The compound pendulum, T = 4 K(sin^2(theta0/2)) sqrt(I/(M g d)) its exact period, is at theta = 0 moving
+  at -2 Omega sin(theta0/2) (energy) after a quarter period, Omega = sqrt(M g d / I): the phase-space
+  error there falls at each integrator's order, at 10 and 170 degrees. (A turning point would not do for
+  reduced-euler: semi-implicit Euler on one hinge is conjugate to the leapfrog by a shift proportional to
+  the rate, so at rest its error is second order while elsewhere it is first.)
+- A free body is a one-link tree on a free joint: the torque-free asymmetric body against the Jacobi
+  elliptic solution (analysis/exact.py), slopes 1 and 4.
+- A 3-D chain of non-isotropic tumbling bodies (ball, tilted hinge): split2 with RATTLE, reduced-euler and
+  reduced-rk4 converge to one motion as dt falls, each at its order, from initial velocities that break
+  the hinge (both project them the same way: the joints' impulsive reaction).
+- What the trees refuse is a located error.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from joint_scenes import angle_and_rate, double_pendulum_3d_text, exact_period, pendulum_text, rod_pivot_inertia
+from test_integrators_accuracy import FLIP, GENERIC, fitted_slope, rotation_error
+
+from rbcli.api import Simulation
+from rbcli.physics.integrators import REDUCED_INTEGRATORS, get_integrator
+from rbcli.scene.load import load_scene_text
+from rbcli.scene.spec import SceneError
+
+ORDER = {"reduced-euler": 1, "reduced-rk4": 4}
+# steps per quarter period where each order is asymptotic and far above round-off (10 and 170 degrees)
+QUARTER_STEPS = {"reduced-euler": (100, 200, 400), "reduced-rk4": (25, 50, 100)}
+
+
+def _phase_error_after_a_quarter_period(integrator: str, theta0: float, steps: int) -> float:
+    """|(theta, (omega - omega_exact) / Omega)| after a quarter of the exact period in `steps` steps."""
+    quarter = exact_period(theta0) / 4.0
+    sim = Simulation(load_scene_text(pendulum_text(theta0, quarter / steps, steps=steps, integrator=integrator)))
+    sim.step(steps)
+    state = sim.state
+    theta, rate = angle_and_rate(state.x[0], state.v[0])
+    M, d, inertia = rod_pivot_inertia()
+    natural = math.sqrt(M * 9.81 * d / inertia)
+    return math.hypot(theta, (rate + 2.0 * natural * math.sin(theta0 / 2.0)) / natural)
+
+
+@pytest.mark.parametrize("integrator", list(REDUCED_INTEGRATORS))
+@pytest.mark.parametrize("degrees", [10.0, 170.0])
+def test_the_pendulum_reaches_its_exact_quarter_period_state_at_the_integrator_s_order(integrator, degrees):
+    theta0 = math.radians(degrees)
+    steps = QUARTER_STEPS[integrator]
+    errors = [_phase_error_after_a_quarter_period(integrator, theta0, n) for n in steps]
+    slope = fitted_slope(1.0 / np.array(steps), errors)
+    assert abs(slope - ORDER[integrator]) < 0.25, (errors, slope)
+    assert errors[-1] < (1e-2 if integrator == "reduced-euler" else 1e-6), errors
+
+
+@pytest.mark.parametrize("integrator", list(REDUCED_INTEGRATORS))
+@pytest.mark.parametrize("case", [GENERIC, FLIP], ids=["generic", "flip"])
+def test_a_free_body_is_a_free_root_at_the_integrator_s_order(integrator, case):
+    """The torque-free asymmetric body (and near the intermediate-axis separatrix), 20 s, against the
+    exact solution: the largest orientation error falls at the method's order."""
+    dts = {"reduced-euler": (1e-4, 3e-4, 1e-3), "reduced-rk4": (1e-2, 2e-2, 5e-2)}[integrator]
+    errors = [rotation_error(integrator, case, dt, 20.0, every=max(1, round(0.01 / dt)))[0] for dt in dts]
+    assert abs(fitted_slope(dts, errors) - ORDER[integrator]) < 0.25, errors
+
+
+CHAIN_TIME = 0.5  # [s]
+
+
+def _chain_text(dt: float, integrator: str) -> str:
+    """double_pendulum_3d_text with the elbow a hinge about a tilted axis (the box's and the cloud's
+    initial spins break it: the first step, or the reduced state's start, projects them)."""
+    text = double_pendulum_3d_text(dt).replace("integrator: split2", f"integrator: {integrator}")
+    text = text.replace("steps: 10", f"duration: {CHAIN_TIME!r}")
+    return text.replace("name: elbow, type: ball,", "name: elbow, type: hinge, axis: [0.48, -0.64, 0.6],")
+
+
+def _chain_end(dt: float, integrator: str) -> np.ndarray:
+    sim = Simulation(load_scene_text(_chain_text(dt, integrator)))
+    sim.step(round(CHAIN_TIME / dt))
+    state = sim.state
+    return np.concatenate([state.x.ravel(), state.v.ravel(), state.omega.ravel()])
+
+
+def test_maximal_and_reduced_coordinates_converge_to_one_3d_chain_motion():
+    reference = _chain_end(2.5e-4, "reduced-rk4")
+    assert np.max(np.abs(_chain_end(5e-4, "reduced-rk4") - reference)) < 1e-9  # reduced-rk4 is converged
+    dts = [4e-3, 2e-3, 1e-3]
+    for integrator, order in (("split2", 2), ("reduced-euler", 1)):
+        gaps = [float(np.max(np.abs(_chain_end(dt, integrator) - reference))) for dt in dts]
+        assert abs(fitted_slope(dts, gaps) - order) < 0.3, (integrator, gaps)
+        assert gaps[-1] < (1e-3 if order == 2 else 0.2), (integrator, gaps)
+
+
+def test_the_links_obey_the_joints_to_round_off_and_the_state_is_forward_kinematics():
+    """reduced-rk4 on the tumbling chain: the anchors coincide to round-off, the hinge's axis stays common,
+    and a checkpoint restored continues bitwise."""
+    sim = Simulation(load_scene_text(_chain_text(1e-3, "reduced-rk4")))
+    table = sim.model.joint
+    sim.step(300)
+    saved = sim.checkpoint()
+    sim.step(200)
+    after = sim.checkpoint().arrays
+    s = sim.data.state
+    from rbcli.physics.rotation import quat_rotate
+
+    for j in range(2):
+        a, b = int(table.body_a[j]), int(table.body_b[j])
+        p_a = s.x[a] + quat_rotate(s.q[a][None], table.anchor_a[j][None])[0]
+        p_b = table.anchor_b[j] if b < 0 else s.x[b] + quat_rotate(s.q[b][None], table.anchor_b[j][None])[0]
+        assert np.linalg.norm(p_a - p_b) < 1e-13
+    axis_a = quat_rotate(s.q[1][None], table.axis_a[1][None])[0]
+    normals = quat_rotate(np.repeat(s.q[0][None], 2, axis=0), table.normal_b[1])
+    assert np.max(np.abs(normals @ axis_a)) < 1e-13
+    sim.restore(saved)
+    sim.step(200)
+    for name, array in sim.checkpoint().arrays.items():
+        assert np.array_equal(array, after[name]), name
+
+
+def test_the_reduced_integrators_are_listed_with_their_order():
+    for name, order in ORDER.items():
+        info = get_integrator(name)
+        assert info.reduced and info.order == order
+
+
+def test_what_the_trees_do_not_hold_is_a_located_error():
+    text = double_pendulum_3d_text(1e-3).replace("integrator: split2", "integrator: reduced-rk4")
+    loop = text + "  - {name: loop, type: ball, bodies: [cloud, world], anchor: [0.0, 0.0, 2.0]}\n"
+    with pytest.raises(SceneError) as raised:
+        Simulation(load_scene_text(loop.replace("anchor: [0.0, 0.0, 2.0]", "anchor: " + _cloud_point(text))))
+    message = str(raised.value)
+    assert message.startswith("<string>:19:") and "joint 'loop': it closes a loop" in message
+    limited = text.replace("name: shoulder, type: ball,", "name: shoulder, type: ball, cone: {axis: [0, 0, -1], "
+                           "reference: [1, 0, 0], swing: [0.5, 0.5]},")  # fmt: skip
+    with pytest.raises(SceneError, match="joint 'shoulder': joint limits are not modelled yet"):
+        Simulation(load_scene_text(limited))
+
+
+def _cloud_point(text: str) -> str:
+    """The cloud's initial centre of mass as the scene gives it (a point on the cloud: a valid anchor)."""
+    line = text.split("name: cloud", 1)[1].split("position: ", 1)[1].splitlines()[0]
+    return line.strip()
