@@ -337,6 +337,7 @@ def main() -> None:
     )
     for joint in ("hinge", "ball"):
         cost = {}
+        whole_cost: dict[str, dict[int, float]] = {}
         for links in RBSIM_SIZES:
             steps = max(10, int(budget / links))
             solver = SolverRun(links, joint)
@@ -353,19 +354,38 @@ def main() -> None:
             mj_rate = links * mj_steps / min(mj_times) if mj_times else float("nan")
             ratio = rate / mj_rate
             spreads = f"{spread(times):4.0%}" + (f" / {spread(mj_times):4.0%}" if mj_times else "")
-            wanted = options.full_step and links in TARGET_RATIO
-            fulls = [full_step_chain(links, joint, steps, name) for name in whole_steps] if wanted else []
+            # the whole steps at the sizes MuJoCo runs; the reduced ones (O(n) per step) at 10,000 links too
+            fulls = [
+                full_step_chain(links, joint, steps, name)
+                if links in TARGET_RATIO or name.startswith("reduced")
+                else None
+                for name in whole_steps
+                if options.full_step
+            ]
+            for name, full in zip(whole_steps, fulls, strict=False):
+                if full is not None:
+                    whole_cost.setdefault(name, {})[links] = 1e9 / full[0]
             print(
                 f"{joint:>6} {links:>6} {mj_rate:9.3g} {ISSUE_MUJOCO.get((joint, links), float('nan')):9.2g}"
                 f" {rate:9.3g} {ratio:6.2f} {TARGET_RATIO.get(links, float('nan')):6.1f} {cost[links]:8.0f}"
                 f" {min(factor_times) / min(times):7.0%} {solver.constraint_error():8.1e} {spreads:>11}"
-                + "".join(f" {full[0]:13.3g} {full[1]:8.1e} {full[0] / mj_rate:6.2f}" for full in fulls if full)
+                + "".join(
+                    f" {full[0]:13.3g} {full[1]:8.1e} {full[0] / mj_rate:6.2f}" if full else f" {'':>29}"
+                    for full in fulls
+                )  # fmt: skip
             )
         flat = cost[RBSIM_SIZES[-1]] / cost[RBSIM_SIZES[0]]
         print(
             f"{joint}: cost per link at {RBSIM_SIZES[-1]:,} / at {RBSIM_SIZES[0]} links = {flat:.2f}"
             f" (target <= {TARGET_FLAT})"
         )
+        for name, costs in whole_cost.items():
+            if RBSIM_SIZES[-1] in costs:
+                print(
+                    f"{joint}: {name} whole step, ns per link-step {costs[RBSIM_SIZES[0]]:.0f} at {RBSIM_SIZES[0]}"
+                    f" links, {costs[RBSIM_SIZES[-1]]:.0f} at {RBSIM_SIZES[-1]:,}: ratio"
+                    f" {costs[RBSIM_SIZES[-1]] / costs[RBSIM_SIZES[0]]:.2f} (target <= {TARGET_FLAT})"
+                )
     print(f"load average {os.getloadavg()[0]:.2f} at the end")
 
 
