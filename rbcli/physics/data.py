@@ -163,9 +163,11 @@ class Data:
             self.force.contact.body_history[:] = 1
             self.force.contact.quiet_state[:] = 0  # and the quiet skin is this run's (contact/quiet.py)
 
-    def clear_work(self) -> None:
+    def clear_work(self, *, trees_from_state: bool = True) -> None:
         """Forget everything carried between steps but the state (after the state is set from outside):
-        the adaptive controller then chooses its first step afresh, as at the start of a run."""
+        the adaptive controller then chooses its first step afresh, as at the start of a run. In joint
+        coordinates the trees' (coord, rate) are taken from the state as it now is, unless
+        trees_from_state is False (they were set, and the state written from them)."""
         self.F[:] = 0.0
         self.tau[:] = 0.0
         self.scratch[:] = 0.0
@@ -174,7 +176,7 @@ class Data:
             self.force.contact.quiet_state[:] = 0
         if self.joint is not None:  # the joints' Newton starts from the free drift (joints/rattle.py)
             self.joint.guess_count[:] = 0.0
-        if self.tree is not None and self.tree_table is not None:  # (coord, rate) from the state as it now is
+        if trees_from_state and self.tree is not None and self.tree_table is not None:  # (coord, rate) from the state
             from rbcli.physics.tree.coordinates import set_from_bodies
 
             s = self.state

@@ -29,7 +29,8 @@ import numpy as np
 from rbcli.physics.data import make_data
 from rbcli.physics.frames import body_angular_velocity, internal_orientation, user_orientation
 from rbcli.physics.integrators import get_integrator
-from rbcli.physics.rotation import quat_rotate, quat_rotate_inverse
+from rbcli.physics.joints.tables import JOINT_KINDS
+from rbcli.physics.rotation import quat_conjugate, quat_multiply, quat_rotate, quat_rotate_inverse
 from rbcli.physics.state import State
 from rbcli.runner.governor import ThreadGovernor
 from rbcli.runner.threads import (
@@ -53,6 +54,8 @@ if TYPE_CHECKING:
 NEVER = 2**62
 # a checkpoint's array of the simulated state before its step, in scenes with welds (their reactions)
 WELD_PREVIOUS = "weld.previous"
+# joints/tables.py's kind codes, as JointCoordinates names them
+_KIND_NAMES = {code: name for name, code in JOINT_KINDS.items()}
 
 
 class SimulationDiverged(RuntimeError):
@@ -80,6 +83,25 @@ class BodyState:
     omega: np.ndarray
     P: np.ndarray
     L: np.ndarray
+
+
+@dataclass(frozen=True)
+class JointCoordinates:
+    """One joint's coordinate and rate in joint coordinates (a reduced integrator: docs/trees.md).
+
+    kind: "hinge", "slider" or "ball". child: the body the joint moves, the end farther from its tree's
+    root; parent: the other end ("world" for the world or a static body). position: a hinge's angle [rad]
+    or a slider's travel [m], the child's relative to its parent measured from the initial pose, shape
+    (1,); a ball's unit quaternion (w, x, y, z), the child's turn relative to its parent since the
+    initial pose, in the child's own (user) body frame, shape (4,). rate: d position / dt [rad/s, m/s],
+    or a ball's relative angular velocity [rad/s] in the child's body frame, shape (1,) or (3,).
+    """
+
+    kind: str
+    child: str
+    parent: str
+    position: np.ndarray
+    rate: np.ndarray
 
 
 class Simulation:
@@ -479,6 +501,84 @@ class Simulation:
             state.x[:], state.q[:], state.P[:], state.L[:] = merged_state(parts, self.model, s.x, s.q, s.P, s.L)
             state.step = s.step
         self.data.clear_work()
+        self.reactions_known = False
+        self._previous = None
+
+    # ---- joint coordinates (reduced integrators) ------------------------------------------------------
+
+    def _tree_links(self) -> dict[str, int]:
+        """Joint name -> its tree link, in a run in joint coordinates (ValueError otherwise)."""
+        tree = self.model.tree
+        if tree is None or self.data.tree is None:
+            raise ValueError(
+                f"joint coordinates are the state of the reduced integrators (reduced-euler, reduced-rk4); this "
+                f"run's integrator {self.settings.integrator!r} holds the joints in maximal coordinates"
+            )
+        names = [joint.name for joint in self.compiled.simulated_spec.joints]
+        return {names[int(j)]: i for i, j in enumerate(tree.joint.tolist()) if j >= 0}
+
+    def joint_state(self) -> dict[str, JointCoordinates]:
+        """Every joint's coordinate and rate, by joint name (JointCoordinates), in a run in joint
+        coordinates (docs/trees.md); ValueError in maximal coordinates."""
+        from rbcli.physics.joints.tables import JOINT_BALL
+        from rbcli.physics.rotation import quat_rotate
+
+        links = self._tree_links()
+        tree, data = self.model.tree, self.data.tree
+        assert tree is not None and data is not None
+        out = {}
+        for name, i in links.items():
+            kind, child, parent = int(tree.kind[i]), int(tree.body[i]), int(tree.parent[i])
+            position = data.coord[tree.coord_start[i] : tree.coord_start[i + 1]].copy()
+            rate = data.rate[tree.dof_start[i] : tree.dof_start[i + 1]].copy()
+            if kind == JOINT_BALL:  # principal -> the child's user frame: e u e^*, R(e) omega
+                e = self.model.body_frame_q[child]
+                position = quat_multiply(quat_multiply(e, position), quat_conjugate(e))
+                rate = quat_rotate(e[None], rate[None])[0]
+            out[name] = JointCoordinates(
+                _KIND_NAMES[kind], self.model.body_names[child],
+                "world" if parent < 0 else self.model.body_names[int(tree.body[parent])], position, rate,
+            )  # fmt: skip
+        return out
+
+    def set_joint_state(self, name: str, *, position: Sequence[float] | np.ndarray | None = None,
+                        rate: Sequence[float] | np.ndarray | None = None) -> None:  # fmt: skip
+        """Set one joint's coordinate and/or rate (JointCoordinates' units and frames; a ball's quaternion
+        is normalised); the bodies follow by forward kinematics, and the carried work is cleared as by
+        `set_state`. ValueError naming what is wrong (an unknown joint, a wrong shape, a maximal run)."""
+        from rbcli.physics.joints.tables import JOINT_BALL
+        from rbcli.physics.rotation import quat_rotate_inverse
+        from rbcli.physics.tree.aba import forward_kinematics
+
+        links = self._tree_links()
+        if name not in links:
+            raise ValueError(f"no joint {name!r} in joint coordinates; joints: {', '.join(links) or 'none'}")
+        tree, data = self.model.tree, self.data.tree
+        assert tree is not None and data is not None
+        i = links[name]
+        kind, child = int(tree.kind[i]), int(tree.body[i])
+        c0, c1, d0, d1 = (int(v) for v in (tree.coord_start[i], tree.coord_start[i + 1], tree.dof_start[i],
+                                            tree.dof_start[i + 1]))  # fmt: skip
+        e = self.model.body_frame_q[child]
+        if position is not None:
+            value = np.array(position, dtype=np.float64).reshape(-1)
+            if value.shape != (c1 - c0,) or not np.isfinite(value).all():
+                raise ValueError(f"joint {name!r}: position must be {c1 - c0} finite number(s), got {position!r}")
+            if kind == JOINT_BALL:
+                norm = float(np.linalg.norm(value))
+                if not norm > 0.0:
+                    raise ValueError(f"joint {name!r}: a ball's position is a non-zero quaternion (w, x, y, z)")
+                value = quat_multiply(quat_multiply(quat_conjugate(e), value / norm), e)
+            data.coord[c0:c1] = value
+        if rate is not None:
+            value = np.array(rate, dtype=np.float64).reshape(-1)
+            if value.shape != (d1 - d0,) or not np.isfinite(value).all():
+                raise ValueError(f"joint {name!r}: rate must be {d1 - d0} finite number(s), got {rate!r}")
+            data.rate[d0:d1] = quat_rotate_inverse(e[None], value[None])[0] if kind == JOINT_BALL else value
+        s = self.data.state
+        forward_kinematics(tree, data.coord, data.rate, data.work, s.x, s.q, s.P, s.L)
+        data.fk_state[0] = 1.0
+        self.data.clear_work(trees_from_state=False)
         self.reactions_known = False
         self._previous = None
 

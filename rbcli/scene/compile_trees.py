@@ -182,5 +182,6 @@ def compile_trees(
         anchor_child[i] = child_anchor - R0[child].T @ offset
         assert link_kind[i] in (JOINT_HINGE, JOINT_SLIDER, JOINT_BALL, JOINT_FIXED)
     body = np.array([v for v, _, _ in order], dtype=np.int64)
+    joint = np.array([j for _, _, j in order], dtype=np.int64)
     return tree_table(parent, link_kind, anchor_parent, anchor_child, axis, rest_q, model.body_mass[body],
-                      model.body_inertia[body], body=body)  # fmt: skip
+                      model.body_inertia[body], body=body, joint=joint)  # fmt: skip

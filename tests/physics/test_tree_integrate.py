@@ -79,10 +79,13 @@ def _chain_text(dt: float, integrator: str) -> str:
     text = double_pendulum_3d_text(dt).replace("integrator: split2", f"integrator: {integrator}")
     text = text.replace("steps: 10", f"duration: {CHAIN_TIME!r}")
     text = text.replace("name: elbow, type: ball,", "name: elbow, type: hinge, axis: [0.48, -0.64, 0.6],")
-    return text + """forces:
+    return (
+        text
+        + """forces:
   - {type: spring, body: cloud, point: [0.1, 0.0, 0.0], anchor: [0.5, 0.3, 1.5], stiffness: 40, rest_length: 0.2}
   - {type: drag, bodies: all, linear: 0.05, angular_linear: 0.001}
 """
+    )
 
 
 def _chain_end(dt: float, integrator: str) -> np.ndarray:
@@ -151,3 +154,36 @@ def _cloud_point(text: str) -> str:
     """The cloud's initial centre of mass as the scene gives it (a point on the cloud: a valid anchor)."""
     line = text.split("name: cloud", 1)[1].split("position: ", 1)[1].splitlines()[0]
     return line.strip()
+
+
+def test_joint_coordinates_are_read_and_written_by_joint_name():
+    """The pendulum in joint coordinates: the hinge's angle is 0 at the initial pose; set to 0.3 rad moving
+    at 1.5 rad/s, the rod's centre of mass is at theta0 + 0.3 about the pivot moving at 1.5 rad/s (read off
+    the bodies' state, which forward kinematics rewrote); a ball joint's quaternion and rate, in the
+    child's own frame, read back as written; a maximal run has no joint coordinates."""
+    theta0 = math.radians(10.0)
+    sim = Simulation(load_scene_text(pendulum_text(theta0, 1e-3, integrator="reduced-euler")))
+    pivot = sim.joint_state()["pivot"]
+    assert (pivot.kind, pivot.child, pivot.parent) == ("hinge", "rod", "world")
+    assert abs(pivot.position[0]) < 1e-15 and abs(pivot.rate[0]) < 1e-15
+    sim.set_joint_state("pivot", position=[0.3], rate=[1.5])
+    theta, rate = angle_and_rate(sim.state.x[0], sim.state.v[0])
+    assert abs(theta - (theta0 + 0.3)) < 1e-13 and abs(rate - 1.5) < 1e-12
+    assert sim.joint_state()["pivot"].position[0] == 0.3
+    sim.step(10)
+    assert sim.joint_state()["pivot"].rate[0] < 1.5  # rising away from the bottom: slower
+    chain = Simulation(load_scene_text(double_pendulum_3d_text(1e-3).replace("integrator: split2",
+                                                                               "integrator: reduced-rk4")))  # fmt: skip
+    u = np.array([0.9, 0.1, -0.3, 0.2])
+    u /= np.linalg.norm(u)
+    chain.set_joint_state("elbow", position=u, rate=[0.5, -1.0, 2.0])
+    elbow = chain.joint_state()["elbow"]
+    assert (elbow.kind, elbow.child, elbow.parent) == ("ball", "cloud", "box")
+    np.testing.assert_allclose(elbow.position, u, atol=1e-15)
+    np.testing.assert_allclose(elbow.rate, [0.5, -1.0, 2.0], atol=1e-14)
+    with pytest.raises(ValueError, match="no joint 'knee'"):
+        chain.set_joint_state("knee", rate=[1.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match="rate must be 3 finite"):
+        chain.set_joint_state("elbow", rate=[1.0])
+    with pytest.raises(ValueError, match="maximal coordinates"):
+        Simulation(load_scene_text(pendulum_text(theta0, 1e-3))).joint_state()

@@ -64,6 +64,7 @@ class TreeTable(NamedTuple):
     parent: np.ndarray  # int64 (n,): parent link, -1 for the world; parent[i] < i
     kind: np.ndarray  # int64 (n,): JOINT_FIXED, JOINT_HINGE, JOINT_SLIDER, JOINT_BALL or TREE_FREE
     body: np.ndarray  # int64 (n,): the link's row in the state arrays (x, q, P, L, F, tau)
+    joint: np.ndarray  # int64 (n,): the scene's joint (JointTable row) that joins the link to its parent; -1: none
     anchor_parent: np.ndarray  # [m] (n, 3): the joint point in the parent's frame (world for -1)
     anchor_child: np.ndarray  # [m] (n, 3): the joint point in the link's frame
     axis: np.ndarray  # [1] (n, 3): unit hinge / slider axis, link frame
@@ -132,9 +133,11 @@ def tree_table(
     mass,
     inertia,
     body=None,
+    joint=None,
 ) -> TreeTable:  # noqa: ANN001
-    """A TreeTable from per-link sequences (body defaults to the link's index). Checks the order (parent
-    before child), the free joint's place (roots only) and normalises axes and rest rotations."""
+    """A TreeTable from per-link sequences (body defaults to the link's index, joint to -1: none). Checks
+    the order (parent before child), the free joint's place (roots only) and normalises axes and rest
+    rotations."""
     parent, kind = frozen_ints(parent), frozen_ints(kind)
     n = parent.shape[0]
     if np.any(parent >= np.arange(n)) or np.any(parent < -1):
@@ -177,6 +180,7 @@ def tree_table(
         parent,
         kind,
         frozen_ints(np.arange(n) if body is None else body),
+        frozen_ints(np.full(n, -1) if joint is None else joint),
         frozen_floats(anchor_parent, 3),
         frozen_floats(anchor_child, 3),
         frozen_floats(axis, 3),
