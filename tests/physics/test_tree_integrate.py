@@ -8,7 +8,7 @@ runner, against exact solutions and against the maximal integrators.
   the rate, so at rest its error is second order while elsewhere it is first.)
 - A free body is a one-link tree on a free joint: the torque-free asymmetric body against the Jacobi
   elliptic solution (analysis/exact.py), slopes 1 and 4.
-- A 3-D chain of non-isotropic tumbling bodies (ball, tilted hinge) pulled by a spring on its last
+- A 3-D chain of non-isotropic tumbling bodies (ball, tilted hinge) pulled by a damped spring on its last
   link, with drag: split2 with RATTLE, reduced-euler and reduced-rk4 converge to one motion as dt falls,
   each at its order, from initial velocities that break the hinge (both project them the same way: the
   joints' impulsive reaction), so the forces reach the joints alike (J^T f in joint coordinates).
@@ -72,9 +72,8 @@ CHAIN_TIME = 0.5  # [s]
 
 def _chain_text(dt: float, integrator: str) -> str:
     """double_pendulum_3d_text with the elbow a hinge about a tilted axis (the box's and the cloud's
-    initial spins break it: the first step, or the reduced state's start, projects them), a spring from
-    a point of the cloud to a world point and drag on both (a damped spring is left out: split2 + RATTLE
-    converges to the same motion with one, but at order ~1.3, docs/trees.md): forces that reach the joints through
+    initial spins break it: the first step, or the reduced state's start, projects them), a damped
+    spring from a point of the cloud to a world point and drag on both: forces that reach the joints through
     ABA's backward pass (J^T f) in joint coordinates and through the multipliers in maximal ones."""
     text = double_pendulum_3d_text(dt).replace("integrator: split2", f"integrator: {integrator}")
     text = text.replace("steps: 10", f"duration: {CHAIN_TIME!r}")
@@ -82,7 +81,8 @@ def _chain_text(dt: float, integrator: str) -> str:
     return (
         text
         + """forces:
-  - {type: spring, body: cloud, point: [0.1, 0.0, 0.0], anchor: [0.5, 0.3, 1.5], stiffness: 40, rest_length: 0.2}
+  - {type: spring, body: cloud, point: [0.1, 0.0, 0.0], anchor: [0.5, 0.3, 1.5], stiffness: 40, rest_length: 0.2,
+     damping: 0.3}
   - {type: drag, bodies: all, linear: 0.05, angular_linear: 0.001}
 """
     )

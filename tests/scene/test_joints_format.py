@@ -190,7 +190,9 @@ def test_duplicate_joint_names():
 def test_an_integrator_that_does_not_hold_joints_is_refused_naming_the_ones_that_do(integrator):
     scene = SCENE.replace("duration: 0.01}", f"duration: 0.01, integrator: {integrator}}}")
     issue = the_error(issues_of("  - {type: ball, bodies: [upper, world], anchor: [0, 0, 1]}\n", scene), "joints")
-    assert issue.message.endswith(f"integrator '{integrator}' does not hold joints; the ones that do: split2")
+    assert issue.message.endswith(
+        f"integrator '{integrator}' does not hold joints; the ones that do: split2, reduced-euler, reduced-rk4"
+    )
     assert at(issue) == (1, col(scene.splitlines()[0], integrator))
 
 

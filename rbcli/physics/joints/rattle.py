@@ -37,8 +37,11 @@ start, h k lambda = bound - c, alternating with the joints' Newton (drives.limit
 
 Kinematic bodies are put at their exact end pose (kinematic_end) before the Newton, so the rows close
 on the prescribed pose; static and kinematic bodies take no impulse (W = 0). Dampers and drag (the
-dissipative terms) act as their own flow at both ends, K_c(h/2) D_diss(h/2) I D(h) D_diss(h/2) K_c(h/2),
-a palindrome: second order (symplectic only in the conservative part, as split2).
+dissipative terms) act as their own flow on the joints' tangent space at both ends (joints/dissipation.py):
+D(h/2) on the momenta the last velocity stage left, then the conservative RATTLE step, then at the end
+the momenta projected onto G V = 0 and D(h/2) again, a palindrome: second order (symplectic only in the
+conservative part, as split2). Their free flow (forces/damping.py) applied to the drift's momenta, which
+break the velocity rows by O(h), made the step first order (docs/integrators.md, "Limitations").
 """
 
 from __future__ import annotations
@@ -47,14 +50,15 @@ import numba
 from numba.extending import overload
 
 from rbcli.physics.dispatch import DISPATCH_OPTIONS, absent, kernel_only
-from rbcli.physics.forces.damping import dissipation_flow, dissipation_present
+from rbcli.physics.forces.damping import dissipation_present
 from rbcli.physics.forces.wrench import accumulate_wrench
 from rbcli.physics.integrators.split2 import free_drift
+from rbcli.physics.joints.dissipation import joint_dissipation
 from rbcli.physics.joints.drives import limit_positions
 from rbcli.physics.joints.impulses import apply_body_impulses, body_impulses, gather_impulses, joint_impulses
 from rbcli.physics.joints.rows import joint_rows
 from rbcli.physics.joints.solver import solve_rows
-from rbcli.physics.joints.stages import factor_at
+from rbcli.physics.joints.stages import factor_at, project_momenta
 from rbcli.physics.joints.tables import (
     STAT_FLOOR,
     STAT_ITERATIONS,
@@ -93,17 +97,19 @@ def joint_update(
     plain split2 step)."""
     if table is None or work is None:
         return False
-    dissipative = dissipation_present(forces.spring, forces.drag)
-    accumulate_wrench(model, forces, contact, force_data, t, x, q, P, L, F, tau, not dissipative)
-    _kick(forces.has_torque, 0.5 * h, P, L, F, tau)
-    if dissipative:
-        dissipation_flow(model, forces.spring, forces.drag, 0.5 * h, x, q, P, L)
+    work.joint_impulse[:, :] = 0.0  # this step's reactions, gathered by the stages below
+    work.limit_hit[:, :] = 0.0
     for b in range(x.shape[0]):
         for c in range(3):
             work.x_start[b, c] = x[b, c]
         for c in range(4):
             work.q_start[b, c] = q[b, c]
     redundant = factor_at(model, table, work, work.x_start, work.q_start)
+    dissipative = dissipation_present(forces.spring, forces.drag)
+    if dissipative:  # D(h/2) on the joints' tangent space, on the momenta the last velocity stage left
+        joint_dissipation(model, forces.spring, forces.drag, table, work, 0.5 * h, x, q, P, L)
+    accumulate_wrench(model, forces, contact, force_data, t, x, q, P, L, F, tau, not dissipative)
+    _kick(forces.has_torque, 0.5 * h, P, L, F, tau)
     guessed = _first_iterate(table, work, P, L, redundant)
     for b in range(x.shape[0]):
         free_drift(model, b, h, work.x_start, work.q_start, P, L, x, q)
@@ -111,9 +117,10 @@ def joint_update(
     joint_position(model, table, work, h, x, q, P, L, guessed)
     work.stats[STAT_REDUNDANT] = redundant
     accumulate_wrench(model, forces, contact, force_data, t + h, x, q, P, L, F, tau, not dissipative)
-    if dissipative:
-        dissipation_flow(model, forces.spring, forces.drag, 0.5 * h, x, q, P, L)
     _kick(forces.has_torque, 0.5 * h, P, L, F, tau)
+    if dissipative:  # the mirror of the start: onto G V = 0 at the end, then D(h/2) there
+        project_momenta(model, table, work, x, q, P, L)
+        joint_dissipation(model, forces.spring, forces.drag, table, work, 0.5 * h, x, q, P, L)
     return True
 
 
@@ -141,8 +148,6 @@ def _first_iterate(table, work, P, L, redundant) -> bool:  # noqa: ANN001
     step to step) and bury the reactions in round-off. Measured on the chains, the line through the
     last two starts ~1/100 of the free drift's residual away: one iteration fewer (module docstring)."""
     work.impulse[:] = 0.0
-    work.joint_impulse[:, :] = 0.0
-    work.limit_hit[:, :] = 0.0
     count = work.guess_count[0]
     if count == 0.0 or redundant != 0:
         return False

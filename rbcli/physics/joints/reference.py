@@ -166,7 +166,7 @@ def _rates(model, table: JointTable, x, q, P, L):  # noqa: ANN001, ANN202
 
 
 def project_velocities_numpy(model, table: JointTable, x, q, P, L) -> np.ndarray:  # noqa: ANN001
-    """(P, L) -= G^T mu with mu = (G W G^T)^-1 G V, in place (stages._project); returns mu."""
+    """(P, L) -= G^T mu with mu = (G W G^T)^-1 G V, in place (stages.project_momenta); returns mu."""
     G, W, rate = _rates(model, table, x, q, P, L)
     mu = np.linalg.solve(G @ W @ G.T, rate)
     d = (G.T @ mu).reshape(x.shape[0], 6) * ~table.body_ground[:, None]

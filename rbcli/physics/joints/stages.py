@@ -55,7 +55,7 @@ def joint_velocity(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
     motors and dampers, then the limits that are reached (drives.py)."""
     if table is None or work is None:
         return
-    _project(model, table, work, x, q, P, L)
+    project_momenta(model, table, work, x, q, P, L)
     drive_velocities(model, table, work, h, x, q, P, L)
     work.stats[STAT_VELOCITY] = row_velocities(model, table, work, q, P, L)
     for b in range(P.shape[0]):
@@ -83,7 +83,7 @@ def joint_begin(model, table, work, x, q, P, L) -> None:  # noqa: ANN001
     elif work.stats[STAT_VELOCITY] <= VELOCITY_SLACK and _momenta_left(work, P, L):
         return  # bitwise the state the last velocity stage left, with G V within the slack
     if row_velocities(model, table, work, q, P, L) > VELOCITY_SLACK:
-        _project(model, table, work, x, q, P, L)
+        project_momenta(model, table, work, x, q, P, L)
 
 
 @numba.njit(**STEP_KERNEL)
@@ -135,7 +135,7 @@ def factor_at(model, table, work, x, q) -> int:  # noqa: ANN001
 
 @separately_compiled
 @numba.njit(cache=True)
-def _project(model, table, work, x, q, P, L) -> None:  # noqa: ANN001
+def project_momenta(model, table, work, x, q, P, L) -> None:  # noqa: ANN001
     """(P, L) -= G^T mu, mu = A^-1 G V at (x, q): G V = 0 after it; mu is added to work.impulse."""
     factor_at(model, table, work, x, q)
     row_velocities(model, table, work, q, P, L)
