@@ -54,7 +54,7 @@ from rbcli.analysis.errors import (
     run_errors,
     smoothness_notes,
 )
-from rbcli.physics.integrators import INTEGRATORS, IntegratorInfo, get_integrator
+from rbcli.physics.integrators import INTEGRATORS, REDUCED_INTEGRATORS, IntegratorInfo, get_integrator
 from rbcli.record.memory_sink import Trajectory
 from rbcli.runner.kernel_timing import KernelTiming, simulation_advance, time_kernel
 from rbcli.scene.compile import CompiledScene, compile_scene
@@ -237,15 +237,29 @@ class StudyResult:
 # what the scene admits
 
 
-def applicable_integrators(*, jointed: bool = False) -> tuple[str, ...]:
+def applicable_integrators(*, jointed: bool = False, trees: bool = False) -> tuple[str, ...]:
     """Every registered integrator (fixed-step ones by dt, adaptive ones by tolerance), except those
     kept only to demonstrate a failure (ask for them by name); for a scene with joints, the ones that
-    hold joints (integrators.check_integrator)."""
-    return tuple(
+    hold joints (integrators.check_integrator), and when its joints form trees (trees: compile_trees
+    takes them) the ones in joint coordinates beside them: the two families, error against cost."""
+    maximal = tuple(
         name
         for name, info in INTEGRATORS.items()
         if not getattr(info, "demonstration", False) and (info.joints or not jointed)
     )
+    return maximal + (tuple(REDUCED_INTEGRATORS) if jointed and trees else ())
+
+
+def _forms_trees(spec: SceneSpec) -> bool:
+    """Whether the scene's joints compile to trees in joint coordinates (scene/compile_trees.py: no loop,
+    distance joint, limit or drive), so the reduced integrators can run it."""
+    from rbcli.scene.spec import SceneError
+
+    try:
+        compile_scene(spec, integrator=next(iter(REDUCED_INTEGRATORS)))
+    except SceneError:
+        return False
+    return True
 
 
 def is_adaptive(info: IntegratorInfo) -> bool:
@@ -324,13 +338,15 @@ def default_dts(dt: float) -> tuple[float, ...]:
 # references
 
 
-def reference_integrator(*, jointed: bool = False) -> str:
+def reference_integrator(*, jointed: bool = False, trees: bool = False) -> str:
     """The most accurate registered fixed-step method: the highest order, ties broken by
     REFERENCE_PREFERENCE (symplectic split4 before rk4); demonstration methods never; for a scene with
-    joints, among those that hold joints."""
+    joints, among those that hold joints (reduced-rk4, fourth order, where the joints form trees)."""
     candidates = [
         i for i in INTEGRATORS.values() if not getattr(i, "demonstration", False) and (i.joints or not jointed)
     ]
+    if jointed and trees:
+        candidates += list(REDUCED_INTEGRATORS.values())
     rank = {name: k for k, name in enumerate(REFERENCE_PREFERENCE)}
     return max(candidates, key=lambda i: (i.order, -rank.get(i.name, len(rank)))).name
 
@@ -433,7 +449,8 @@ def study(
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
     spec = _study_spec(scene)
     jointed = any(joint.kind != "fixed" for joint in spec.joints)  # welds are merged bodies, no constraints
-    names = tuple(integrators) if integrators else applicable_integrators(jointed=jointed)
+    trees = jointed and _forms_trees(spec)
+    names = tuple(integrators) if integrators else applicable_integrators(jointed=jointed, trees=trees)
     infos = [get_integrator(name) for name in names]  # KeyError names the known ones
     adaptive = [i for i in infos if is_adaptive(i)]  # also by tolerance (their fixed-step rows fit the order)
     dts = tuple(sorted({float(d) for d in (dts or default_dts(spec.simulation.dt))}, reverse=True))
@@ -464,7 +481,7 @@ def study(
         return compile_scene(spec, dt=dt / scale, duration=grid.duration, integrator=name, record_every=every)
 
     # joints: the pendulum's exact motion, else the finest run of a method that holds joints
-    ref_name = None if exact or pendulum is not None else reference_integrator(jointed=jointed)
+    ref_name = None if exact or pendulum is not None else reference_integrator(jointed=jointed, trees=trees)
     dt_ref = min(dts) / REFERENCE_REFINEMENT
     tolerances = tuple(tolerances or DEFAULT_TOLERANCES)
     total = float(len(dts) * (len(infos) + len(mujoco_methods)) + len(adaptive) * len(tolerances) + 1)

@@ -34,11 +34,22 @@ def test_the_exact_pendulum_is_the_pendulum_scenes_motion():
     assert np.abs(np.array(x) - reference.x[:, 0]).max() < 1e-5  # measured 4.3e-6 m (3.5e-7 at 10 degrees)
 
 
-def test_a_study_of_a_pendulum_uses_its_exact_motion_and_fits_order_two():
+def test_a_study_of_a_pendulum_uses_its_exact_motion_and_fits_each_family_s_orders():
+    """The two families side by side: split2 with RATTLE (maximal coordinates) and the integrators in
+    joint coordinates (the pendulum is a tree), each at its order against the exact motion."""
     result = study(load_scene_text(pendulum_text(math.radians(170), 1e-3)), dts=[4e-3, 2e-3, 1e-3], duration=2.0,
                    min_time=0)  # fmt: skip
     assert result.reference.kind == "exact" and "pendulum" in result.reference.description
-    assert {run.integrator for run in result.runs} == {"split2"}  # the one that holds joints
+    # the ones that hold joints: RATTLE, and the two in joint coordinates
+    assert {run.integrator for run in result.runs} == {"split2", "reduced-euler", "reduced-rk4"}
     assert result.primary_error == "rotation"
-    order = result.fits["split2"].rotation.order
-    assert order is not None and 1.8 < order < 2.3, order  # measured 2.01
+    for name, order in (("split2", 2), ("reduced-euler", 1), ("reduced-rk4", 4)):
+        fitted = result.fits[name].rotation.order
+        assert fitted is not None and abs(fitted - order) < 0.3, (name, fitted)  # measured 2.01, ...
+
+
+def test_a_study_of_a_chain_with_a_loop_keeps_to_maximal_coordinates():
+    text = pendulum_text(math.radians(30), 1e-3)
+    text += "  - {name: again, type: ball, bodies: [rod, world], anchor: [0, 0, 1]}\n"  # a second joint: a loop
+    result = study(load_scene_text(text), dts=[2e-3, 1e-3], duration=0.2, min_time=0)
+    assert {run.integrator for run in result.runs} == {"split2"}
