@@ -387,6 +387,11 @@ def run_settings(
     refusal = check_integrator(name, joints=jointed)
     if refusal is not None and refusal.key == "integrator":
         raise refuse("integrator", name, f"{refusal.reason}; {refusal.expected}")
+    from rbcli.physics.integrators import REDUCED_INTEGRATORS
+
+    if sim.coordinates == "reduced" and name not in REDUCED_INTEGRATORS:
+        raise refuse("integrator", name, "the scene runs in joint coordinates (simulation.coordinates: reduced); "
+                     f"the integrators there: {', '.join(REDUCED_INTEGRATORS)}")  # fmt: skip
     if tolerance is not None or sim.tolerance is not None:
         number("tolerance", tolerance if tolerance is not None else sim.tolerance)
     settings = RunSettings(

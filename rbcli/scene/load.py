@@ -61,6 +61,10 @@ CONTACT_DEFAULT_INTEGRATOR = "split2"
 # the integrator of a scene with joints that names none: split2 is the one that holds them (docs/joints.md)
 JOINTS_DEFAULT_INTEGRATOR = "split2"
 
+# the integrator of a scene in joint coordinates (`coordinates: reduced`) that names none: fourth order,
+# cheaper than split2 with RATTLE at every accuracy the pendulum's study measures (docs/trees.md)
+REDUCED_DEFAULT_INTEGRATOR = "reduced-rk4"
+
 # a run longer than this many steps is more likely a unit slip (dt in ms?) than intended
 MANY_STEPS = 1_000_000_000
 
@@ -183,7 +187,7 @@ def _analyse(
 
         contact = contact_from_mapping(data["contact"], issues, clean)
         check_contact_bodies(bodies, entries, issues)
-        if simulation is not None and "integrator" not in data["simulation"]:
+        if simulation is not None and "integrator" not in data["simulation"] and simulation.coordinates != "reduced":
             # the tutorial's default (euler-matrix) gains energy in every bounce; split2 is symplectic,
             # second order and evaluates the contact forces once per step
             simulation = replace(simulation, integrator=CONTACT_DEFAULT_INTEGRATOR)
@@ -194,7 +198,7 @@ def _analyse(
         names = [b.name for b in bodies]
         joints += joints_from_list(data["joints"], names, issues, clean, taken=chain_joint_names)
     if joints and simulation is not None:
-        if "integrator" not in data["simulation"]:  # the one method that holds joints (docs/joints.md)
+        if "integrator" not in data["simulation"] and simulation.coordinates != "reduced":  # the one that holds them
             simulation = replace(simulation, integrator=JOINTS_DEFAULT_INTEGRATOR)
         if any(joint.kind != "fixed" for joint in joints):  # welds are merged bodies (scene/welds.py)
             _check_joint_integrator(data["simulation"], simulation, issues)
@@ -424,13 +428,22 @@ def _simulation(sim: dict[str, Any], issues: IssueCollector) -> SimulationSpec |
     path: YamlPath = ("simulation",)
     before = issues.error_count
     dt = float(sim["dt"])
-    integrator = str(sim.get("integrator", "euler-matrix"))
-    from rbcli.physics.integrators import check_integrator
+    coordinates = str(sim.get("coordinates", "maximal"))
+    default = REDUCED_DEFAULT_INTEGRATOR if coordinates == "reduced" else "euler-matrix"
+    integrator = str(sim.get("integrator", default))
+    from rbcli.physics.integrators import REDUCED_INTEGRATORS, check_integrator
 
     refusal = check_integrator(integrator, tolerance="tolerance" in sim)
     if refusal is not None:
         shown = refusal.naming(integrator) if refusal.key == "integrator" else refusal.reason
         issues.error((*path, refusal.key), shown, refusal.expected, key=refusal.key == "tolerance")
+    elif coordinates == "reduced" and integrator not in REDUCED_INTEGRATORS:
+        issues.error((*path, "integrator"), f"integrator {integrator!r} runs in maximal coordinates, and "
+                     "simulation.coordinates is reduced", f"integrator: {', '.join(REDUCED_INTEGRATORS)} "
+                     "(docs/trees.md), or coordinates: maximal")  # fmt: skip
+    elif "coordinates" in sim and coordinates == "maximal" and integrator in REDUCED_INTEGRATORS:
+        issues.error((*path, "integrator"), f"integrator {integrator!r} runs in joint coordinates, and "
+                     "simulation.coordinates is maximal", "coordinates: reduced, or a maximal integrator")  # fmt: skip
     if "steps" in sim:
         duration = int(sim["steps"]) * dt
     else:
@@ -457,6 +470,7 @@ def _simulation(sim: dict[str, Any], issues: IssueCollector) -> SimulationSpec |
         dt=dt,
         duration=duration,
         integrator=integrator,
+        coordinates=coordinates,
         tolerance=float(sim["tolerance"]) if "tolerance" in sim else None,
         record=record,
         output=sim.get("output"),

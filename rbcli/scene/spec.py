@@ -72,6 +72,9 @@ class SimulationSpec:
     duration: float
     integrator: str = "euler-matrix"
     tolerance: float | None = None  # adaptive error control instead of a fixed dt (integrators issue)
+    # "maximal" (x, q, P, L of every body) or "reduced" (articulated trees in joint coordinates: only the
+    # reduced integrators run it; docs/trees.md)
+    coordinates: str = "maximal"
     record: RecordSpec = field(default_factory=RecordSpec)
     output: str | None = None  # output path; format from the extension (.mcap or .rrd)
     seed: int = 0

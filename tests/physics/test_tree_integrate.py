@@ -187,3 +187,22 @@ def test_joint_coordinates_are_read_and_written_by_joint_name():
         chain.set_joint_state("elbow", rate=[1.0])
     with pytest.raises(ValueError, match="maximal coordinates"):
         Simulation(load_scene_text(pendulum_text(theta0, 1e-3))).joint_state()
+
+
+def test_a_scene_says_it_runs_in_joint_coordinates():
+    """`simulation: {coordinates: reduced}` without an integrator runs reduced-rk4; with a maximal integrator
+    it is a located error, and so is an override to one; the default, maximal, stays split2 for joints."""
+    theta0 = math.radians(10.0)
+    text = pendulum_text(theta0, 1e-3)  # names split2
+    reduced = text.replace("integrator: split2}", "coordinates: reduced}")
+    sim = Simulation(load_scene_text(reduced))
+    assert sim.settings.integrator == "reduced-rk4" and sim.model.tree is not None
+    sim.step(5)
+    assert set(sim.joint_state()) == {"pivot"}
+    with pytest.raises(SceneError) as raised:
+        load_scene_text(text.replace("integrator: split2}", "integrator: split2, coordinates: reduced}"))
+    message = str(raised.value)
+    assert message.startswith("<string>:3:") and "integrator 'split2' runs in maximal coordinates" in message
+    with pytest.raises(ValueError, match="integrator='split2': the scene runs in joint coordinates"):
+        Simulation(load_scene_text(reduced), integrator="split2")
+    assert Simulation(load_scene_text(text.replace("integrator: split2}", "}"))).settings.integrator == "split2"
