@@ -9,8 +9,9 @@ vertex, "the ground") splits into components:
 - a body no joint holds is a one-link tree on a free joint.
 A component with more joints than a tree has (a loop, or two joints to the ground) is refused at the
 joint that closes the loop: loops stay with the maximal integrators (split2 and RATTLE). So are what the
-trees do not model yet: distance joints, limits, cones, dampers and motors, kinematic bodies in a tree,
-impulses on links. Links are numbered breadth first from each root, so parents come first.
+trees do not model yet: distance joints, limits, cones, motors, kinematic bodies in a tree, impulses on
+links. A joint's damper becomes a damper on each of its rates (integrate.py). Links are numbered breadth
+first from each root, so parents come first.
 
 Joint frames. A joint joins body_a and body_b of the JointTable at anchor_a, anchor_b (principal frames
 about the centres of mass; a world point for the world). The child is the end farther from the root:
@@ -33,7 +34,7 @@ from rbcli.physics.joints.tables import JOINT_BALL, JOINT_DISTANCE, JOINT_FIXED,
 from rbcli.physics.model import Model
 from rbcli.physics.rotation import quat_conjugate, quat_multiply, quat_to_matrix
 from rbcli.physics.state import State
-from rbcli.physics.tree.table import TREE_FREE, TreeTable, tree_table
+from rbcli.physics.tree.table import TREE_DOFS, TREE_FREE, TreeTable, tree_table
 from rbcli.scene.joint_spec import JointSpec
 from rbcli.scene.spec import BodySpec, SceneError, SceneIssue, SourceLocation
 
@@ -76,8 +77,8 @@ def compile_trees(
             refuse(j, "bodies", "a kinematic body in a tree is not modelled yet")
         elif np.isfinite(table.limit_lower[j]) or np.isfinite(table.limit_upper[j]) or np.any(table.cone[j, 8:10]):
             refuse(j, "limits", "joint limits are not modelled yet")
-        elif table.damping[j] != 0.0 or table.motor_cap[j] != 0.0:
-            refuse(j, "damping" if table.damping[j] != 0.0 else "motor", "dampers and motors are not modelled yet")
+        elif table.motor_cap[j] != 0.0:
+            refuse(j, "motor", "motors are not modelled yet")
         else:
             usable.append(j)
     n_bodies = model.body_count
@@ -183,5 +184,10 @@ def compile_trees(
         assert link_kind[i] in (JOINT_HINGE, JOINT_SLIDER, JOINT_BALL, JOINT_FIXED)
     body = np.array([v for v, _, _ in order], dtype=np.int64)
     joint = np.array([j for _, _, j in order], dtype=np.int64)
+    # a joint's damper on each of its rates (a ball's on its relative spin: the same c on all three)
+    damping = np.concatenate([
+        np.full(TREE_DOFS[int(k)], float(table.damping[j]) if j >= 0 and table is not None else 0.0)
+        for k, j in zip(link_kind.tolist(), joint.tolist(), strict=True)
+    ]) if n else np.zeros(0)  # fmt: skip
     return tree_table(parent, link_kind, anchor_parent, anchor_child, axis, rest_q, model.body_mass[body],
-                      model.body_inertia[body], body=body, joint=joint)  # fmt: skip
+                      model.body_inertia[body], body=body, joint=joint, damping=damping)  # fmt: skip

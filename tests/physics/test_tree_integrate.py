@@ -246,3 +246,42 @@ def test_a_ragdoll_with_contact_moves_alike_in_both_families():
     own = max(np.max(np.abs(maximal[22][-1] - maximal[44][-1])), np.max(np.abs(reduced[22][-1] - reduced[44][-1])))
     assert gap[22][-1] <= 1.5 * own, (gap[22][-1], own)
     assert gap[44][-1] < gap[22][-1], (gap[44][-1], gap[22][-1])
+
+
+def _flywheel_text(joint: str, damping: float, dt: float, integrator: str) -> str:
+    """A cube of eight 0.5 kg particles at (+-0.1, +-0.1, +-0.1) m (radius 0.01 m: isotropic inertia I) on
+    a damped hinge about z, or a damped ball joint, at its centre, spinning at 5 rad/s about z; no gravity."""
+    corners = ", ".join(f"[{x}, {y}, {z}]" for x in (-0.1, 0.1) for y in (-0.1, 0.1) for z in (-0.1, 0.1))
+    axis = ", axis: [0, 0, 1]" if joint == "hinge" else ""
+    return f"""
+name: flywheel
+simulation: {{dt: {dt!r}, duration: 1.0, integrator: {integrator}}}
+bodies:
+  - name: wheel
+    particles: {{positions: [{corners}], masses: 0.5, radius: 0.01}}
+    position: [0, 0, 0]
+    angular_velocity: [0, 0, 5.0]
+joints:
+  - {{name: axle, type: {joint}, bodies: [wheel, world], anchor: [0, 0, 0]{axis}, damping: {damping!r}}}
+"""
+
+
+FLYWHEEL_INERTIA = 8 * 0.5 * (2 * 0.1**2) + 8 * 0.4 * 0.5 * 0.01**2  # [kg m^2] about any axis (a cube)
+
+
+@pytest.mark.parametrize("joint", ["hinge", "ball"])
+def test_a_joint_damper_is_implicit_in_reduced_euler_and_fourth_order_in_reduced_rk4(joint):
+    """omega(t) = 5 exp(-c t / I). reduced-euler's damper is backward Euler, so after n steps omega is
+    exactly 5 (1 + c h / I)^-n, at any c h (here up to 50 I: a stiff damper stays stable and monotone);
+    reduced-rk4's error falls at order 4."""
+    for c in (0.05, 50.0 * FLYWHEEL_INERTIA / 1e-2):
+        sim = Simulation(load_scene_text(_flywheel_text(joint, c, 1e-2, "reduced-euler")))
+        sim.step(10)
+        expected = 5.0 * (1.0 + c * 1e-2 / FLYWHEEL_INERTIA) ** -10
+        np.testing.assert_allclose(sim.state.omega[0], [0.0, 0.0, expected], rtol=1e-12, atol=1e-14 * 5.0)
+    errors = []
+    for dt in (0.1, 0.05, 0.025):
+        sim = Simulation(load_scene_text(_flywheel_text(joint, 0.05, dt, "reduced-rk4")))
+        sim.step(round(1.0 / dt))
+        errors.append(abs(sim.state.omega[0, 2] - 5.0 * math.exp(-0.05 / FLYWHEEL_INERTIA)))
+    assert abs(fitted_slope([0.1, 0.05, 0.025], errors) - 4.0) < 0.25, errors

@@ -342,7 +342,7 @@ def tree_accelerations(tree, work, force, torque, joint_force, qdd) -> None:  # 
             s = motion[d0]
             s0, s1, s2, s3, s4, s5 = s[0], s[1], s[2], s[3], s[4], s[5]
             U0, U1, U2, U3, U4, U5 = _sym6_times(IA, i, s0, s1, s2, s3, s4, s5)
-            inv = 1.0 / (s0 * U0 + s1 * U1 + s2 * U2 + s3 * U3 + s4 * U4 + s5 * U5)
+            inv = 1.0 / (s0 * U0 + s1 * U1 + s2 * U2 + s3 * U3 + s4 * U4 + s5 * U5 + work.armature[d0])
             f = pA[i]
             uu = joint_force[d0] - _dot6(f, s0, s1, s2, s3, s4, s5)
             U[d0, 0], U[d0, 1], U[d0, 2], U[d0, 3], U[d0, 4], U[d0, 5] = U0, U1, U2, U3, U4, U5
@@ -402,6 +402,8 @@ def tree_accelerations(tree, work, force, torque, joint_force, qdd) -> None:  # 
             z01, z11, z21 = _cross(cx, cy, cz, w01, w11, w21)
             z02, z12, z22 = _cross(cx, cy, cz, w02, w12, w22)
             d00, d01, d02, d11, d12, d22 = t00 - z00, t01 - z01, t02 - z02, t11 - z11, t12 - z12, t22 - z22
+            # a ball's armature is isotropic (one damper on its relative spin), so the basis does not matter
+            d00, d11, d22 = d00 + work.armature[d0], d11 + work.armature[d0 + 1], d22 + work.armature[d0 + 2]
             k00, k01, k02 = d11 * d22 - d12 * d12, d02 * d12 - d01 * d22, d01 * d12 - d02 * d11
             k11, k12, k22 = d00 * d22 - d02 * d02, d01 * d02 - d00 * d12, d00 * d11 - d01 * d01
             det = 1.0 / (d00 * k00 + d01 * k01 + d02 * k02)
@@ -449,6 +451,7 @@ def tree_accelerations(tree, work, force, torque, joint_force, qdd) -> None:  # 
                 for l in range(k):
                     s = U[d0 + l]
                     dinv[e0 + j * k + l] = _dot6(motion[d0 + j], s[0], s[1], s[2], s[3], s[4], s[5])
+                dinv[e0 + j * k + j] += work.armature[d0 + j]
             for j in range(k):
                 pivot = dinv[e0 + j * k + j]
                 dinv[e0 + j * k + j] = 1.0

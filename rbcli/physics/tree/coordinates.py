@@ -64,6 +64,7 @@ def set_from_bodies(tree: TreeTable, data: TreeData, x: np.ndarray, q: np.ndarra
     forward_kinematics(tree, data.coord, zeros, data.work, x_, q_, P_, L_)  # the configuration, at rest
     generalized_momentum(tree, data.work, P, L, momentum)
     no_force = np.zeros_like(x)
+    data.work.armature[:] = 0.0  # M itself
     tree_accelerations(tree, data.work, no_force, no_force, momentum, data.rate)  # M^-1 J^T h
     forward_kinematics(tree, data.coord, data.rate, data.work, x, q, P, L)
     data.fk_state[0] = 1.0

@@ -11,6 +11,11 @@ contact, recording and every output read the state arrays as in maximal coordina
                     R^4 and normalised at each stage and at the end (a projection onto |u| = 1, which
                     keeps the order: the exact flow stays on the sphere)
 
+The joints' dampers (-c rate on each rate) are implicit in reduced-euler, as MuJoCo's joint damping:
+(M + h C) qdd = f - C rate, so rate_new = rate + h qdd solves M (rate_new - rate) / h = f - C rate_new
+(backward Euler in the damper: stable at any c h), by adding h c to D = S^T I^A S in ABA (the armature
+term, work.armature); explicit in reduced-rk4 (stable while c h is below ~2.8 of the joint's inertia).
+
 First order / fourth order (tests/physics/test_tree_integrate.py measures both on the compound pendulum's
 exact period). Neither is symplectic: in joint coordinates the Hamiltonian H = p^T M(q)^-1 p / 2 + V(q) is
 not separable, so no explicit splitting keeps it (Leimkuhler-Reich ch. 4); semi-implicit Euler is
@@ -128,12 +133,24 @@ def normalise_quaternions(tree, coord) -> None:  # noqa: ANN001
             coord[q0 + k] *= norm
 
 
+@numba.njit(**STEP_KERNEL)
+def damper_forces(tree, tree_data, rate, implicit_h) -> None:  # noqa: ANN001
+    """The joints' dampers: joint_force = -c rate, and armature = implicit_h c (integrate.py's docstring: an
+    implicit damper when implicit_h is the step, explicit with 0)."""
+    damping = tree.damping
+    for k in range(rate.shape[0]):
+        c = damping[k]
+        tree_data.joint_force[k] = -c * rate[k]
+        tree_data.work.armature[k] = implicit_h * c
+
+
 @numba.njit(**STEP_ENTRY)
 def _accelerations(model, forces, contact, force_data, tree, tree_data, t, coord, rate, x, q, P, L, F, tau):  # noqa: ANN001, ANN202
     """qdd at (coord, rate) and time t into tree_data.qdd: forward kinematics (the state arrays), the force
     pass, ABA. One call site per integrator, so the force pass is inlined once."""
     forward_kinematics(tree, coord, rate, tree_data.work, x, q, P, L)
     accumulate_wrench(model, forces, contact, force_data, t, x, q, P, L, F, tau)
+    damper_forces(tree, tree_data, rate, 0.0)
     tree_accelerations(tree, tree_data.work, F, tau, tree_data.joint_force, tree_data.qdd)
 
 
@@ -146,6 +163,7 @@ def step_euler(model, forces, contact, force_data, tree, tree_data, t, h, x, q, 
     if tree_data.fk_state[0] != 1.0:
         forward_kinematics(tree, coord, rate, work, x, q, P, L)
     accumulate_wrench(model, forces, contact, force_data, t, x, q, P, L, F, tau)
+    damper_forces(tree, tree_data, rate, h)  # implicit: (M + h C) qdd = f - C rate
     tree_accelerations(tree, work, F, tau, tree_data.joint_force, qdd)
     for k in range(rate.shape[0]):
         rate[k] += h * qdd[k]
@@ -184,6 +202,7 @@ def step_rk4(model, forces, contact, force_data, tree, tree_data, t, h, x, q, P,
         # the first stage's forward kinematics is the state's own, kept from the last step
         if stage == 0 and tree_data.fk_state[0] == 1.0:
             accumulate_wrench(model, forces, contact, force_data, t, x, q, P, L, F, tau)
+            damper_forces(tree, tree_data, rate, 0.0)
             tree_accelerations(tree, tree_data.work, F, tau, tree_data.joint_force, qdd)
         else:
             _accelerations(model, forces, contact, force_data, tree, tree_data, t + a * h, coord, rate, x, q, P, L,

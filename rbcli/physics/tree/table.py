@@ -76,6 +76,8 @@ class TreeTable(NamedTuple):
     dof_start: np.ndarray  # int64 (n + 1,): link i's rates are rate[dof_start[i]:dof_start[i + 1]]
     dinv_start: np.ndarray  # int64 (n + 1,): link i's D^-1 (k x k, k its rates) in TreeWork.dinv
     motion: np.ndarray  # (D, 6): each rate's column of S, link frame (angular, linear): the reference's
+    # [N m s/rad or N s/m] (D,): a damper on each rate, joint force -damping rate (a ball's on each of its 3)
+    damping: np.ndarray
 
 
 class TreeWork(NamedTuple):
@@ -94,6 +96,9 @@ class TreeWork(NamedTuple):
     U: np.ndarray  # (D, 6): I^A S, one row per rate
     u: np.ndarray  # (D,): tau - S^T p^A
     dinv: np.ndarray  # (dinv_start[n],): (S^T I^A S)^-1 per link, k x k row-major
+    # (D,): added to each rate's diagonal of D = S^T I^A S, as a rotor's armature is (Featherstone 7.3): an
+    # implicit damper's h c (integrate.py), so ABA solves (M + diag(armature)) qdd = tau - bias
+    armature: np.ndarray
 
 
 class TreeData(NamedTuple):
@@ -134,8 +139,10 @@ def tree_table(
     inertia,
     body=None,
     joint=None,
+    damping=None,
 ) -> TreeTable:  # noqa: ANN001
-    """A TreeTable from per-link sequences (body defaults to the link's index, joint to -1: none). Checks
+    """A TreeTable from per-link sequences (body defaults to the link's index, joint to -1: none; damping,
+    per rate, to 0). Checks
     the order (parent before child), the free joint's place (roots only) and normalises axes and rest
     rotations."""
     parent, kind = frozen_ints(parent), frozen_ints(kind)
@@ -192,6 +199,7 @@ def tree_table(
         dof_start,
         dinv_start,
         frozen_floats(motion, 6),
+        frozen_floats(np.zeros(int(dofs.sum())) if damping is None else damping),
     )
 
 
@@ -213,7 +221,7 @@ def make_tree_work(tree: TreeTable) -> TreeWork:
     return TreeWork(
         np.zeros((n, 3, 3)), np.zeros((n, 3)), np.zeros((dofs, 6)), np.zeros((n, 6)), np.zeros((n, 6)),
         np.zeros((n, 6)), np.zeros((n, SYM6)), np.zeros((n, 6)), np.zeros((n, 6)), np.zeros((dofs, 6)),
-        np.zeros(dofs), np.zeros(int(tree.dinv_start[-1])),
+        np.zeros(dofs), np.zeros(int(tree.dinv_start[-1])), np.zeros(dofs),
     )  # fmt: skip
 
 
