@@ -70,6 +70,7 @@ joint_record: Any = _unbound
 # their step replaces the update, and the joint stages do not run (the joints hold by construction)
 HOLDS_TREE = False
 tree_step: Any = _unbound
+tree_record: Any = _unbound
 
 
 def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, filled):  # noqa: ANN001, ANN201
@@ -138,6 +139,9 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
         if HOLDS_JOINTS:
             # joint_record: on recording steps, each joint's reaction over the last (sub-)step into the next frame
             joint_record(joint, joint_work, h, frames, filled, (index + 1) % record_every == 0)
+        if HOLDS_TREE:
+            # tree_record: on recording steps, each joint's reaction over the last (sub-)step into the next frame
+            tree_record(tree, tree_data, frames, filled, (index + 1) % record_every == 0)
         # record: on recording steps, the divergence check and the state copied into the next frame
         filled, status = record_if_due(index + 1, record_every, x, q, P, L, frames, filled)
         if status != STATUS_OK:
@@ -170,6 +174,10 @@ def fixed_step_loop(
         "HOLDS_TREE": reduced,
         "tree_step": integrator.step if reduced else _unbound,
     }
+    if reduced:
+        from rbcli.physics.tree.integrate import tree_record
+
+        bound["tree_record"] = tree_record
     if joints:
         from rbcli.physics.joints import rattle, stages
 

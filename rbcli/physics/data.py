@@ -47,6 +47,8 @@ JOINT_REACTIONS = "joint.joint_impulse"
 # the joints' last two position multipliers and their count: the next step's first Newton iterate
 # (joints/rattle.py); a log from before they were carried resumes with none (to round-off, not bitwise)
 JOINT_GUESS = ("joint.guess", "joint.guess_count")
+# in joint coordinates, the joints' wrenches of the last step (tree/table.py TreeData.reaction), likewise
+TREE_REACTIONS = "tree.reaction"
 
 
 class KernelAdaptive(NamedTuple):
@@ -129,6 +131,7 @@ class Data:
                 arrays[f"adaptive.{name}"] = array
         if self.tree is not None:  # the trees' state: x, q, P, L are forward kinematics of it
             arrays["tree.coord"], arrays["tree.rate"] = self.tree.coord, self.tree.rate
+            arrays[TREE_REACTIONS] = self.tree.reaction  # read by no step: the last step's, for the first frame
         if self.joint is not None:  # read by no step: the last step's reactions, for the first frame
             arrays[JOINT_REACTIONS] = self.joint.joint_impulse  # a resumed run records (joint_forces)
             arrays[JOINT_GUESS[0]], arrays[JOINT_GUESS[1]] = self.joint.guess, self.joint.guess_count
@@ -141,6 +144,9 @@ class Data:
         if JOINT_REACTIONS in mine and JOINT_REACTIONS not in arrays:  # a log from before it was carried
             mine[JOINT_REACTIONS][...] = 0.0
             del mine[JOINT_REACTIONS]
+        if TREE_REACTIONS in mine and TREE_REACTIONS not in arrays:
+            mine[TREE_REACTIONS][...] = np.nan
+            del mine[TREE_REACTIONS]
         for name in JOINT_GUESS:
             if name in mine and name not in arrays:  # likewise: the first step after it starts cold
                 mine[name][...] = 0.0

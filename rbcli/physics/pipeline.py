@@ -31,6 +31,7 @@ A step from grid index n (t = n dt) to n + 1 runs, in this order:
                     chunk's end (the stages after it read the state only on recording steps)
     contact_record  on recording steps: the step's contact statistics into the next frame
     joint_record    (split2, scenes with joints) on recording steps: the joints' reactions into the next frame
+    tree_record     (the reduced integrators) the same, from the trees' joint wrenches (tree/integrate.py)
     record          on recording steps: the divergence check, then the state copied into the next frame
 
 Only some integrators' loops run a stage marked `only`: the integrators whose IntegratorInfo has that
@@ -103,6 +104,8 @@ STEP_STAGES: tuple[Stage, ...] = (
           "contact_record_stage", "contact_record_stage"),
     Stage("joint_record", "on recording steps, each joint's reaction over the last (sub-)step into the next frame",
           "joint_record", None, only="joints"),
+    Stage("tree_record", "on recording steps, each joint's reaction over the last (sub-)step into the next frame",
+          "tree_record", None, only="tree"),
     Stage("record", "on recording steps, the divergence check and the state copied into the next frame",
           "record_if_due", "record_if_due"),
 )  # fmt: skip

@@ -181,6 +181,8 @@ class Simulation:
                 compiled.initial_state, self.model, chunk.SCRATCH_WIDTH, substeps=self.settings.substeps,
                 contact_threads=self.contact_threads,
             )  # fmt: skip
+        if self.data.tree is not None and "joint_forces" in self.settings.streams:  # their backward pass: ~10 %
+            self.data.tree.reactions_on[0] = 1.0
         # welds (scene/welds.py): the scene's bodies on the simulated ones, and the simulated state before the
         # last step, (body_count, 13) x, q, P, L, from which the welds' reactions are read (runner/weld_reactions.py)
         self.parts = compiled.parts
@@ -396,7 +398,9 @@ class Simulation:
         first body and row 1 for its second (zeros for the world), each the force [N] and the torque
         about that body's centre of mass [N m], world frame, as the mean over the step (the step's
         impulse of the joint's rows, motor, damper and limit, divided by the step; with contact
-        sub-steps, the last sub-step's). Zeros before the first step; {} in a scene without joints.
+        sub-steps, the last sub-step's). Zeros before the first step; {} in a scene without joints. In joint
+        coordinates (a reduced integrator) the mean of the step's force evaluations' joint wrenches, computed
+        when the scene records the joint_forces stream (they cost ~10 % of a step), else NaN.
         A kick's reaction (an impulse on a jointed body, or initial velocities that break a joint: the
         step's joint_begin projection) is not in it: it is an impulse, not a force over the step."""
         if self.parts is not None:
@@ -434,9 +438,14 @@ class Simulation:
         joint coordinates (a reduced integrator: its joints' reactions are not computed yet, docs/trees.md)."""
         work = self.data.joint
         if work is None:
-            joints = self.model.joint
-            if self.data.tree is not None and joints is not None:
-                return np.full((joints.kind.shape[0], 12), np.nan)
+            joints, tree, data = self.model.joint, self.model.tree, self.data.tree
+            if tree is not None and data is not None and joints is not None:  # joint coordinates
+                out = np.full((joints.kind.shape[0], 12), np.nan)
+                if data.reactions_on[0] == 1.0:
+                    for i, (j, side) in enumerate(zip(tree.joint.tolist(), tree.joint_side.tolist(), strict=True)):
+                        if j >= 0:
+                            out[j] = data.reaction[i] if side > 0 else np.roll(data.reaction[i], 6)
+                return out
             return np.zeros((0, 12))
         return work.joint_impulse / (self.settings.dt / self.data.substeps)
 
@@ -599,7 +608,7 @@ class Simulation:
         fit this run: another scene, integrator or contact layout)."""
         if checkpoint.step < 0:
             raise ValueError(f"checkpoint step must be >= 0, got {checkpoint.step}")
-        from rbcli.physics.data import JOINT_REACTIONS
+        from rbcli.physics.data import JOINT_REACTIONS, TREE_REACTIONS
 
         arrays = dict(checkpoint.arrays)
         previous = arrays.pop(WELD_PREVIOUS, None) if self.parts is not None else None
@@ -610,6 +619,8 @@ class Simulation:
             self._previous = np.array(previous, dtype=np.float64)
         # the last step's reactions are known when the checkpoint carries them (welds: the state before it)
         carried = JOINT_REACTIONS in arrays if self.data.joint is not None else self._previous is not None
+        if self.data.tree is not None:
+            carried = TREE_REACTIONS in arrays
         self.reactions_known = checkpoint.step > 0 and carried
 
     def reset(self) -> None:

@@ -159,12 +159,6 @@ def compile_scene(
     from rbcli.physics.integrators import REDUCED_INTEGRATORS
 
     if settings.integrator in REDUCED_INTEGRATORS:  # the trees in joint coordinates (scene/compile_trees.py)
-        if "joint_forces" in settings.streams and base.model.joint is not None:
-            raise SceneError([SceneIssue(
-                spec.simulation.location, "the joint_forces stream: the joints' reactions are not computed in joint "
-                f"coordinates yet ({settings.integrator})", "streams without joint_forces, or a maximal integrator "
-                "(split2)",
-            )])  # fmt: skip
         model = replace(model, tree=_trees(spec if base.simulated is None else base.simulated, base))
     return CompiledScene(spec, model, base.forces, state, settings, base.contact, base.parts, base.simulated,
                          base.warnings)  # fmt: skip

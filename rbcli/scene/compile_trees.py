@@ -184,10 +184,12 @@ def compile_trees(
         assert link_kind[i] in (JOINT_HINGE, JOINT_SLIDER, JOINT_BALL, JOINT_FIXED)
     body = np.array([v for v, _, _ in order], dtype=np.int64)
     joint = np.array([j for _, _, j in order], dtype=np.int64)
+    side = np.array([0 if j < 0 or table is None else (1 if int(table.body_a[j]) == v else -1) for v, _, j in order],
+                    dtype=np.int64)  # fmt: skip
     # a joint's damper on each of its rates (a ball's on its relative spin: the same c on all three)
     damping = np.concatenate([
         np.full(TREE_DOFS[int(k)], float(table.damping[j]) if j >= 0 and table is not None else 0.0)
         for k, j in zip(link_kind.tolist(), joint.tolist(), strict=True)
     ]) if n else np.zeros(0)  # fmt: skip
     return tree_table(parent, link_kind, anchor_parent, anchor_child, axis, rest_q, model.body_mass[body],
-                      model.body_inertia[body], body=body, joint=joint, damping=damping)  # fmt: skip
+                      model.body_inertia[body], body=body, joint=joint, damping=damping, joint_side=side)  # fmt: skip

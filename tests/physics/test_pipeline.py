@@ -56,7 +56,7 @@ def _names(calls: list[ast.Call]) -> list[str]:
 def test_stage_list_is_impulses_contact_update_record():
     names = ["impulses", "joint_begin", "contact_begin", "kinematic_begin", "joint_update", "tree_update", "update",
              "kinematic_end", "joint_velocity", "contact_commit", "materialise", "contact_record",
-             "joint_record", "record"]  # fmt: skip
+             "joint_record", "tree_record", "record"]  # fmt: skip
     assert [stage.name for stage in STEP_STAGES] == names
     assert [stage.name for stage in STEP_STAGES if stage.substep] == names[2:10]
     # materialise belongs to exact's loop alone (it writes the states exact defers), the joint stages to
@@ -67,10 +67,10 @@ def test_stage_list_is_impulses_contact_update_record():
         **dict.fromkeys(joint_stages, "joints"),
         "materialise": "defers",
         "tree_update": "tree",
+        "tree_record": "tree",
     }
-    assert [stage.name for stage in STEP_STAGES if stage.adaptive is None] == [*joint_stages[:2], "tree_update",
-                                                                               joint_stages[2], "materialise",
-                                                                               "joint_record"]  # fmt: skip
+    fixed_only = [*joint_stages[:2], "tree_update", joint_stages[2], "materialise", "joint_record", "tree_record"]
+    assert [stage.name for stage in STEP_STAGES if stage.adaptive is None] == fixed_only
     assert all(stage.fixed for stage in STEP_STAGES)
     assert [name for name, info in INTEGRATORS.items() if info.joints] == ["split2"]
     assert [name for name, info in INTEGRATORS.items() if info.defers] == ["exact"]

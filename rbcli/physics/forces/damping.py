@@ -66,14 +66,11 @@ def _inverse_inertia_times(model, q, b, vx, vy, vz):  # noqa: ANN001, ANN202
     return rotate(q, b, lx * inv[b, 0], ly * inv[b, 1], lz * inv[b, 2])
 
 
-# the row flows are calls (a reference-count update per array they take, 200-400 ns per row application):
-# inline="always" saved that but, with the turns inlined too, quadrupled split2/split4 compile times
-@numba.njit(cache=True)
-def _damper_flow(model, spring, row, h, x, q, P, L) -> None:  # noqa: ANN001
-    """The exact flow over time h of damper `row` alone (module docstring), x and q held."""
-    c = spring.damping[row]
-    if c == 0.0:
-        return
+@numba.njit(cache=True, inline="always")
+def damper_line(spring, row, x, q):  # noqa: ANN001, ANN201 - numba scalars
+    """Damper `row`'s line: the unit direction e from end b's point to end a's, the points' world offsets
+    r_a, r_b from their centres of mass (r_b = 0 for a world anchor) and the length |d| (0: no direction,
+    e then undefined): (ex, ey, ez, rax, ray, raz, rbx, rby, rbz, length)."""
     a = spring.body_a[row]
     pa = spring.point_a[row]
     rax, ray, raz = rotate(q, a, pa[0], pa[1], pa[2])
@@ -92,8 +89,22 @@ def _damper_flow(model, spring, row, h, x, q, P, L) -> None:  # noqa: ANN001
         dz -= pb[2]
     length = math.sqrt(dx * dx + dy * dy + dz * dz)
     if length == 0.0:
+        return 0.0, 0.0, 0.0, rax, ray, raz, rbx, rby, rbz, 0.0
+    return dx / length, dy / length, dz / length, rax, ray, raz, rbx, rby, rbz, length
+
+
+# the row flows are calls (a reference-count update per array they take, 200-400 ns per row application):
+# inline="always" saved that but, with the turns inlined too, quadrupled split2/split4 compile times
+@numba.njit(cache=True)
+def _damper_flow(model, spring, row, h, x, q, P, L) -> None:  # noqa: ANN001
+    """The exact flow over time h of damper `row` alone (module docstring), x and q held."""
+    c = spring.damping[row]
+    if c == 0.0:
         return
-    ex, ey, ez = dx / length, dy / length, dz / length
+    a, b = spring.body_a[row], spring.body_b[row]
+    ex, ey, ez, rax, ray, raz, rbx, rby, rbz, length = damper_line(spring, row, x, q)
+    if length == 0.0:
+        return
     # end a: the moment arm n = r x e, the velocity along e and the inverse effective mass
     nax, nay, naz = ray * ez - raz * ey, raz * ex - rax * ez, rax * ey - ray * ex
     gx, gy, gz = _inverse_inertia_times(model, q, a, nax, nay, naz)

@@ -36,7 +36,7 @@ import math
 import numba
 
 from rbcli.physics import kernel_cache
-from rbcli.physics.forces.body_point import rotate
+from rbcli.physics.forces.damping import damper_line
 from rbcli.physics.joints.impulses import apply_body_impulses, gather_impulses
 from rbcli.physics.joints.solver import solve_rows
 from rbcli.physics.kernel_link import separately_compiled
@@ -125,20 +125,9 @@ def _damper_row(model, spring, table, work, row, s, x, q, P, L) -> None:  # noqa
     if c == 0.0:
         return
     a, b = spring.body_a[row], spring.body_b[row]
-    pa = spring.point_a[row]
-    rax, ray, raz = rotate(q, a, pa[0], pa[1], pa[2])
-    dx, dy, dz = x[a, 0] + rax, x[a, 1] + ray, x[a, 2] + raz
-    pb = spring.point_b[row]
-    rbx = rby = rbz = 0.0
-    if b >= 0:
-        rbx, rby, rbz = rotate(q, b, pb[0], pb[1], pb[2])
-        dx, dy, dz = dx - (x[b, 0] + rbx), dy - (x[b, 1] + rby), dz - (x[b, 2] + rbz)
-    else:
-        dx, dy, dz = dx - pb[0], dy - pb[1], dz - pb[2]
-    length = math.sqrt(dx * dx + dy * dy + dz * dz)
+    ex, ey, ez, rax, ray, raz, rbx, rby, rbz, length = damper_line(spring, row, x, q)
     if length == 0.0:  # the force is zero there (spring.py), so is the flow
         return
-    ex, ey, ez = dx / length, dy / length, dz / length
     nax, nay, naz = ray * ez - raz * ey, raz * ex - rax * ez, rax * ey - ray * ex
     nbx, nby, nbz = rby * ez - rbz * ey, rbz * ex - rbx * ez, rbx * ey - rby * ex
     _row_flow(table, work, s, c, a, b, ex, ey, ez, nax, nay, naz, -ex, -ey, -ez, -nbx, -nby, -nbz, P, L)

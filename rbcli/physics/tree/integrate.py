@@ -37,6 +37,7 @@ import numba
 from rbcli.physics import kernel_cache
 from rbcli.physics.forces.wrench import accumulate_wrench
 from rbcli.physics.joints.tables import JOINT_BALL, JOINT_HINGE, JOINT_SLIDER
+from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.step import STEP_ENTRY, STEP_KERNEL
 from rbcli.physics.tree.aba import forward_kinematics, tree_accelerations
 from rbcli.physics.tree.table import TREE_FREE
@@ -144,6 +145,79 @@ def damper_forces(tree, tree_data, rate, implicit_h) -> None:  # noqa: ANN001
         tree_data.work.armature[k] = implicit_h * c
 
 
+@numba.njit(**STEP_KERNEL)
+def joint_wrenches(tree, tree_data, F, tau, weight, first) -> None:  # noqa: ANN001
+    """tree_data.reaction = (first: ) or += weight * each link's joint wrench at the evaluation ABA just
+    made (work.acc, its velocities and inertias): the Newton-Euler equations of the link's subtree, summed
+    from the leaves, f_i = sum over the subtree of (I a + v x* I v - f_ext) about x_i, with world axes;
+    [0:6] (force, torque about its centre of mass) on the link, [6:12] the opposite on its parent (about
+    the parent's centre of mass; zero for a root: the world). Dampers and joint forces are in it, as the
+    maximal joints' reactions hold their dampers and motors."""
+    work, W = tree_data.work, tree_data.wrench
+    n = tree.parent.shape[0]
+    for i in range(n):
+        b, m = tree.body[i], tree.mass[i]
+        iw = work.inertia_world[i]
+        wx, wy, wz = work.velocity[i, 0], work.velocity[i, 1], work.velocity[i, 2]
+        vx, vy, vz = work.velocity[i, 3], work.velocity[i, 4], work.velocity[i, 5]
+        ax, ay, az = work.acc[i, 0], work.acc[i, 1], work.acc[i, 2]
+        lx = iw[0] * wx + iw[1] * wy + iw[2] * wz
+        ly = iw[1] * wx + iw[3] * wy + iw[4] * wz
+        lz = iw[2] * wx + iw[4] * wy + iw[5] * wz
+        # torque: I alpha + omega x I omega - tau; force: m (a + omega x v) - F (a: the spatial acceleration)
+        W[i, 3] = iw[0] * ax + iw[1] * ay + iw[2] * az + wy * lz - wz * ly - tau[b, 0]
+        W[i, 4] = iw[1] * ax + iw[3] * ay + iw[4] * az + wz * lx - wx * lz - tau[b, 1]
+        W[i, 5] = iw[2] * ax + iw[4] * ay + iw[5] * az + wx * ly - wy * lx - tau[b, 2]
+        W[i, 0] = m * (work.acc[i, 3] + wy * vz - wz * vy) - F[b, 0]
+        W[i, 1] = m * (work.acc[i, 4] + wz * vx - wx * vz) - F[b, 1]
+        W[i, 2] = m * (work.acc[i, 5] + wx * vy - wy * vx) - F[b, 2]
+    for i in range(n - 1, -1, -1):
+        p = tree.parent[i]
+        rx, ry, rz = work.xpos[i, 0], work.xpos[i, 1], work.xpos[i, 2]
+        if p >= 0:  # about the parent's centre of mass: torque + r x force, r = x_i - x_p
+            W[p, 0] += W[i, 0]
+            W[p, 1] += W[i, 1]
+            W[p, 2] += W[i, 2]
+            W[p, 3] += W[i, 3] + ry * W[i, 2] - rz * W[i, 1]
+            W[p, 4] += W[i, 4] + rz * W[i, 0] - rx * W[i, 2]
+            W[p, 5] += W[i, 5] + rx * W[i, 1] - ry * W[i, 0]
+        # on the link: W[i]; on its parent: the opposite force, its moment about the parent's centre of
+        # mass (r = x_i - x_p now, at this evaluation); a root's other end is the world: nothing
+        tx, ty, tz = -W[i, 3], -W[i, 4], -W[i, 5]
+        if p >= 0:
+            tx -= ry * W[i, 2] - rz * W[i, 1]
+            ty -= rz * W[i, 0] - rx * W[i, 2]
+            tz -= rx * W[i, 1] - ry * W[i, 0]
+        part = (W[i, 0], W[i, 1], W[i, 2], W[i, 3], W[i, 4], W[i, 5], -W[i, 0], -W[i, 1], -W[i, 2], tx, ty, tz)
+        root = 0.0 if p >= 0 else 1.0
+        for k in range(12):
+            value = weight * part[k] * (1.0 - root if k >= 6 else 1.0)
+            if first:
+                tree_data.reaction[i, k] = value
+            else:
+                tree_data.reaction[i, k] += value
+
+
+@separately_compiled
+@numba.njit(**STEP_KERNEL)
+def tree_record(tree, tree_data, frames, filled, due) -> None:  # noqa: ANN001
+    """On a recording step, each joint's reaction over the step just taken into the frame the record stage
+    is about to fill (frames.joint (K, J, 12): on body_a [0:6] and body_b [6:12], (force [N], torque [N m]
+    about each body's centre of mass), world: Simulation.joint_reactions' layout); NaN while reactions are
+    off. Only into buffers made for them."""
+    out = frames.joint
+    if not due or filled >= out.shape[0] or out.shape[1] == 0:
+        return
+    known = tree_data.reactions_on[0] == 1.0
+    for i in range(tree.parent.shape[0]):
+        j, side = tree.joint[i], tree.joint_side[i]
+        if j < 0 or j >= out.shape[1]:
+            continue
+        shift = 0 if side > 0 else 6  # the link's part [0:6] is body_a's when the link is body_a
+        for k in range(12):
+            out[filled, j, (k + shift) % 12] = tree_data.reaction[i, k] if known else math.nan
+
+
 @numba.njit(**STEP_ENTRY)
 def _accelerations(model, forces, contact, force_data, tree, tree_data, t, coord, rate, x, q, P, L, F, tau):  # noqa: ANN001, ANN202
     """qdd at (coord, rate) and time t into tree_data.qdd: forward kinematics (the state arrays), the force
@@ -165,6 +239,8 @@ def step_euler(model, forces, contact, force_data, tree, tree_data, t, h, x, q, 
     accumulate_wrench(model, forces, contact, force_data, t, x, q, P, L, F, tau)
     damper_forces(tree, tree_data, rate, h)  # implicit: (M + h C) qdd = f - C rate
     tree_accelerations(tree, work, F, tau, tree_data.joint_force, qdd)
+    if tree_data.reactions_on[0] == 1.0:  # the step's accelerations are constant over it: its mean
+        joint_wrenches(tree, tree_data, F, tau, 1.0, True)
     for k in range(rate.shape[0]):
         rate[k] += h * qdd[k]
     advance_coords(tree, coord, rate, h)
@@ -207,6 +283,8 @@ def step_rk4(model, forces, contact, force_data, tree, tree_data, t, h, x, q, P,
         else:
             _accelerations(model, forces, contact, force_data, tree, tree_data, t + a * h, coord, rate, x, q, P, L,
                            F, tau)  # fmt: skip
+        if tree_data.reactions_on[0] == 1.0:  # the mean over the step, with the stages' weights
+            joint_wrenches(tree, tree_data, F, tau, weight / 6.0, stage == 0)
         coord_rate(tree, coord, rate, dcoord)
         for k in range(nc):
             coord_sum[k] += weight * dcoord[k]

@@ -78,6 +78,9 @@ class TreeTable(NamedTuple):
     motion: np.ndarray  # (D, 6): each rate's column of S, link frame (angular, linear): the reference's
     # [N m s/rad or N s/m] (D,): a damper on each rate, joint force -damping rate (a ball's on each of its 3)
     damping: np.ndarray
+    # int64 (n,): +1 where the link is its joint's body_a (the JointTable's first body), -1 where it is
+    # body_b, 0 without a joint (a free root): how its reaction maps onto the joint's (J, 12) row
+    joint_side: np.ndarray
 
 
 class TreeWork(NamedTuple):
@@ -117,14 +120,21 @@ class TreeData(NamedTuple):
     dcoord: np.ndarray  # (C,): a stage's d coord / dt
     # (1,): 1 when the state arrays and `work` hold forward kinematics of (coord, rate) (integrate.py)
     fk_state: np.ndarray
+    # [N, N m] (n, 12): each link's joint's force and torque over the last step (world, torques about the
+    # centres of mass), [0:6] on the link, [6:12] on its parent (0 for a root), the mean over the step's
+    # force evaluations (integrate.py joint_wrenches), computed while reactions_on[0] is 1 (the
+    # joint_forces stream: ~10 % of a step); wrench (n, 6): their scratch
+    reaction: np.ndarray
+    reactions_on: np.ndarray
+    wrench: np.ndarray
 
 
 def make_tree_data(tree: TreeTable) -> TreeData:
     """Zeroed tree data for `tree` (coordinates at zero_coords; the runner sets them from the state)."""
-    C, D = tree_coord_count(tree), tree_dof_count(tree)
+    C, D, n = tree_coord_count(tree), tree_dof_count(tree), tree_link_count(tree)
     return TreeData(
         make_tree_work(tree), zero_coords(tree), np.zeros(D), np.zeros(D), np.zeros(D), np.zeros(C), np.zeros(D),
-        np.zeros(C), np.zeros(D), np.zeros(C), np.zeros(1),
+        np.zeros(C), np.zeros(D), np.zeros(C), np.zeros(1), np.full((n, 12), np.nan), np.zeros(1), np.zeros((n, 6)),
     )  # fmt: skip
 
 
@@ -140,6 +150,7 @@ def tree_table(
     body=None,
     joint=None,
     damping=None,
+    joint_side=None,
 ) -> TreeTable:  # noqa: ANN001
     """A TreeTable from per-link sequences (body defaults to the link's index, joint to -1: none; damping,
     per rate, to 0). Checks
@@ -200,6 +211,7 @@ def tree_table(
         dinv_start,
         frozen_floats(motion, 6),
         frozen_floats(np.zeros(int(dofs.sum())) if damping is None else damping),
+        frozen_ints(np.zeros(n) if joint_side is None else joint_side),
     )
 
 
