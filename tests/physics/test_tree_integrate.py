@@ -333,3 +333,26 @@ def test_the_reported_reactions_balance_each_body_s_momentum_change():
     scale = 1e-3 * max(np.abs(box).max(), np.abs(cloud).max())
     assert np.abs(change[0] - 1e-3 * box).max() < 1e-9 * scale
     assert np.abs(change[1] - 1e-3 * cloud).max() < 1e-9 * scale
+
+
+def test_set_state_in_joint_coordinates_keeps_what_the_joints_allow():
+    """A spin and a velocity the hinge does not allow, set on the pendulum's rod, become the motion the
+    hinge allows that is closest in kinetic energy: a turn about the hinge's axis (y) through the pivot,
+    its rate (I_pivot omega = the angular momentum about the pivot's axis), and the state stays on it."""
+    sim = Simulation(load_scene_text(pendulum_text(math.radians(30.0), 1e-3, integrator="reduced-rk4")))
+    pivot = np.array([0.0, 0.0, 1.0])
+    x = sim.state.x[0]
+    M, d, inertia = rod_pivot_inertia()
+    omega, v = np.array([1.0, 2.0, 3.0]), np.array([0.5, -0.2, 0.1])
+    sim.set_state(omega=omega[None], v=v[None])
+    # the angular momentum about the pivot's y axis: (L + (x - pivot) x P) . y, with L = I omega
+    state = sim.state
+    I_com = sim.model.body_inertia[0]  # principal; the rod's frame: L = R diag(I) R^T omega
+    from rbcli.physics.rotation import quat_rotate, quat_rotate_inverse
+
+    q = sim.data.state.q
+    L = quat_rotate(q, I_com * quat_rotate_inverse(q, omega[None]))[0]
+    about_y = (L + np.cross(x - pivot, M * v))[1]
+    np.testing.assert_allclose(state.omega[0], [0.0, about_y / inertia, 0.0], atol=1e-12)
+    np.testing.assert_allclose(state.v[0], np.cross(state.omega[0], x - pivot), atol=1e-12)
+    assert abs(sim.joint_state()["pivot"].rate[0] - about_y / inertia) < 1e-12
