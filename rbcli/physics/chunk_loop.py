@@ -136,12 +136,15 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
             integrator_materialise(model, forces, contact, t, dt, x, q, P, L, scratch, due)
         # contact_record: on recording steps, the state's contact count, deepest overlap and energy
         contact_record_stage(contact, contact_work, x, q, frames, filled, (index + 1) % record_every == 0)
+        due = (index + 1) % record_every == 0
         if HOLDS_JOINTS:
-            # joint_record: on recording steps, each joint's reaction over the last (sub-)step into the next frame
-            joint_record(joint, joint_work, h, frames, filled, (index + 1) % record_every == 0)
+            if due:  # a call passes the joint tables by value (~100 arrays): on recording steps only
+                # joint_record: on recording steps, each joint's reaction over the last (sub-)step into the next frame
+                joint_record(joint, joint_work, h, frames, filled, due)
         if HOLDS_TREE:
-            # tree_record: on recording steps, each joint's reaction over the last (sub-)step into the next frame
-            tree_record(tree, tree_data, frames, filled, (index + 1) % record_every == 0)
+            if due:  # likewise the trees' (~45 arrays)
+                # tree_record: on recording steps, each joint's reaction over the last (sub-)step into the next frame
+                tree_record(tree, tree_data, frames, filled, due)
         # record: on recording steps, the divergence check and the state copied into the next frame
         filled, status = record_if_due(index + 1, record_every, x, q, P, L, frames, filled)
         if status != STATUS_OK:
