@@ -248,10 +248,6 @@ def step_euler(model, forces, contact, force_data, tree, tree_data, t, h, x, q, 
     tree_data.fk_state[0] = 1.0
 
 
-# per stage: where the forces are evaluated (fraction of h), and the weight of its derivative in the sum
-_RK4_TIME = (0.0, 0.5, 0.5, 1.0)
-
-
 @numba.njit(**STEP_ENTRY)
 def step_rk4(model, forces, contact, force_data, tree, tree_data, t, h, x, q, P, L, F, tau) -> None:  # noqa: ANN001
     """One classical RK4 step of every tree (module docstring), in place. Stage s evaluates qdd and the
