@@ -9,8 +9,9 @@ vertex, "the ground") splits into components:
 - a body no joint holds is a one-link tree on a free joint.
 A component with more joints than a tree has (a loop, or two joints to the ground) is refused at the
 joint that closes the loop: loops stay with the maximal integrators (split2 and RATTLE). So are what the
-trees do not model yet: distance joints, limits, cones, motors, kinematic bodies in a tree, impulses on
-links. A joint's damper becomes a damper on each of its rates (integrate.py). Links are numbered breadth
+trees do not model yet: distance joints, kinematic bodies in a tree, impulses on links. A joint's damper
+becomes a damper on each of its rates (integrate.py); its limits, cone and motor become rows on its
+coordinate (physics/tree/limits.py, `_limit_rows`). Links are numbered breadth
 first from each root, so parents come first.
 
 Joint frames. A joint joins body_a and body_b of the JointTable at anchor_a, anchor_b (principal frames
@@ -30,11 +31,29 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from rbcli.physics.joints.tables import JOINT_BALL, JOINT_DISTANCE, JOINT_FIXED, JOINT_HINGE, JOINT_SLIDER, WORLD
+from rbcli.physics.joints.tables import (
+    JOINT_BALL,
+    JOINT_DISTANCE,
+    JOINT_FIXED,
+    JOINT_HINGE,
+    JOINT_SLIDER,
+    WORLD,
+    JointTable,
+)
 from rbcli.physics.model import Model
 from rbcli.physics.rotation import quat_conjugate, quat_multiply, quat_to_matrix
 from rbcli.physics.state import State
-from rbcli.physics.tree.table import TREE_DOFS, TREE_FREE, TreeTable, tree_table
+from rbcli.physics.tree.table import (
+    LIMIT_COORD,
+    LIMIT_SWING,
+    LIMIT_TWIST,
+    MAX_LIMIT_ROWS,
+    MOTOR,
+    TREE_DOFS,
+    TREE_FREE,
+    TreeTable,
+    tree_table,
+)
 from rbcli.scene.joint_spec import JointSpec
 from rbcli.scene.spec import BodySpec, SceneError, SceneIssue, SourceLocation
 
@@ -75,10 +94,6 @@ def compile_trees(
             refuse(j, "type", "a distance joint is a constraint between two links, not a tree's joint")
         elif kinematic[a] or (b != WORLD and kinematic[b]):
             refuse(j, "bodies", "a kinematic body in a tree is not modelled yet")
-        elif np.isfinite(table.limit_lower[j]) or np.isfinite(table.limit_upper[j]) or np.any(table.cone[j, 8:10]):
-            refuse(j, "limits", "joint limits are not modelled yet")
-        elif table.motor_cap[j] != 0.0:
-            refuse(j, "motor", "motors are not modelled yet")
         else:
             usable.append(j)
     n_bodies = model.body_count
@@ -191,5 +206,66 @@ def compile_trees(
         np.full(TREE_DOFS[int(k)], float(table.damping[j]) if j >= 0 and table is not None else 0.0)
         for k, j in zip(link_kind.tolist(), joint.tolist(), strict=True)
     ]) if n else np.zeros(0)  # fmt: skip
+    limit_index, limit_data = _limit_rows(table, state, static, order, side, rest_q)
+    if len(limit_index) > MAX_LIMIT_ROWS:
+        assert table is not None
+        refuse(int(order[limit_index[MAX_LIMIT_ROWS][0]][2]), "limits",
+               f"more than {MAX_LIMIT_ROWS} limits and motors in one scene's trees")  # fmt: skip
+        raise SceneError(issues)
     return tree_table(parent, link_kind, anchor_parent, anchor_child, axis, rest_q, model.body_mass[body],
-                      model.body_inertia[body], body=body, joint=joint, damping=damping, joint_side=side)  # fmt: skip
+                      model.body_inertia[body], body=body, joint=joint, damping=damping, joint_side=side,
+                      limit_index=limit_index, limit_data=limit_data)  # fmt: skip
+
+
+def _limit_rows(
+    table: JointTable | None,
+    state: State,
+    static: np.ndarray,
+    order: list[tuple[int, int, int]],
+    side: np.ndarray,
+    rest_q: np.ndarray,
+) -> tuple[list[list[int]], list[np.ndarray]]:
+    """The trees' limit and motor rows (physics/tree/limits.py) of each link's joint: a hinge's or
+    slider's limits and motor in the tree's sign of its coordinate (negated where the link is body_b),
+    a ball joint's twist limits and cone with the constant quaternions A, B of Q = A u B (side +1) or
+    A u^* B (side -1): with f_a, f_b the joint frames on body_a and body_b and K the orientation of the
+    joint's other end where it is the ground (a static body's; 1 for the world or a parent link),
+    A = (K f_b)^* rest_q, B = f_a (side +1), A = f_b^*, B = rest_q^* K f_a (side -1)."""
+    index: list[list[int]] = []
+    data: list[np.ndarray] = []
+    if table is None:
+        return index, data
+    identity = np.array([1.0, 0.0, 0.0, 0.0])
+
+    def row(link: int, sign: float, row_kind: int, low: float, high: float, cap: float = np.inf,
+            A: np.ndarray = identity, B: np.ndarray = identity, half_angles: tuple[float, float] = (0.0, 0.0),
+            ) -> None:  # fmt: skip
+        index.append([link, row_kind])
+        data.append(np.concatenate([[low, high, cap], A, B, half_angles, [sign]]))
+
+    for i, (_, parent_vertex, j) in enumerate(order):
+        if j < 0:
+            continue
+        kind, sign = int(table.kind[j]), float(side[i])
+        lower, upper = float(table.limit_lower[j]), float(table.limit_upper[j])
+
+        if kind in (JOINT_HINGE, JOINT_SLIDER):
+            if np.isfinite(lower) or np.isfinite(upper):
+                row(i, sign, LIMIT_COORD, lower, upper) if sign > 0 else row(i, sign, LIMIT_COORD, -upper, -lower)
+            if table.motor_cap[j] != 0.0:
+                speed = sign * float(table.motor_speed[j])
+                row(i, sign, MOTOR, speed, speed, float(table.motor_cap[j]))
+        elif kind == JOINT_BALL and (np.isfinite(lower) or np.isfinite(upper) or np.any(table.cone[j, 8:10])):
+            f_a, f_b = table.cone[j, 0:4], table.cone[j, 4:8]
+            other = int(table.body_b[j]) if sign > 0 else int(table.body_a[j])
+            K = state.q[other] if parent_vertex == GROUND and other != WORLD and static[other] else identity
+            if sign > 0:
+                A, B = quat_multiply(quat_conjugate(quat_multiply(K, f_b)), rest_q[i]), f_a
+            else:
+                A, B = quat_conjugate(f_b), quat_multiply(quat_conjugate(rest_q[i]), quat_multiply(K, f_a))
+            if np.isfinite(lower) or np.isfinite(upper):
+                row(i, sign, LIMIT_TWIST, lower, upper, A=A, B=B)
+            if np.any(table.cone[j, 8:10]):
+                half_angles = (float(table.cone[j, 8]), float(table.cone[j, 9]))
+                row(i, sign, LIMIT_SWING, -np.inf, 1.0, A=A, B=B, half_angles=half_angles)
+    return index, data

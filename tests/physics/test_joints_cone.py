@@ -45,8 +45,9 @@ CIRCLE = ", cone: {axis: [0, 0, -1], swing: 0.5, twist: [-0.4, 0.3]}"
 ELLIPSE = ", cone: {axis: [0, 0, -1], swing: [0.6, 0.3], reference: [1, 1, 0], twist: [-0.25, 0.35]}"
 
 
-def _box(cone: str) -> Simulation:
-    return Simulation(load_scene_text(BOX.format(corners=CORNERS, cone=cone)))
+def _box(cone: str, integrator: str = "split2") -> Simulation:
+    text = BOX.format(corners=CORNERS, cone=cone)
+    return Simulation(load_scene_text(text.replace("integrator: split2", f"integrator: {integrator}")))
 
 
 def _q(rng: np.random.Generator) -> np.ndarray:
@@ -151,16 +152,20 @@ def _measures(table, q: np.ndarray) -> tuple[float, float]:  # noqa: ANN001
     return swing_measure_numpy(Q, a1, a2), swing_twist_numpy(Q)[0]
 
 
+@pytest.mark.parametrize("integrator", ["split2", "reduced-euler", "reduced-rk4"])
 @pytest.mark.parametrize("cone", [CIRCLE, ELLIPSE], ids=["circle", "ellipse"])
-def test_a_spinning_box_stays_in_its_cone_and_twist_range_and_each_stop_loses_energy(cone):
+def test_a_spinning_box_stays_in_its_cone_and_twist_range_and_each_stop_loses_energy(cone, integrator):
     """The box thrown at (4, -2.5, 3) rad/s would swing to ~1 rad and twist past both bounds: at every
     step the swing measure stays <= 1 + 1e-12 and the twist within its range to 1e-12, both reach a bound
     (within 1e-9; the twist stays stopped at its lower bound); until the first step that reaches a limit
     the run is bitwise the run without the cone (so its energy is that run's); the first stop takes
     > 0.1 % of the energy, and the steps where a limit acts (stops, and sliding along the cone) never gain
     more than twice the unlimited run's largest step-to-step wobble (7e-8 J against a first stop's
-    -0.1 J); by 2 s the stops have taken > 5 % of the energy above rest; the ball joint holds to 1e-12."""
-    limited, free = _box(cone), _box("")
+    -0.1 J), or 1e-9 of the energy where the method's wobble is below that (reduced-rk4's, ~1e-13 J);
+    by 2 s the stops have taken > 5 % of the energy above rest; the ball joint holds to 1e-12. In maximal
+    coordinates and in joint coordinates (physics/tree/limits.py: there the cone is a row on the ball's
+    rates, and the joint holds by construction)."""
+    limited, free = _box(cone, integrator), _box("", integrator)
     table = limited.model.joint
     lower, upper = float(table.limit_lower[0]), float(table.limit_upper[0])
     rest = G * float(limited.model.body_mass.sum()) * -0.5  # the energy hanging at rest
@@ -178,7 +183,8 @@ def test_a_spinning_box_stays_in_its_cone_and_twist_range_and_each_stop_loses_en
         c, tau = _measures(table, limited.data.state.q)
         swing_max, twist_lo, twist_hi = max(swing_max, c), min(twist_lo, tau), max(twist_hi, tau)
         assert c <= 1.0 + 1e-12 and lower - 1e-12 <= tau <= upper + 1e-12, (n, c - 1.0, tau)
-        acted = bool(np.any(limited.data.joint.limit_hit[0] != 0.0)) or c >= 1.0 - 1e-9
+        pushed = limited.data.joint.limit_hit[0] if limited.data.tree is None else limited.data.tree.limits.impulse
+        acted = bool(np.any(pushed != 0.0)) or c >= 1.0 - 1e-9
         acted = acted or tau <= lower + 1e-9 or tau >= upper - 1e-9
         if apart is None:
             same = all(np.array_equal(getattr(limited.data.state, k), getattr(free.data.state, k)) for k in "xqPL")
@@ -190,7 +196,7 @@ def test_a_spinning_box_stays_in_its_cone_and_twist_range_and_each_stop_loses_en
         assert np.linalg.norm(limited.data.state.x[0] + _rotated(limited, table)) <= 1e-12
     assert apart is not None and apart > 20, apart
     assert swing_max >= 1.0 - 1e-9 and (twist_lo <= lower + 1e-9 or twist_hi >= upper - 1e-9)
-    assert gained[0] < -1e-3 * e0 and max(gained) <= 2.0 * wobble, (gained[0] / e0, max(gained), wobble)
+    assert gained[0] < -1e-3 * e0 and max(gained) <= max(2.0 * wobble, 1e-9 * e0), (gained[0] / e0, max(gained), wobble)
     assert _energy(limited) - rest < 0.95 * e0, (_energy(limited) - rest) / e0
 
 

@@ -1,12 +1,14 @@
 """Joint limits, one-sided and held to round-off (physics/joints/drives.py): a block on a vertical slider
 falls onto its lower limit at the free-fall time and rests there exactly; a pendulum swinging between a
-hinge's two limits never passes either and is stopped at each (an inelastic stop loses energy)."""
+hinge's two limits never passes either and is stopped at each (an inelastic stop loses energy). Each in
+maximal coordinates (split2) and in joint coordinates (physics/tree/limits.py)."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
+import pytest
 
 from rbcli.runner.simulation import Simulation
 from rbcli.scene.load import load_scene_text
@@ -41,10 +43,14 @@ joints:
 """
 
 
-def test_a_slider_falls_onto_its_lower_limit_and_rests_there_exactly():
+INTEGRATORS = ["split2", "reduced-euler", "reduced-rk4"]  # maximal coordinates and both joint-coordinate ones
+
+
+@pytest.mark.parametrize("integrator", INTEGRATORS)
+def test_a_slider_falls_onto_its_lower_limit_and_rests_there_exactly(integrator):
     """Free fall over the 0.3 m of travel takes sqrt(2 0.3 / g) = 0.2473 s; the block then stays at
     z = 1 - 0.3 to round-off with zero velocity (the limit stops it: inelastic), never below."""
-    sim = Simulation(load_scene_text(SLIDER))
+    sim = Simulation(load_scene_text(SLIDER.replace("split2", integrator)))
     z, vz = np.empty(1000), np.empty(1000)
     for n in range(1000):
         sim.step(1)
@@ -55,11 +61,12 @@ def test_a_slider_falls_onto_its_lower_limit_and_rests_there_exactly():
     assert np.abs(z[landed:] - 0.7).max() <= 1e-12 and np.abs(vz[landed:]).max() <= 1e-12
 
 
-def test_a_hinge_swings_between_its_limits_and_never_passes_them():
+@pytest.mark.parametrize("integrator", INTEGRATORS)
+def test_a_hinge_swings_between_its_limits_and_never_passes_them(integrator):
     """The rod is thrown at 4 rad/s from hanging straight down, enough to reach both limits (its swing
     would reach ~1.1 rad); the angle of its centre of mass about the pivot stays in [-0.3, 0.5] to
     1e-12, each limit is reached (within 1e-9, where the stop acts), and each stop takes energy away."""
-    sim = Simulation(load_scene_text(HINGE))
+    sim = Simulation(load_scene_text(HINGE.replace("split2", integrator)))
     mass = float(sim.model.body_mass[0])
 
     def energy() -> float:

@@ -17,6 +17,7 @@ from scipy.spatial.transform import Rotation
 from rbcli.physics.joints.tables import JOINT_BALL, JOINT_FIXED, JOINT_HINGE, JOINT_SLIDER
 from rbcli.physics.tree import reference
 from rbcli.physics.tree.aba import forward_kinematics, tree_accelerations
+from rbcli.physics.tree.limits import tree_response
 from rbcli.physics.tree.table import TREE_FREE, make_tree_work, tree_table, zero_coords
 
 GRAVITY = np.array([0.0, 0.0, -9.81])
@@ -93,6 +94,31 @@ def test_aba_equals_the_dense_solve(seed, n, free_root):
     expected = reference.accelerations(tree, coord, rate, tau, force, torque)
     qdd = Kernels(tree).accelerations(coord, rate, tau, force, torque)
     assert np.linalg.norm(qdd - expected) <= 1e-12 * np.linalg.norm(expected)
+
+
+@pytest.mark.parametrize("seed, n, free_root", CASES)
+def test_the_impulse_response_is_the_inverse_mass_matrix(seed, n, free_root):
+    """limits.py's tree_response on the factors ABA left: delta = (M + diag(armature))^-1 tau against the
+    CRBA mass matrix solved densely, for a random generalized impulse and a random armature (the implicit
+    dampers' h c; a ball's the same on its three rates), and each link's velocity change it reports
+    against S delta summed down the tree (the reference's link velocities of delta at these coordinates)."""
+    rng = np.random.default_rng(100 + seed)
+    tree, coord, rate = random_tree(rng, n, free_root)
+    kernels = Kernels(tree)
+    armature = rng.uniform(0.0, 0.5, size=rate.shape)
+    for i in np.flatnonzero(tree.kind == JOINT_BALL):  # a ball's damper is one on its relative spin: isotropic
+        armature[tree.dof_start[i] : tree.dof_start[i] + 3] = armature[tree.dof_start[i]]
+    kernels.work.armature[:] = armature
+    kernels.accelerations(coord, rate, np.zeros_like(rate), np.zeros((n, 3)), np.zeros((n, 3)))
+    tau = rng.normal(size=rate.shape)
+    delta, acc = np.full_like(rate, np.nan), np.full((n, 6), np.nan)
+    tree_response(tree, kernels.work, tau, delta, np.zeros((n, 6)), np.zeros_like(rate), acc)
+    expected = np.linalg.solve(reference.mass_matrix(tree, coord) + np.diag(armature), tau)
+    assert np.linalg.norm(delta - expected) <= 1e-12 * np.linalg.norm(expected)
+    # each link's spatial velocity change (omega, v of its centre of mass: world) is the one the rates delta give
+    v, omega = reference.world_velocities(tree, coord, delta)
+    assert np.allclose(acc[:, :3], omega, rtol=0, atol=1e-12 * np.abs(omega).max())
+    assert np.allclose(acc[:, 3:], v, rtol=0, atol=1e-12 * np.abs(v).max())
 
 
 def test_aba_covers_every_joint_kind():

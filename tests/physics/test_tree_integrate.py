@@ -144,10 +144,9 @@ def test_what_the_trees_do_not_hold_is_a_located_error():
         Simulation(load_scene_text(loop.replace("anchor: [0.0, 0.0, 2.0]", "anchor: " + _cloud_point(text))))
     message = str(raised.value)
     assert message.startswith("<string>:19:") and "joint 'loop': it closes a loop" in message
-    limited = text.replace("name: shoulder, type: ball,", "name: shoulder, type: ball, cone: {axis: [0, 0, -1], "
-                           "reference: [1, 0, 0], swing: [0.5, 0.5]},")  # fmt: skip
-    with pytest.raises(SceneError, match="joint 'shoulder': joint limits are not modelled yet"):
-        Simulation(load_scene_text(limited))
+    tethered = text + "  - {name: tether, type: distance, bodies: [cloud, box], anchors: [[0, 0, 0], [0, 0, 0]]}\n"
+    with pytest.raises(SceneError, match="joint 'tether': a distance joint is a constraint between two links"):
+        Simulation(load_scene_text(tethered))
 
 
 def _cloud_point(text: str) -> str:

@@ -415,8 +415,9 @@ def body_boxes_numpy(
     rho = np.full(body_count, -np.inf)
     np.maximum.at(rho, sphere_body, np.linalg.norm(sphere_offset, axis=1) + sphere_radius)
     empty = ~np.isfinite(rho)
-    centre = np.where(empty[:, None], 0.0, 0.5 * (lo + hi))
-    half = np.where(empty[:, None], -np.inf, 0.5 * (hi - lo))
+    filled_lo, filled_hi = np.where(empty[:, None], 0.0, lo), np.where(empty[:, None], 0.0, hi)  # inf - inf: no
+    centre = 0.5 * (filled_lo + filled_hi)
+    half = np.where(empty[:, None], -np.inf, 0.5 * (filled_hi - filled_lo))
     return start, centre, half, rho
 
 

@@ -36,102 +36,15 @@ import numba
 
 from rbcli.physics import kernel_cache
 from rbcli.physics.forces.wrench import accumulate_wrench
-from rbcli.physics.joints.tables import JOINT_BALL, JOINT_HINGE, JOINT_SLIDER
+from rbcli.physics.joints.tables import JOINT_BALL
 from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.step import STEP_ENTRY, STEP_KERNEL
 from rbcli.physics.tree.aba import forward_kinematics, tree_accelerations
-from rbcli.physics.tree.table import TREE_FREE
+from rbcli.physics.tree.flow import advance_coords, coord_rate, normalise_quaternions
+from rbcli.physics.tree.limits import tree_limits
+from rbcli.physics.tree.reactions import joint_wrenches
 
 kernel_cache.install()
-
-# below this |v| = h |omega| / 2 the exponential's sin|v| / |v| = 1 - |v|^2 / 6 to round-off
-SMALL_ROTATION = 1e-4
-
-
-@numba.njit(cache=True, inline="always")
-def _times_exp(w, x, y, z, v0, v1, v2):  # noqa: ANN001, ANN202 - numba scalars
-    """u exp((0, v)) normalised: u turned by 2 |v| about v in its own frame (right multiplication)."""
-    angle = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
-    sinc = 1.0 - angle * angle / 6.0 if angle < SMALL_ROTATION else math.sin(angle) / angle
-    ew, ex, ey, ez = math.cos(angle), sinc * v0, sinc * v1, sinc * v2
-    nw = w * ew - x * ex - y * ey - z * ez
-    nx = w * ex + x * ew + y * ez - z * ey
-    ny = w * ey - x * ez + y * ew + z * ex
-    nz = w * ez + x * ey - y * ex + z * ew
-    norm = 1.0 / math.sqrt(nw * nw + nx * nx + ny * ny + nz * nz)
-    return nw * norm, nx * norm, ny * norm, nz * norm
-
-
-@numba.njit(cache=True, inline="always")
-def _rotate(w, x, y, z, v0, v1, v2):  # noqa: ANN001, ANN202
-    """R(u) v for a unit quaternion u = (w, x, y, z)."""
-    tx, ty, tz = 2.0 * (y * v2 - z * v1), 2.0 * (z * v0 - x * v2), 2.0 * (x * v1 - y * v0)
-    return v0 + w * tx + y * tz - z * ty, v1 + w * ty + z * tx - x * tz, v2 + w * tz + x * ty - y * tx
-
-
-@numba.njit(**STEP_KERNEL)
-def advance_coords(tree, coord, rate, h) -> None:  # noqa: ANN001
-    """coord <- coord moved for a time h at the constant `rate` along each joint's own geometry: angles
-    and travels + h rate, a ball's u exp(h omega / 2), a free root's x + h R(q) v and q exp(h omega / 2)."""
-    for i in range(tree.parent.shape[0]):
-        kind, c0, d0 = tree.kind[i], tree.coord_start[i], tree.dof_start[i]
-        if kind == JOINT_HINGE or kind == JOINT_SLIDER:
-            coord[c0] += h * rate[d0]
-        elif kind == JOINT_BALL:
-            hh = 0.5 * h
-            coord[c0], coord[c0 + 1], coord[c0 + 2], coord[c0 + 3] = _times_exp(
-                coord[c0], coord[c0 + 1], coord[c0 + 2], coord[c0 + 3], hh * rate[d0], hh * rate[d0 + 1],
-                hh * rate[d0 + 2],
-            )  # fmt: skip
-        elif kind == TREE_FREE:
-            w, x, y, z = coord[c0 + 3], coord[c0 + 4], coord[c0 + 5], coord[c0 + 6]
-            v0, v1, v2 = _rotate(w, x, y, z, rate[d0 + 3], rate[d0 + 4], rate[d0 + 5])
-            coord[c0] += h * v0
-            coord[c0 + 1] += h * v1
-            coord[c0 + 2] += h * v2
-            hh = 0.5 * h
-            coord[c0 + 3], coord[c0 + 4], coord[c0 + 5], coord[c0 + 6] = _times_exp(
-                w, x, y, z, hh * rate[d0], hh * rate[d0 + 1], hh * rate[d0 + 2]
-            )
-
-
-@numba.njit(**STEP_KERNEL)
-def coord_rate(tree, coord, rate, dcoord) -> None:  # noqa: ANN001
-    """dcoord = d coord / dt at (coord, rate): rate for angles and travels, u (0, omega) / 2 for a ball's
-    quaternion, (R(q) v, q (0, omega) / 2) for a free root's pose."""
-    for i in range(tree.parent.shape[0]):
-        kind, c0, d0 = tree.kind[i], tree.coord_start[i], tree.dof_start[i]
-        if kind == JOINT_HINGE or kind == JOINT_SLIDER:
-            dcoord[c0] = rate[d0]
-            continue
-        if kind == JOINT_BALL:
-            q0 = c0
-            o0, o1, o2 = rate[d0], rate[d0 + 1], rate[d0 + 2]
-        elif kind == TREE_FREE:
-            q0 = c0 + 3
-            o0, o1, o2 = rate[d0], rate[d0 + 1], rate[d0 + 2]
-            w, x, y, z = coord[q0], coord[q0 + 1], coord[q0 + 2], coord[q0 + 3]
-            dcoord[c0], dcoord[c0 + 1], dcoord[c0 + 2] = _rotate(w, x, y, z, rate[d0 + 3], rate[d0 + 4], rate[d0 + 5])
-        else:
-            continue
-        w, x, y, z = coord[q0], coord[q0 + 1], coord[q0 + 2], coord[q0 + 3]
-        dcoord[q0] = 0.5 * (-x * o0 - y * o1 - z * o2)
-        dcoord[q0 + 1] = 0.5 * (w * o0 + y * o2 - z * o1)
-        dcoord[q0 + 2] = 0.5 * (w * o1 - x * o2 + z * o0)
-        dcoord[q0 + 3] = 0.5 * (w * o2 + x * o1 - y * o0)
-
-
-@numba.njit(**STEP_KERNEL)
-def normalise_quaternions(tree, coord) -> None:  # noqa: ANN001
-    """Every ball's and free root's quaternion coordinates scaled to unit length."""
-    for i in range(tree.parent.shape[0]):
-        kind = tree.kind[i]
-        if kind != JOINT_BALL and kind != TREE_FREE:
-            continue
-        q0 = tree.coord_start[i] + (3 if kind == TREE_FREE else 0)
-        norm = 1.0 / math.sqrt(coord[q0] ** 2 + coord[q0 + 1] ** 2 + coord[q0 + 2] ** 2 + coord[q0 + 3] ** 2)
-        for k in range(4):
-            coord[q0 + k] *= norm
 
 
 @numba.njit(cache=True, inline="always")
@@ -143,59 +56,6 @@ def damper_forces(damping, rate, joint_force, armature, implicit_h) -> None:  # 
         c = damping[k]
         joint_force[k] = -c * rate[k]
         armature[k] = implicit_h * c
-
-
-@numba.njit(**STEP_KERNEL)
-def joint_wrenches(tree, tree_data, F, tau, weight, first) -> None:  # noqa: ANN001
-    """tree_data.reaction = (first: ) or += weight * each link's joint wrench at the evaluation ABA just
-    made (work.acc, its velocities and inertias): the Newton-Euler equations of the link's subtree, summed
-    from the leaves, f_i = sum over the subtree of (I a + v x* I v - f_ext) about x_i, with world axes;
-    [0:6] (force, torque about its centre of mass) on the link, [6:12] the opposite on its parent (about
-    the parent's centre of mass; zero for a root: the world). Dampers and joint forces are in it, as the
-    maximal joints' reactions hold their dampers and motors."""
-    work, W = tree_data.work, tree_data.wrench
-    n = tree.parent.shape[0]
-    for i in range(n):
-        b, m = tree.body[i], tree.mass[i]
-        iw = work.inertia_world[i]
-        wx, wy, wz = work.velocity[i, 0], work.velocity[i, 1], work.velocity[i, 2]
-        vx, vy, vz = work.velocity[i, 3], work.velocity[i, 4], work.velocity[i, 5]
-        ax, ay, az = work.acc[i, 0], work.acc[i, 1], work.acc[i, 2]
-        lx = iw[0] * wx + iw[1] * wy + iw[2] * wz
-        ly = iw[1] * wx + iw[3] * wy + iw[4] * wz
-        lz = iw[2] * wx + iw[4] * wy + iw[5] * wz
-        # torque: I alpha + omega x I omega - tau; force: m (a + omega x v) - F (a: the spatial acceleration)
-        W[i, 3] = iw[0] * ax + iw[1] * ay + iw[2] * az + wy * lz - wz * ly - tau[b, 0]
-        W[i, 4] = iw[1] * ax + iw[3] * ay + iw[4] * az + wz * lx - wx * lz - tau[b, 1]
-        W[i, 5] = iw[2] * ax + iw[4] * ay + iw[5] * az + wx * ly - wy * lx - tau[b, 2]
-        W[i, 0] = m * (work.acc[i, 3] + wy * vz - wz * vy) - F[b, 0]
-        W[i, 1] = m * (work.acc[i, 4] + wz * vx - wx * vz) - F[b, 1]
-        W[i, 2] = m * (work.acc[i, 5] + wx * vy - wy * vx) - F[b, 2]
-    for i in range(n - 1, -1, -1):
-        p = tree.parent[i]
-        rx, ry, rz = work.xpos[i, 0], work.xpos[i, 1], work.xpos[i, 2]
-        if p >= 0:  # about the parent's centre of mass: torque + r x force, r = x_i - x_p
-            W[p, 0] += W[i, 0]
-            W[p, 1] += W[i, 1]
-            W[p, 2] += W[i, 2]
-            W[p, 3] += W[i, 3] + ry * W[i, 2] - rz * W[i, 1]
-            W[p, 4] += W[i, 4] + rz * W[i, 0] - rx * W[i, 2]
-            W[p, 5] += W[i, 5] + rx * W[i, 1] - ry * W[i, 0]
-        # on the link: W[i]; on its parent: the opposite force, its moment about the parent's centre of
-        # mass (r = x_i - x_p now, at this evaluation); a root's other end is the world: nothing
-        tx, ty, tz = -W[i, 3], -W[i, 4], -W[i, 5]
-        if p >= 0:
-            tx -= ry * W[i, 2] - rz * W[i, 1]
-            ty -= rz * W[i, 0] - rx * W[i, 2]
-            tz -= rx * W[i, 1] - ry * W[i, 0]
-        part = (W[i, 0], W[i, 1], W[i, 2], W[i, 3], W[i, 4], W[i, 5], -W[i, 0], -W[i, 1], -W[i, 2], tx, ty, tz)
-        root = 0.0 if p >= 0 else 1.0
-        for k in range(12):
-            value = weight * part[k] * (1.0 - root if k >= 6 else 1.0)
-            if first:
-                tree_data.reaction[i, k] = value
-            else:
-                tree_data.reaction[i, k] += value
 
 
 @separately_compiled
@@ -244,6 +104,8 @@ def step_euler(model, forces, contact, force_data, tree, tree_data, t, h, x, q, 
     for k in range(rate.shape[0]):
         rate[k] += h * qdd[k]
     advance_coords(tree, coord, rate, h)
+    if tree.limit_index.shape[0] > 0:  # the limits' and motors' impulses, with this step's ABA (limits.py)
+        tree_limits(tree, tree_data, h)
     forward_kinematics(tree, coord, rate, work, x, q, P, L)
     tree_data.fk_state[0] = 1.0
 
@@ -292,6 +154,8 @@ def step_rk4(model, forces, contact, force_data, tree, tree_data, t, h, x, q, P,
     for k in range(nd):
         rate[k] = rate0[k] + sixth * rate_sum[k]
     normalise_quaternions(tree, coord)
+    if tree.limit_index.shape[0] > 0:  # after the smooth step, with its last ABA (limits.py)
+        tree_limits(tree, tree_data, h)
     forward_kinematics(tree, coord, rate, tree_data.work, x, q, P, L)
     tree_data.fk_state[0] = 1.0
 

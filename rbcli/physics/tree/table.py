@@ -81,6 +81,26 @@ class TreeTable(NamedTuple):
     # int64 (n,): +1 where the link is its joint's body_a (the JointTable's first body), -1 where it is
     # body_b, 0 without a joint (a free root): how its reaction maps onto the joint's (J, 12) row
     joint_side: np.ndarray
+    # the joints' limits and motors acting on the coordinates (limits.py), one row each: int64 (m, 2) the
+    # row's link and its kind (LIMIT_COORD, LIMIT_TWIST, LIMIT_SWING, MOTOR); (m, LIMIT_COLUMNS) its
+    # numbers (the LIMIT_* columns below), in the tree's own coordinates (a joint whose link is its body_b
+    # has its hinge angle and slider travel negated: its bounds and motor speed are turned so)
+    limit_index: np.ndarray
+    limit_data: np.ndarray
+
+
+# kinds of limit rows (TreeTable.limit_index[:, 1]): a hinge's or slider's coordinate between bounds, a
+# ball joint's twist angle between bounds and its swing measure below 1 (physics/joints/cone.py), a
+# hinge's or slider's velocity motor
+LIMIT_COORD, LIMIT_TWIST, LIMIT_SWING, MOTOR = range(4)
+# columns of TreeTable.limit_data: the lower and upper bound [rad, m or 1] (a motor's speed in both, rad/s
+# or m/s), the motor's largest torque or force [N m or N] (inf for a limit), a ball joint's relative
+# rotation Q = A u B (or A u^* B: side -1) from its coordinate u (limits.py), the cone's half-angles
+# [rad], and the side (+1: the link is the joint's body_a)
+LIMIT_LOWER, LIMIT_UPPER, LIMIT_CAP, LIMIT_A, LIMIT_B, LIMIT_HALF_ANGLES, LIMIT_SIDE = 0, 1, 2, 3, 7, 11, 13
+LIMIT_COLUMNS = 14
+# the most limit and motor rows a table holds: their coupling matrix is dense (m x m, LimitWork.delassus)
+MAX_LIMIT_ROWS = 1024
 
 
 class TreeWork(NamedTuple):
@@ -127,6 +147,35 @@ class TreeData(NamedTuple):
     reaction: np.ndarray
     reactions_on: np.ndarray
     wrench: np.ndarray
+    limits: LimitWork
+
+
+class LimitWork(NamedTuple):
+    """The limits' and motors' arrays (limits.py), over the table's m rows, D rates and n links."""
+
+    value: np.ndarray  # (m,): each row's coordinate at the end of the step (a motor's: its rate)
+    row: np.ndarray  # (m, 3): d value / d rate over its link's rates (1 or 3 of them)
+    active: np.ndarray  # int64 (m,): the rows a stage solves for (the first `count` of them)
+    delassus: np.ndarray  # (m, m): A = J M^-1 J^T over the active rows
+    target: np.ndarray  # (m,): what A lambda should be (the rows' rate changes)
+    low: np.ndarray  # (m,): the bounds on lambda
+    high: np.ndarray
+    impulse: np.ndarray  # [N m s or N s] (m,): lambda of the last step, both stages summed
+    stage_impulse: np.ndarray  # (m,): one stage's lambda
+    tau: np.ndarray  # (D,): J^T lambda
+    delta: np.ndarray  # (D,): M^-1 tau
+    u: np.ndarray  # (D,): the response's scratch
+    force: np.ndarray  # (n, 6): its articulated forces
+    acc: np.ndarray  # (n, 6): the links' spatial accelerations of M^-1 tau
+
+
+def make_limit_work(tree: TreeTable) -> LimitWork:
+    m, D, n = tree.limit_index.shape[0], tree_dof_count(tree), tree_link_count(tree)
+    return LimitWork(
+        np.zeros(m), np.zeros((m, 3)), np.zeros(m, dtype=np.int64), np.zeros((m, m)), np.zeros(m), np.zeros(m),
+        np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(D), np.zeros(D), np.zeros(D), np.zeros((n, 6)),
+        np.zeros((n, 6)),
+    )  # fmt: skip
 
 
 def make_tree_data(tree: TreeTable) -> TreeData:
@@ -135,6 +184,7 @@ def make_tree_data(tree: TreeTable) -> TreeData:
     return TreeData(
         make_tree_work(tree), zero_coords(tree), np.zeros(D), np.zeros(D), np.zeros(D), np.zeros(C), np.zeros(D),
         np.zeros(C), np.zeros(D), np.zeros(C), np.zeros(1), np.full((n, 12), np.nan), np.zeros(1), np.zeros((n, 6)),
+        make_limit_work(tree),
     )  # fmt: skip
 
 
@@ -151,9 +201,11 @@ def tree_table(
     joint=None,
     damping=None,
     joint_side=None,
+    limit_index=None,
+    limit_data=None,
 ) -> TreeTable:  # noqa: ANN001
     """A TreeTable from per-link sequences (body defaults to the link's index, joint to -1: none; damping,
-    per rate, to 0). Checks
+    per rate, to 0; limit rows to none). Checks
     the order (parent before child), the free joint's place (roots only) and normalises axes and rest
     rotations."""
     parent, kind = frozen_ints(parent), frozen_ints(kind)
@@ -212,7 +264,16 @@ def tree_table(
         frozen_floats(motion, 6),
         frozen_floats(np.zeros(int(dofs.sum())) if damping is None else damping),
         frozen_ints(np.zeros(n) if joint_side is None else joint_side),
+        _frozen_index(np.zeros((0, 2)) if limit_index is None else limit_index),
+        frozen_floats(np.zeros((0, LIMIT_COLUMNS)) if limit_data is None else limit_data, LIMIT_COLUMNS),
     )
+
+
+def _frozen_index(values) -> np.ndarray:  # noqa: ANN001
+    """An int64 (m, 2) array, contiguous and read-only."""
+    out = np.ascontiguousarray(np.asarray(values, dtype=np.int64).reshape(-1, 2))
+    out.setflags(write=False)
+    return out
 
 
 def tree_link_count(tree: TreeTable) -> int:

@@ -1,0 +1,387 @@
+"""Joint limits and velocity motors in joint coordinates: impulses on the rates, solved together.
+
+What a row acts on (TreeTable.limit_index, limit_data; scene/compile_trees.py builds them from the
+joints' limits, cones and motors):
+- LIMIT_COORD: a hinge's angle or a slider's travel, the coordinate itself, between two bounds;
+- LIMIT_TWIST, LIMIT_SWING: a ball joint's twist angle between bounds and its swing measure below 1, the
+  functions of the relative rotation Q of the joint's frames that physics/joints/cone.py defines (the
+  maximal joints' cone). From the ball's coordinate u: Q = A u B where the link is the joint's body_a
+  (side +1), Q = A u^* B where it is body_b (side -1), A and B constant (compile_trees.py); the row over
+  the ball's rates (omega, link frame) is R(A u)^T j (side +1) or -R(A)^T j (side -1), j cone.py's row in
+  b's joint frame;
+- MOTOR: a hinge's or slider's rate brought to a speed by at most cap h of impulse a step.
+
+Each row is a function c of the coordinates with a row j over its link's rates (dc/dt = j . rate). An
+impulse lambda on rows J changes the rates by M^-1 J^T lambda (M the tree's mass matrix with the
+armature of the implicit dampers, integrate.py), computed by the articulated-body algorithm's force
+passes on the factors the step's last ABA left (`tree_response`: O(n), no new factor). The rows act
+after the integrator's smooth step (coord_f, rate_f) as impulses at the step's start would: rates change
+by Delta = M^-1 J^T lambda and the coordinates by h Delta (for semi-implicit Euler exactly what an
+impulse before its update gives), in two stages as the maximal joints' limits (joints/drives.py):
+
+- position stage: a limit row whose coordinate c_f lies beyond a bound is put back onto it, h j . Delta
+  = bound - c_f (exact for an angle or a travel: linear in the coordinates; a ball's swing and twist
+  to second order, the rest in the next step), lambda pushing into the range only; a motor row brings
+  its rate to its speed, |lambda| <= cap h. Rows are solved together: the dense A = J M^-1 J^T over the
+  active rows (one response pass per row) by projected Gauss-Seidel to round-off (a small mixed
+  complementarity problem: a ragdoll's few limits couple through the tree); a limit that this pushes
+  past its own bound joins the active set and the solve runs again;
+- velocity stage: a limit row at its bound (within LIMIT_CONTACT) with its rate pointing out of the range
+  is stopped (j . rate = 0: an inelastic stop; the position stage alone would leave the rate that carried
+  it there), motors held at their speed with what is left of their cap.
+
+In semi-implicit Euler the motor is then implicit (a rate at its speed from the first step the cap
+allows) and a limit holds its coordinate exactly; in RK4 the rows act once per step after the smooth
+step, so a run is first order while a limit or a capped motor acts (fourth order between). The impulses
+are internal to the tree: the reactions hold them (reactions.py `impulse_wrenches`, the stage's mean
+force lambda / h).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+
+from rbcli.physics import kernel_cache
+from rbcli.physics.joints.cone import swing_measure_row, twist_angle_row
+from rbcli.physics.joints.drives import LIMIT_CONTACT
+from rbcli.physics.joints.rows import quaternion_product
+from rbcli.physics.kernel_link import separately_compiled
+from rbcli.physics.rotation_kernels import rotate_inverse
+from rbcli.physics.step import STEP_KERNEL
+from rbcli.physics.tree.flow import advance_coords
+from rbcli.physics.tree.reactions import impulse_wrenches
+from rbcli.physics.tree.table import (
+    LIMIT_A,
+    LIMIT_B,
+    LIMIT_CAP,
+    LIMIT_COORD,
+    LIMIT_HALF_ANGLES,
+    LIMIT_LOWER,
+    LIMIT_SIDE,
+    LIMIT_TWIST,
+    LIMIT_UPPER,
+    MOTOR,
+)
+
+kernel_cache.install()
+
+# projected Gauss-Seidel sweeps at most (one row converges in one; coupled rows geometrically, a few
+# tens for a ragdoll's limits); it stops when no lambda changes by more than round-off of the largest
+PGS_SWEEPS = 500
+# the position stage's passes at most, and how far past a bound [rad or 1] a later pass leaves a row: an
+# angle or travel lands on its bound in the first pass; a ball's swing measure, quadratic in the
+# correction, within ~1e-5 of it at a hard stop in the first, at round-off in three or four
+POSITION_ITERATIONS = 8
+POSITION_TOLERANCE = 1e-14
+
+
+@separately_compiled
+@numba.njit(**STEP_KERNEL)
+def tree_response(tree, work, tau, delta, force, u, acc) -> None:  # noqa: ANN001
+    """delta (D,) = M^-1 tau for a generalized impulse tau (D,), dual to the rates, with the factors of
+    the last ABA in `work` (its U, D^-1, S, r: tree_accelerations' passes 2 and 3 with no velocity terms
+    and no external force); acc (n, 6): each link's spatial velocity change (world-aligned at its centre
+    of mass); force (n, 6), u (D,): scratch."""
+    n = tree.parent.shape[0]
+    motion, U, dinv = work.motion, work.U, work.dinv
+    for i in range(n):
+        for k in range(6):
+            force[i, k] = 0.0
+    for i in range(n - 1, -1, -1):
+        p, d0, d1, e0 = tree.parent[i], tree.dof_start[i], tree.dof_start[i + 1], tree.dinv_start[i]
+        f = force[i]
+        k = d1 - d0
+        if k == 1:
+            s = motion[d0]
+            uu = tau[d0] - (s[0] * f[0] + s[1] * f[1] + s[2] * f[2] + s[3] * f[3] + s[4] * f[4] + s[5] * f[5])
+            u[d0] = uu
+            if p >= 0:
+                g = uu * dinv[e0]
+                for c in range(6):
+                    f[c] += U[d0, c] * g
+        elif k == 3:  # ball: u' = R tau - S'^T f in the world-aligned basis (aba.py)
+            cx, cy, cz = motion[d0 + 1, 5], -motion[d0, 5], motion[d0, 4]
+            Rm = work.rotation[i]
+            o0, o1, o2 = tau[d0], tau[d0 + 1], tau[d0 + 2]
+            g0, g1, g2 = cy * f[5] - cz * f[4], cz * f[3] - cx * f[5], cx * f[4] - cy * f[3]
+            u[d0] = Rm[0, 0] * o0 + Rm[0, 1] * o1 + Rm[0, 2] * o2 - f[0] + g0
+            u[d0 + 1] = Rm[1, 0] * o0 + Rm[1, 1] * o1 + Rm[1, 2] * o2 - f[1] + g1
+            u[d0 + 2] = Rm[2, 0] * o0 + Rm[2, 1] * o1 + Rm[2, 2] * o2 - f[2] + g2
+            if p >= 0:
+                for j in range(3):
+                    g = dinv[e0 + 3 * j] * u[d0] + dinv[e0 + 3 * j + 1] * u[d0 + 1] + dinv[e0 + 3 * j + 2] * u[d0 + 2]
+                    for c in range(6):
+                        f[c] += U[d0 + j, c] * g
+        else:  # fixed (no rate), free root (six)
+            for l in range(d0, d1):
+                s = motion[l]
+                u[l] = tau[l] - (s[0] * f[0] + s[1] * f[1] + s[2] * f[2] + s[3] * f[3] + s[4] * f[4] + s[5] * f[5])
+            if p >= 0:
+                for j in range(k):
+                    g = 0.0
+                    for l in range(k):
+                        g += dinv[e0 + j * k + l] * u[d0 + l]
+                    for c in range(6):
+                        f[c] += U[d0 + j, c] * g
+        if p >= 0:  # to the parent's centre of mass: (n + r x f, f), r = x_i - x_p
+            rx, ry, rz = work.xpos[i, 0], work.xpos[i, 1], work.xpos[i, 2]
+            F = force[p]
+            F[0] += f[0] + ry * f[5] - rz * f[4]
+            F[1] += f[1] + rz * f[3] - rx * f[5]
+            F[2] += f[2] + rx * f[4] - ry * f[3]
+            F[3] += f[3]
+            F[4] += f[4]
+            F[5] += f[5]
+    for i in range(n):
+        p, d0, d1, e0 = tree.parent[i], tree.dof_start[i], tree.dof_start[i + 1], tree.dinv_start[i]
+        if p >= 0:  # X a_parent: the linear part shifted to this centre of mass, a_lin - r x alpha
+            rx, ry, rz = work.xpos[i, 0], work.xpos[i, 1], work.xpos[i, 2]
+            a0, a1, a2 = acc[p, 0], acc[p, 1], acc[p, 2]
+            a3 = acc[p, 3] - (ry * a2 - rz * a1)
+            a4 = acc[p, 4] - (rz * a0 - rx * a2)
+            a5 = acc[p, 5] - (rx * a1 - ry * a0)
+        else:
+            a0 = a1 = a2 = a3 = a4 = a5 = 0.0
+        k = d1 - d0
+        if k == 1:
+            w = U[d0]
+            g = (u[d0] - (w[0] * a0 + w[1] * a1 + w[2] * a2 + w[3] * a3 + w[4] * a4 + w[5] * a5)) * dinv[e0]
+            delta[d0] = g
+            s = motion[d0]
+            a0, a1, a2 = a0 + s[0] * g, a1 + s[1] * g, a2 + s[2] * g
+            a3, a4, a5 = a3 + s[3] * g, a4 + s[4] * g, a5 + s[5] * g
+        elif k == 3:
+            g0 = u[d0] - (U[d0, 0] * a0 + U[d0, 1] * a1 + U[d0, 2] * a2 + U[d0, 3] * a3 + U[d0, 4] * a4 + U[d0, 5] * a5)
+            g1 = u[d0 + 1] - (U[d0 + 1, 0] * a0 + U[d0 + 1, 1] * a1 + U[d0 + 1, 2] * a2 + U[d0 + 1, 3] * a3
+                              + U[d0 + 1, 4] * a4 + U[d0 + 1, 5] * a5)  # fmt: skip
+            g2 = u[d0 + 2] - (U[d0 + 2, 0] * a0 + U[d0 + 2, 1] * a1 + U[d0 + 2, 2] * a2 + U[d0 + 2, 3] * a3
+                              + U[d0 + 2, 4] * a4 + U[d0 + 2, 5] * a5)  # fmt: skip
+            z0 = dinv[e0] * g0 + dinv[e0 + 1] * g1 + dinv[e0 + 2] * g2
+            z1 = dinv[e0 + 3] * g0 + dinv[e0 + 4] * g1 + dinv[e0 + 5] * g2
+            z2 = dinv[e0 + 6] * g0 + dinv[e0 + 7] * g1 + dinv[e0 + 8] * g2
+            cx, cy, cz = motion[d0 + 1, 5], -motion[d0, 5], motion[d0, 4]
+            a0, a1, a2 = a0 + z0, a1 + z1, a2 + z2
+            a3, a4, a5 = a3 + cy * z2 - cz * z1, a4 + cz * z0 - cx * z2, a5 + cx * z1 - cy * z0
+            Rm = work.rotation[i]
+            delta[d0] = Rm[0, 0] * z0 + Rm[1, 0] * z1 + Rm[2, 0] * z2
+            delta[d0 + 1] = Rm[0, 1] * z0 + Rm[1, 1] * z1 + Rm[2, 1] * z2
+            delta[d0 + 2] = Rm[0, 2] * z0 + Rm[1, 2] * z1 + Rm[2, 2] * z2
+        elif k > 1:
+            for l in range(d0, d1):
+                w = U[l]
+                u[l] -= w[0] * a0 + w[1] * a1 + w[2] * a2 + w[3] * a3 + w[4] * a4 + w[5] * a5
+            for j in range(k):
+                g = 0.0
+                for l in range(k):
+                    g += dinv[e0 + j * k + l] * u[d0 + l]
+                delta[d0 + j] = g
+                s = motion[d0 + j]
+                a0, a1, a2 = a0 + s[0] * g, a1 + s[1] * g, a2 + s[2] * g
+                a3, a4, a5 = a3 + s[3] * g, a4 + s[4] * g, a5 + s[5] * g
+        acc[i, 0], acc[i, 1], acc[i, 2], acc[i, 3], acc[i, 4], acc[i, 5] = a0, a1, a2, a3, a4, a5
+
+
+@numba.njit(cache=True)
+def _evaluate(tree, k, coord, row):  # noqa: ANN001, ANN202
+    """Row k's coordinate at `coord` (a motor's: its coordinate, unused) and its row j over its link's
+    rates into row (3,) (the module docstring)."""
+    link, kind = tree.limit_index[k, 0], tree.limit_index[k, 1]
+    c0 = tree.coord_start[link]
+    if kind == LIMIT_COORD or kind == MOTOR:
+        row[0], row[1], row[2] = 1.0, 0.0, 0.0
+        return coord[c0]
+    data = tree.limit_data[k]
+    side = data[LIMIT_SIDE]
+    uw, ux, uy, uz = coord[c0], coord[c0 + 1], coord[c0 + 2], coord[c0 + 3]
+    if side < 0.0:
+        ux, uy, uz = -ux, -uy, -uz
+    A, B = LIMIT_A, LIMIT_B
+    au = quaternion_product(data[A], data[A + 1], data[A + 2], data[A + 3], uw, ux, uy, uz)
+    Q = quaternion_product(au[0], au[1], au[2], au[3], data[B], data[B + 1], data[B + 2], data[B + 3])
+    if Q[0] < 0.0:
+        Q = (-Q[0], -Q[1], -Q[2], -Q[3])
+    if kind == LIMIT_TWIST:
+        c, j = twist_angle_row(Q)
+    else:
+        c, j = swing_measure_row(Q, data[LIMIT_HALF_ANGLES], data[LIMIT_HALF_ANGLES + 1])
+    if side > 0.0:  # R(A u)^T j
+        r = rotate_inverse(au[0], au[1], au[2], au[3], j[0], j[1], j[2])
+        row[0], row[1], row[2] = r[0], r[1], r[2]
+    else:  # -R(A)^T j
+        r = rotate_inverse(data[A], data[A + 1], data[A + 2], data[A + 3], j[0], j[1], j[2])
+        row[0], row[1], row[2] = -r[0], -r[1], -r[2]
+    return c
+
+
+@numba.njit(cache=True, inline="always")
+def _along(tree, k, row, vector) -> float:  # noqa: ANN001
+    """j_k . vector over row k's link's rates."""
+    link = tree.limit_index[k, 0]
+    d0, d1 = tree.dof_start[link], tree.dof_start[link + 1]
+    total = 0.0
+    for e in range(d1 - d0):
+        total += row[k, e] * vector[d0 + e]
+    return total
+
+
+@numba.njit(cache=True)
+def _respond(tree, tree_data, count) -> None:  # noqa: ANN001
+    """lw.delta = M^-1 J^T lambda for the first `count` active rows' lambda (lw.stage_impulse)."""
+    lw = tree_data.limits
+    tau = lw.tau
+    for d in range(tau.shape[0]):
+        tau[d] = 0.0
+    for a in range(count):
+        k = lw.active[a]
+        link = tree.limit_index[k, 0]
+        d0, d1 = tree.dof_start[link], tree.dof_start[link + 1]
+        for e in range(d1 - d0):
+            tau[d0 + e] += lw.row[k, e] * lw.stage_impulse[k]
+    tree_response(tree, tree_data.work, tau, lw.delta, lw.force, lw.u, lw.acc)
+
+
+@numba.njit(cache=True)
+def _solve(tree, tree_data, count) -> None:  # noqa: ANN001
+    """lambda (lw.stage_impulse) of the first `count` active rows: A lambda = target within [low, high]
+    by projected Gauss-Seidel on the dense A = J M^-1 J^T (one response pass per row), then lw.delta =
+    M^-1 J^T lambda."""
+    lw = tree_data.limits
+    A, tau = lw.delassus, lw.tau
+    for a in range(count):
+        for d in range(tau.shape[0]):
+            tau[d] = 0.0
+        k = lw.active[a]
+        link = tree.limit_index[k, 0]
+        d0, d1 = tree.dof_start[link], tree.dof_start[link + 1]
+        for e in range(d1 - d0):
+            tau[d0 + e] = lw.row[k, e]
+        tree_response(tree, tree_data.work, tau, lw.delta, lw.force, lw.u, lw.acc)
+        for b in range(count):
+            A[b, a] = _along(tree, lw.active[b], lw.row, lw.delta)
+    lam = lw.stage_impulse
+    for a in range(count):
+        lam[lw.active[a]] = 0.0
+    for _ in range(PGS_SWEEPS):
+        change, size = 0.0, 0.0
+        for a in range(count):
+            k = lw.active[a]
+            if A[a, a] <= 0.0:  # a row no rate moves (a singular cone row): no impulse
+                continue
+            residual = lw.target[k]
+            for b in range(count):
+                residual -= A[a, b] * lam[lw.active[b]]
+            new = min(max(lam[k] + residual / A[a, a], lw.low[k]), lw.high[k])
+            change = max(change, abs(new - lam[k]))
+            size = max(size, abs(new))
+            lam[k] = new
+        if change <= 4e-16 * size:
+            break
+    _respond(tree, tree_data, count)
+
+
+@numba.njit(cache=True)
+def _apply(tree, tree_data, count, h, move) -> None:  # noqa: ANN001
+    """rate += delta (and coord moved by h delta when `move`), lambda into lw.impulse, and the impulse's
+    share of the reactions while they are recorded."""
+    lw = tree_data.limits
+    rate = tree_data.rate
+    for d in range(rate.shape[0]):
+        rate[d] += lw.delta[d]
+    if move:
+        advance_coords(tree, tree_data.coord, lw.delta, h)
+    for a in range(count):
+        k = lw.active[a]
+        lw.impulse[k] += lw.stage_impulse[k]
+    if tree_data.reactions_on[0] == 1.0:
+        impulse_wrenches(tree, tree_data, lw.acc, 1.0 / h)
+
+
+@numba.njit(cache=True)
+def _is_active(lw, count, k) -> bool:  # noqa: ANN001
+    for a in range(count):
+        if lw.active[a] == k:
+            return True
+    return False
+
+
+@separately_compiled
+@numba.njit(**STEP_KERNEL)
+def tree_limits(tree, tree_data, h) -> None:  # noqa: ANN001
+    """The limits' and motors' two stages (module docstring) on the step just taken: tree_data.coord and
+    .rate in place, before the step's closing forward kinematics; the factors are its last ABA's."""
+    lw = tree_data.limits
+    m = tree.limit_index.shape[0]
+    coord, rate = tree_data.coord, tree_data.rate
+    for k in range(m):
+        lw.impulse[k] = 0.0
+        lw.value[k] = _evaluate(tree, k, coord, lw.row[k])
+    # position stage: limits beyond a bound back onto it, motors to their speed; a ball's swing and twist
+    # are not linear in the rates, so the stage repeats (simplified Newton: the same M) until they hold
+    for iteration in range(POSITION_ITERATIONS):
+        slack = 0.0 if iteration == 0 else POSITION_TOLERANCE
+        count = 0
+        for k in range(m):
+            data = tree.limit_data[k]
+            lower, upper = data[LIMIT_LOWER], data[LIMIT_UPPER]
+            if iteration > 0:
+                lw.value[k] = _evaluate(tree, k, coord, lw.row[k])
+            if tree.limit_index[k, 1] == MOTOR:
+                if iteration > 0:  # at its speed (or its cap) since the first pass
+                    continue
+                cap = data[LIMIT_CAP] * h
+                lw.target[k], lw.low[k], lw.high[k] = lower - _along(tree, k, lw.row, rate), -cap, cap
+            elif lw.value[k] < lower - slack:
+                lw.target[k], lw.low[k], lw.high[k] = (lower - lw.value[k]) / h, 0.0, math.inf
+            elif lw.value[k] > upper + slack:
+                lw.target[k], lw.low[k], lw.high[k] = (upper - lw.value[k]) / h, -math.inf, 0.0
+            else:
+                continue
+            lw.active[count] = k
+            count += 1
+        if count == 0:
+            break
+        for _ in range(m):  # until the correction pushes no other limit past its bound
+            _solve(tree, tree_data, count)
+            grown = count
+            for k in range(m):
+                if tree.limit_index[k, 1] == MOTOR or _is_active(lw, count, k):
+                    continue
+                data = tree.limit_data[k]
+                moved = lw.value[k] + h * _along(tree, k, lw.row, lw.delta)
+                if moved < data[LIMIT_LOWER]:
+                    lw.target[k], lw.low[k], lw.high[k] = (data[LIMIT_LOWER] - lw.value[k]) / h, 0.0, math.inf
+                elif moved > data[LIMIT_UPPER]:
+                    lw.target[k], lw.low[k], lw.high[k] = (data[LIMIT_UPPER] - lw.value[k]) / h, -math.inf, 0.0
+                else:
+                    continue
+                lw.active[grown] = k
+                grown += 1
+            if grown == count:
+                break
+            count = grown
+        _apply(tree, tree_data, count, h, True)
+    # velocity stage: a limit at its bound and moving out is stopped; motors keep their speed
+    count, stops = 0, 0
+    for k in range(m):
+        data = tree.limit_data[k]
+        lower, upper = data[LIMIT_LOWER], data[LIMIT_UPPER]
+        lw.value[k] = _evaluate(tree, k, coord, lw.row[k])
+        r = _along(tree, k, lw.row, rate)
+        if tree.limit_index[k, 1] == MOTOR:
+            cap = data[LIMIT_CAP] * h
+            lw.target[k], lw.low[k], lw.high[k] = lower - r, -cap - lw.impulse[k], cap - lw.impulse[k]
+        elif lw.value[k] <= lower + LIMIT_CONTACT and r < 0.0:
+            lw.target[k], lw.low[k], lw.high[k] = -r, 0.0, math.inf
+            stops += 1
+        elif lw.value[k] >= upper - LIMIT_CONTACT and r > 0.0:
+            lw.target[k], lw.low[k], lw.high[k] = -r, -math.inf, 0.0
+            stops += 1
+        else:
+            continue
+        lw.active[count] = k
+        count += 1
+    if stops > 0:
+        _solve(tree, tree_data, count)
+        _apply(tree, tree_data, count, h, False)
