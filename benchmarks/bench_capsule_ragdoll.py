@@ -41,9 +41,10 @@ SECONDS = 3.0
 TILT = math.radians(10.0)
 
 
-def run_rbsim(repeats: int) -> tuple[float, float, float, int]:
-    """(best CPU s for SECONDS, deepest sink / radius, largest joint residual [m], sub-steps a step)."""
-    sim = Simulation(SCENE, threads=1)
+def run_rbsim(repeats: int, integrator: str = "split2") -> tuple[float, float, float, int]:
+    """(best CPU s for SECONDS, deepest sink / radius, largest joint residual [m], sub-steps a step), the
+    scene run by `integrator` (split2 as shipped; reduced-euler, reduced-rk4: in joint coordinates)."""
+    sim = Simulation(SCENE, threads=1, integrator=integrator)
     sim.step(1)  # compiles (or loads) the kernels
     steps = round(SECONDS / sim.dt)
     best = math.inf
@@ -147,12 +148,17 @@ def run_mujoco(repeats: int) -> tuple[float, float, float] | None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
+    choices = "comma list: split2 (as shipped), reduced-euler, reduced-rk4"
+    parser.add_argument("--integrators", default="split2,reduced-euler", help=choices)
     options = parser.parse_args()
-    seconds, sink, gap, substeps = run_rbsim(options.repeats)
-    print(
-        f"rbsim  : {SECONDS:g} s of motion in {seconds:.2f} CPU-s (dt 1 ms x {substeps} sub-steps), deepest part "
-        f"{100 * sink:.1f} % of its radius, joint rows <= {gap:.1e} m"
-    )
+    cost = {}
+    for integrator in options.integrators.split(","):
+        seconds, sink, gap, substeps = run_rbsim(options.repeats, integrator)
+        cost[integrator] = seconds
+        print(
+            f"rbsim {integrator:13s}: {SECONDS:g} s of motion in {seconds:.2f} CPU-s (dt 1 ms x {substeps} sub-steps), "
+            f"deepest part {100 * sink:.1f} % of its radius, joint rows <= {gap:.1e} m"
+        )
     print("         targets: <= 5 CPU-s, <= 10 %, <= 1e-12 m")
     found = run_mujoco(options.repeats)
     if found is None:
@@ -163,7 +169,8 @@ def main() -> None:
             f"MuJoCo : {SECONDS:g} s of motion in {seconds_mj:.3f} CPU-s (Euler, dt {step:g} s), deepest contact "
             f"{100 * deepest:.1f} % of its part's radius"
         )
-        print(f"         rbsim / MuJoCo CPU time {seconds / seconds_mj:.1f}x")
+        for integrator, seconds in cost.items():
+            print(f"         rbsim ({integrator}) / MuJoCo CPU time {seconds / seconds_mj:.1f}x")
     print(f"load average {os.getloadavg()[0]:.2f} at the end")
 
 
