@@ -71,6 +71,7 @@ joint_record: Any = _unbound
 HOLDS_TREE = False
 tree_step: Any = _unbound
 tree_record: Any = _unbound
+tree_kick: Any = _unbound
 
 
 def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, filled):  # noqa: ANN001, ANN201
@@ -99,7 +100,11 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
         index = step0 + k
         t = index * dt
         # impulses: exact jumps of P and L at the start of the step that holds them
-        impulse_stage(model, forces, force_data, t, t + dt, x, q, P, L)
+        kicked = impulse_stage(model, forces, force_data, t, t + dt, x, q, P, L)
+        if HOLDS_TREE:
+            if kicked:
+                # tree_kick: the kicked links' momenta projected onto the trees' rates (the joints' impulsive reaction)
+                tree_kick(tree, tree_data, x, q, P, L, F, tau)
         if HOLDS_JOINTS:
             # joint_begin: velocities that break the joints (a kick, given so) projected: the exact impulsive reaction
             joint_begin(model, joint, joint_work, x, q, P, L)
@@ -178,9 +183,9 @@ def fixed_step_loop(
         "tree_step": integrator.step if reduced else _unbound,
     }
     if reduced:
-        from rbcli.physics.tree.integrate import tree_record
+        from rbcli.physics.tree.integrate import tree_kick, tree_record
 
-        bound["tree_record"] = tree_record
+        bound.update(tree_record=tree_record, tree_kick=tree_kick)
     if joints:
         from rbcli.physics.joints import rattle, stages
 

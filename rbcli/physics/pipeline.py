@@ -9,6 +9,8 @@ in the sub-step loop and which only some integrators run), so the list and the l
 A step from grid index n (t = n dt) to n + 1 runs, in this order:
 
     impulses        exact jumps P += J, L += r x J of the impulses due in [t, t + dt)  (forces/impulse.py)
+    tree_kick       (reduced-euler, reduced-rk4) after an impulse: the links' momenta projected onto the
+                    trees' rates, M rate = J^T h: the joints' exact impulsive reaction (tree/integrate.py)
     joint_begin     (split2, scenes with joints) velocities that break the joints' rows (a kick, initial
                     velocities given so) projected onto G V = 0: the exact impulsive reaction
     then data.substeps times (1 unless contact sub-stepping is on), over [ts, ts + h), h = dt / substeps:
@@ -80,6 +82,8 @@ class Stage(NamedTuple):
 STEP_STAGES: tuple[Stage, ...] = (
     Stage("impulses", "exact jumps of P and L at the start of the step that holds them",
           "impulse_stage", "impulse_stage"),
+    Stage("tree_kick", "the kicked links' momenta projected onto the trees' rates (the joints' impulsive reaction)",
+          "tree_kick", None, only="tree"),
     Stage("joint_begin", "velocities that break the joints (a kick, given so) projected: the exact impulsive reaction",
           "joint_begin", None, only="joints"),
     Stage("contact_begin", "the contact springs measure time from the start of this (sub-)step",

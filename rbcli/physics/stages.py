@@ -31,19 +31,21 @@ from rbcli.physics.forces.schedule import SCHEDULE_STEP_FLOOR
 from rbcli.physics.kinematic import kinematic_begin, kinematic_end
 
 
-def impulse_stage(model, forces, force_data, t_prev, t_next, x, q, P, L) -> None:  # noqa: ANN001
-    """The impulses due in [t_prev, t_next) (forces/impulse.py) when the scene has any."""
+def impulse_stage(model, forces, force_data, t_prev, t_next, x, q, P, L) -> int:  # noqa: ANN001
+    """The impulses due in [t_prev, t_next) (forces/impulse.py) when the scene has any; how many."""
     kernel_only()
+    return 0
 
 
 @overload(impulse_stage, jit_options=DISPATCH_OPTIONS)
 def _impulse_stage(model, forces, force_data, t_prev, t_next, x, q, P, L):  # noqa: ANN001, ANN202
     if absent(member(forces, "impulse")):
-        return lambda model, forces, force_data, t_prev, t_next, x, q, P, L: None
+        return lambda model, forces, force_data, t_prev, t_next, x, q, P, L: 0
 
     def run(model, forces, force_data, t_prev, t_next, x, q, P, L):  # noqa: ANN001, ANN202
         if forces.impulse.body.shape[0]:
-            apply_impulses(model, forces, force_data, t_prev, t_next, x, q, P, L)
+            return apply_impulses(model, forces, force_data, t_prev, t_next, x, q, P, L)
+        return 0
 
     return run
 

@@ -169,8 +169,7 @@ def _trees(simulated: SceneSpec, base: CompiledModel):  # noqa: ANN202 - TreeTab
     the scene."""
     from rbcli.scene.compile_trees import compile_trees
 
-    impulses = sorted(set(base.forces.impulse.body.tolist()))
-    return compile_trees(base.model, base.initial_state, simulated.bodies, simulated.joints, impulses)
+    return compile_trees(base.model, base.initial_state, simulated.bodies, simulated.joints)
 
 
 def compile_model(spec: SceneSpec, *, merge_welds: bool = True) -> CompiledModel:

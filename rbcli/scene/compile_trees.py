@@ -9,7 +9,7 @@ vertex, "the ground") splits into components:
 - a body no joint holds is a one-link tree on a free joint.
 A component with more joints than a tree has (a loop, or two joints to the ground) is refused at the
 joint that closes the loop: loops stay with the maximal integrators (split2 and RATTLE). So are what the
-trees do not model yet: distance joints, kinematic bodies in a tree, impulses on links. A joint's damper
+trees do not model yet: distance joints, kinematic bodies in a tree. A joint's damper
 becomes a damper on each of its rates (integrate.py); its limits, cone and motor become rows on its
 coordinate (physics/tree/limits.py, `_limit_rows`). Links are numbered breadth
 first from each root, so parents come first.
@@ -67,12 +67,10 @@ def compile_trees(
     state: State,
     bodies: Sequence[BodySpec],
     joints: Sequence[JointSpec],
-    impulse_bodies: Sequence[int] = (),
 ) -> TreeTable:
     """The TreeTable of the scene compiled as `model` (its JointTable, None without joints), at its initial
     state; `bodies` and `joints` are the simulated scene's (welds merged), in the model's order, for the
-    errors' locations. impulse_bodies: bodies an impulse acts on (refused on links). SceneError lists
-    every joint refused."""
+    errors' locations. SceneError lists every joint refused."""
     table = model.joint
     static = np.array([b.static for b in bodies], dtype=bool)
     kinematic = np.array([b.kinematic for b in bodies], dtype=bool)
@@ -97,10 +95,6 @@ def compile_trees(
         else:
             usable.append(j)
     n_bodies = model.body_count
-    for b in impulse_bodies:
-        if not (static[b] or kinematic[b]):
-            issues.append(SceneIssue(bodies[b].location, f"body '{bodies[b].name}': impulses on a body in joint "
-                                     f"coordinates ({REDUCED}) are not modelled yet", MAXIMAL))  # fmt: skip
     if issues:
         raise SceneError(issues)
 

@@ -54,11 +54,11 @@ def _names(calls: list[ast.Call]) -> list[str]:
 
 
 def test_stage_list_is_impulses_contact_update_record():
-    names = ["impulses", "joint_begin", "contact_begin", "kinematic_begin", "joint_update", "tree_update", "update",
-             "kinematic_end", "joint_velocity", "contact_commit", "materialise", "contact_record",
-             "joint_record", "tree_record", "record"]  # fmt: skip
+    names = ["impulses", "tree_kick", "joint_begin", "contact_begin", "kinematic_begin", "joint_update",
+             "tree_update", "update", "kinematic_end", "joint_velocity", "contact_commit", "materialise",
+             "contact_record", "joint_record", "tree_record", "record"]  # fmt: skip
     assert [stage.name for stage in STEP_STAGES] == names
-    assert [stage.name for stage in STEP_STAGES if stage.substep] == names[2:10]
+    assert [stage.name for stage in STEP_STAGES if stage.substep] == names[3:11]
     # materialise belongs to exact's loop alone (it writes the states exact defers), the joint stages to
     # split2's (the one integrator that holds joints: integrators.check_integrator); neither to the
     # adaptive loop (joints refuse a tolerance, dopri5 defers nothing)
@@ -66,10 +66,19 @@ def test_stage_list_is_impulses_contact_update_record():
     assert {stage.name: stage.only for stage in STEP_STAGES if stage.only} == {
         **dict.fromkeys(joint_stages, "joints"),
         "materialise": "defers",
+        "tree_kick": "tree",
         "tree_update": "tree",
         "tree_record": "tree",
     }
-    fixed_only = [*joint_stages[:2], "tree_update", joint_stages[2], "materialise", "joint_record", "tree_record"]
+    fixed_only = [
+        "tree_kick",
+        *joint_stages[:2],
+        "tree_update",
+        joint_stages[2],
+        "materialise",
+        "joint_record",
+        "tree_record",
+    ]
     assert [stage.name for stage in STEP_STAGES if stage.adaptive is None] == fixed_only
     assert all(stage.fixed for stage in STEP_STAGES)
     assert [name for name, info in INTEGRATORS.items() if info.joints] == ["split2"]

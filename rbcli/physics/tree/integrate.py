@@ -41,7 +41,7 @@ from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.step import STEP_ENTRY, STEP_KERNEL
 from rbcli.physics.tree.aba import forward_kinematics, tree_accelerations
 from rbcli.physics.tree.flow import advance_coords, coord_rate, normalise_quaternions
-from rbcli.physics.tree.limits import tree_limits
+from rbcli.physics.tree.limits import tree_limits, tree_response
 from rbcli.physics.tree.reactions import joint_wrenches
 
 kernel_cache.install()
@@ -193,3 +193,32 @@ def generalized_momentum(tree, work, P, L, out) -> None:  # noqa: ANN001
             H[p, 3] += H[i, 3]
             H[p, 4] += H[i, 4]
             H[p, 5] += H[i, 5]
+
+
+@separately_compiled
+@numba.njit(**STEP_KERNEL)
+def tree_kick(tree, tree_data, x, q, P, L, F, tau) -> None:  # noqa: ANN001
+    """After impulses changed some links' P, L (the impulses stage): the rates the joints allow closest in
+    kinetic energy, M rate = J^T h with h the links' momenta now, the joints' exact impulsive reaction (as
+    coordinates.py sets the start, and as the maximal joints' joint_begin projects a kick); then the state
+    arrays rewritten by forward kinematics. M at the coordinates now: one ABA refreshes its factors (no
+    armature: a kick takes no time, so no damper acts in it; F, tau only feed ABA's bias, unused here)."""
+    work, lw = tree_data.work, tree_data.limits
+    coord, rate = tree_data.coord, tree_data.rate
+    if tree_data.fk_state[0] != 1.0:  # the kinematics ABA reads, keeping the kicked momenta (lw.acc: scratch)
+        for i in range(tree.parent.shape[0]):
+            b = tree.body[i]
+            for k in range(3):
+                lw.acc[i, k], lw.acc[i, 3 + k] = P[b, k], L[b, k]
+        forward_kinematics(tree, coord, rate, work, x, q, P, L)
+        for i in range(tree.parent.shape[0]):
+            b = tree.body[i]
+            for k in range(3):
+                P[b, k], L[b, k] = lw.acc[i, k], lw.acc[i, 3 + k]
+    for k in range(rate.shape[0]):
+        work.armature[k] = 0.0
+    tree_accelerations(tree, work, F, tau, tree_data.joint_force, tree_data.qdd)
+    generalized_momentum(tree, work, P, L, lw.tau)
+    tree_response(tree, work, lw.tau, rate, lw.force, lw.u, lw.acc)
+    forward_kinematics(tree, coord, rate, work, x, q, P, L)
+    tree_data.fk_state[0] = 1.0
