@@ -275,3 +275,34 @@ def _cone(value: dict[str, Any], path: YamlPath, issues: IssueCollector) -> Join
     if issues.error_count > before or axis is None or reference is None:
         return None
     return JointCone(_frozen(axis, (3,)), _frozen(reference, (3,)), swing, twist)
+
+
+def joints_form_trees(bodies: Sequence[Any], joints: Sequence[JointSpec], limit_rows: int) -> bool:
+    """Whether the scene's joints can run in joint coordinates (scene/compile_trees.py holds them): no
+    distance joint, no kinematic body at either end, no loop (static bodies and the world are one vertex,
+    the ground: two joints to it close a loop), at most `limit_rows` limit and motor rows (counted two per
+    joint that has limits, a cone or a motor: a bound above the table's). Decided on the scene's names
+    alone, before compiling: a loop of welds alone (merged into one body when compiled) counts as a loop,
+    so a scene this accepts always compiles to trees. bodies: BodySpec (name, static, kinematic)."""
+    ground = {WORLD_NAME} | {b.name for b in bodies if b.static}
+    kinematic = {b.name for b in bodies if b.kinematic}
+    root = {b.name: b.name for b in bodies}
+    root[WORLD_NAME] = WORLD_NAME
+
+    def find(name: str) -> str:
+        name = WORLD_NAME if name in ground else name
+        while root[name] != name:
+            root[name] = root[root[name]]
+            name = root[name]
+        return name
+
+    rows = 0
+    for joint in joints:
+        if joint.kind == "distance" or kinematic.intersection(joint.bodies):
+            return False
+        a, b = find(joint.bodies[0]), find(joint.bodies[1])
+        if a == b:
+            return False
+        root[a] = b
+        rows += 2 if (joint.limits is not None or joint.motor is not None or joint.cone is not None) else 0
+    return rows <= limit_rows

@@ -15,7 +15,7 @@ import os
 from dataclasses import replace
 from functools import cache
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -43,6 +43,9 @@ from rbcli.scene.yaml_located import (
     parse_located_yaml,
 )
 
+if TYPE_CHECKING:
+    from rbcli.scene.joint_spec import JointSpec
+
 # alternatives: a body that gives one of a group replaces whatever `defaults` gives from that group
 EXCLUSIVE_GROUPS = (
     ("particles", "shape", "mesh", "compound"),
@@ -58,7 +61,11 @@ GENERATORS = ("grid", "random", "chain")
 # the integrator of a scene with contact that names none (euler-matrix, the tutorial's, warns with contact)
 CONTACT_DEFAULT_INTEGRATOR = "split2"
 
-# the integrator of a scene with joints that names none: split2 is the one that holds them (docs/joints.md)
+# the integrator of a scene with joints that names none (nor its coordinates): where the joints form trees,
+# reduced-rk4 in joint coordinates, which `rbsim study` shows cheaper than split2 at every accuracy
+# measured (docs/trees.md, "Which integrator a jointed scene gets"); else split2, the maximal integrator
+# that holds loops and distance joints (docs/joints.md)
+TREES_DEFAULT_INTEGRATOR = "reduced-rk4"
 JOINTS_DEFAULT_INTEGRATOR = "split2"
 
 # the integrator of a scene in joint coordinates (`coordinates: reduced`) that names none: fourth order,
@@ -199,7 +206,7 @@ def _analyse(
         joints += joints_from_list(data["joints"], names, issues, clean, taken=chain_joint_names)
     if joints and simulation is not None:
         if "integrator" not in data["simulation"] and simulation.coordinates != "reduced":  # the one that holds them
-            simulation = replace(simulation, integrator=JOINTS_DEFAULT_INTEGRATOR)
+            simulation = replace(simulation, integrator=_joints_default(data["simulation"], bodies, joints))
         if any(joint.kind != "fixed" for joint in joints):  # welds are merged bodies (scene/welds.py)
             _check_joint_integrator(data["simulation"], simulation, issues)
     if issues.error_count or simulation is None:
@@ -278,6 +285,18 @@ def _warn_materials_without_contact(entries: list[Any], issues: IssueCollector) 
         issues.add(path, f"body '{name}': a material does nothing in a scene without `contact:` (no body collides)",
                    "a `contact:` section (docs/contact.md), or no material", key=True, severity="warning",
                    dedupe_key="material without contact")  # fmt: skip
+
+
+def _joints_default(written: dict[str, Any], bodies: list[BodySpec], joints: list[JointSpec]) -> str:
+    """The integrator of a jointed scene that names none: reduced-rk4 where its joints (other than welds,
+    which are merged bodies) form trees and it does not say `coordinates: maximal`, else split2."""
+    from rbcli.physics.tree.table import MAX_LIMIT_ROWS
+    from rbcli.scene.joint_spec import joints_form_trees
+
+    moving = any(joint.kind != "fixed" for joint in joints)
+    if moving and "coordinates" not in written and joints_form_trees(bodies, joints, MAX_LIMIT_ROWS):
+        return TREES_DEFAULT_INTEGRATOR
+    return JOINTS_DEFAULT_INTEGRATOR
 
 
 def _check_joint_integrator(written: dict[str, Any], simulation: SimulationSpec, issues: IssueCollector) -> None:
