@@ -205,6 +205,7 @@ def main() -> None:
     parser.add_argument("--integrators", default="all", help="with --cold: free-body rows per integrator")
     parser.add_argument("--top", type=int, default=8, help="with --cold: functions listed per kind")
     parser.add_argument("--json", type=Path, default=None, help="with --cold: every record, as JSON")
+    parser.add_argument("--only", default="", help="with --cold: the kinds whose label contains this")
     args = parser.parse_args()
     if args.cold:
         sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -213,7 +214,7 @@ def main() -> None:
         from rbcli.physics.integrators import INTEGRATORS
 
         names = list(INTEGRATORS) if args.integrators == "all" else [n for n in args.integrators.split(",") if n]
-        startup_kinds.measure(names, args.top, args.json)
+        startup_kinds.measure(names, args.top, args.json, args.only)
         return
 
     load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3

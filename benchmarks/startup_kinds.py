@@ -108,25 +108,28 @@ def run_scene(scene: Path, cache: Path, workdir: Path) -> FirstRun:
     return FirstRun(cpu=data["cpu"], compiled=[tuple(c) for c in data["compiled"]], llvm=data["llvm"])
 
 
-def kinds(integrators: list[str]) -> list[tuple[str, str]]:
-    """(label, scene text): the five kinds on split2, then the free body under each other integrator."""
+def kinds(integrators: list[str], only: str = "") -> list[tuple[str, str]]:
+    """(label, scene text): the five kinds on split2, the jointed ones as the scene format runs them when
+    they name no integrator (trees: reduced-rk4, docs/trees.md), then the free body under each other
+    integrator; only: the rows whose label contains it."""
     rows = [(kind, kind_scene(kind, "split2")) for kind in SCENES]
+    rows += [(f"{kind}, default", kind_scene(kind)) for kind in ("joints", "joints+contact")]
     rows += [(f"free, {name}", kind_scene("free", name)) for name in integrators if name != "split2"]
-    return rows
+    return [row for row in rows if only in row[0]]
 
 
 def short_types(args: str, width: int = 60) -> str:
     return args if len(args) <= width else args[: width - 3] + "..."
 
 
-def measure(integrators: list[str], top: int, json_out: Path | None) -> None:
+def measure(integrators: list[str], top: int, json_out: Path | None, only: str = "") -> None:
     load = os.getloadavg()[0]
     print(f"First runs per kind of scene (CPU s of the process; load average {load:.1f} on "
           f"{os.cpu_count()} cores)")  # fmt: skip
     results = {}
     with tempfile.TemporaryDirectory(prefix="rbsim-startup-") as folder:
         work = Path(folder)
-        rows = kinds(integrators)
+        rows = kinds(integrators, only)
         scenes = []
         for index, (label, text) in enumerate(rows):
             scene = work / f"kind{index}.yaml"

@@ -13,7 +13,8 @@ it, so the kind that reuses the others' stages (joints with contact) starts last
 from __future__ import annotations
 
 # Short scenes of each kind; `{integrator}` is the `integrator:` entry of `simulation:` (", integrator:
-# NAME", or "" for the scene format's default: euler-matrix, or split2 with contact or joints)
+# NAME", or "" for the scene format's default: euler-matrix, split2 with contact, reduced-rk4 with joints
+# that form trees, as both jointed kinds' do)
 KIND_SCENES: dict[str, str] = {
     "free": """\
 name: free-cloud

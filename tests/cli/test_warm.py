@@ -61,12 +61,14 @@ def test_an_invalid_scene_is_refused_before_anything_compiles(tmp_path):
 
 def test_the_kinds_are_scenes_of_those_kinds():
     """What `rbsim warm` without a scene prepares: each kind loads, with the scene format's default
-    integrator (euler-matrix, or split2 with contact or joints), and is the kind it is named after."""
+    integrator (euler-matrix, split2 with contact, reduced-rk4 with joints: the kinds' chains are trees),
+    and is the kind it is named after."""
     assert sorted(KIND_ORDER) == sorted(KIND_SCENES) and KIND_ORDER[-1] == "joints+contact"
     for kind in KIND_ORDER:
         spec = load_scene_text(kind_scene(kind))
         has = {"contact": spec.contact is not None, "joints": bool(spec.joints), "forces": bool(spec.forces)}
         assert has["contact"] == ("contact" in kind) and has["joints"] == ("joints" in kind), kind
         assert has["forces"] == (kind == "forces"), kind
-        assert spec.simulation.integrator == ("split2" if has["contact"] or has["joints"] else "euler-matrix"), kind
+        default = "reduced-rk4" if has["joints"] else ("split2" if has["contact"] else "euler-matrix")
+        assert spec.simulation.integrator == default, kind
     assert load_scene_text(kind_scene("free", "rk4")).simulation.integrator == "rk4"

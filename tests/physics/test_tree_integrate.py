@@ -190,7 +190,8 @@ def test_joint_coordinates_are_read_and_written_by_joint_name():
 
 def test_a_scene_says_it_runs_in_joint_coordinates():
     """`simulation: {coordinates: reduced}` without an integrator runs reduced-rk4; with a maximal integrator
-    it is a located error, and so is an override to one; the default, maximal, stays split2 for joints."""
+    it is a located error, and so is an override to one; a tree that names no integrator runs reduced-rk4,
+    one that says `coordinates: maximal` split2."""
     theta0 = math.radians(10.0)
     text = pendulum_text(theta0, 1e-3)  # names split2
     reduced = text.replace("integrator: split2}", "coordinates: reduced}")
@@ -204,7 +205,10 @@ def test_a_scene_says_it_runs_in_joint_coordinates():
     assert message.startswith("<string>:3:") and "integrator 'split2' runs in maximal coordinates" in message
     with pytest.raises(ValueError, match="integrator='split2': the scene runs in joint coordinates"):
         Simulation(load_scene_text(reduced), integrator="split2")
-    assert Simulation(load_scene_text(text.replace("integrator: split2}", "}"))).settings.integrator == "split2"
+    named_none = text.replace("integrator: split2}", "}")  # a tree: reduced-rk4 unless the scene says maximal
+    assert Simulation(load_scene_text(named_none)).settings.integrator == "reduced-rk4"
+    maximal = text.replace("integrator: split2}", "coordinates: maximal}")
+    assert Simulation(load_scene_text(maximal)).settings.integrator == "split2"
 
 
 def _limitless_ragdoll(substeps: int) -> str:

@@ -196,9 +196,22 @@ def test_an_integrator_that_does_not_hold_joints_is_refused_naming_the_ones_that
     assert at(issue) == (1, col(scene.splitlines()[0], integrator))
 
 
-def test_a_joint_scene_defaults_to_split2_and_refuses_a_tolerance():
-    spec = load_scene_text(SCENE + "  - {type: ball, bodies: [upper, world], anchor: [0, 0, 1]}\n")
-    assert spec.simulation.integrator == "split2"
+def test_a_joint_scene_defaults_to_its_family_s_integrator_and_refuses_a_tolerance():
+    """Joints that form trees run reduced-rk4 unless the scene says maximal; a loop, a distance joint or a
+    kinematic body in a joint keeps split2 (docs/trees.md, "Which integrator a jointed scene gets")."""
+    ball = "  - {type: ball, bodies: [upper, world], anchor: [0, 0, 1]}\n"
+    assert load_scene_text(SCENE + ball).simulation.integrator == "reduced-rk4"
+    maximal = SCENE.replace("duration: 0.01}", "duration: 0.01, coordinates: maximal}")
+    assert load_scene_text(maximal + ball).simulation.integrator == "split2"
+    elbow = "  - {type: ball, bodies: [lower, upper], anchor: [0, 0, -0.5]}\n"
+    assert load_scene_text(SCENE + ball + elbow).simulation.integrator == "reduced-rk4"
+    loop = "  - {type: ball, bodies: [lower, world], anchor: [0, 0, -1.5]}\n"
+    assert load_scene_text(SCENE + ball + elbow + loop).simulation.integrator == "split2"
+    rod = "  - {type: distance, bodies: [lower, upper], anchors: [[0, 0, 0], [0, 0, 0]]}\n"
+    assert load_scene_text(SCENE + ball + rod).simulation.integrator == "split2"
+    kinematic = SCENE.replace("    position: [0, 0, 0.5]\n", "    position: [0, 0, 0.5]\n    kinematic: true\n")
+    kinematic = kinematic.replace("bodies:\n", "contact: {}\nbodies:\n", 1)
+    assert load_scene_text(kinematic + elbow).simulation.integrator == "split2"
     scene = SCENE.replace("duration: 0.01}", "duration: 0.01, integrator: dopri5, tolerance: 1e-6}")
     issue = the_error(issues_of("  - {type: ball, bodies: [upper, world], anchor: [0, 0, 1]}\n", scene), "fixed step")
     assert issue.location is not None and issue.location.line == 1
