@@ -104,7 +104,7 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
         if HOLDS_TREE:
             if kicked:
                 # tree_kick: the kicked links' momenta projected onto the trees' rates (the joints' impulsive reaction)
-                tree_kick(tree, tree_data, x, q, P, L, F, tau)
+                tree_kick(forces, tree, tree_data, x, q, P, L, F, tau)
         if HOLDS_JOINTS:
             # joint_begin: velocities that break the joints (a kick, given so) projected: the exact impulsive reaction
             joint_begin(model, joint, joint_work, x, q, P, L)
@@ -183,9 +183,9 @@ def fixed_step_loop(
         "tree_step": integrator.step if reduced else _unbound,
     }
     if reduced:
-        from rbcli.physics.tree.integrate import tree_kick, tree_record
+        from rbcli.physics.tree.integrate import tree_kick_stage, tree_record
 
-        bound.update(tree_record=tree_record, tree_kick=tree_kick)
+        bound.update(tree_record=tree_record, tree_kick=tree_kick_stage)
     if joints:
         from rbcli.physics.joints import rattle, stages
 

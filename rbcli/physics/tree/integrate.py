@@ -33,15 +33,17 @@ from __future__ import annotations
 import math
 
 import numba
+from numba.extending import overload
 
 from rbcli.physics import kernel_cache
+from rbcli.physics.dispatch import DISPATCH_OPTIONS, absent, kernel_only, member
 from rbcli.physics.forces.wrench import accumulate_wrench
 from rbcli.physics.joints.tables import JOINT_BALL
 from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.step import STEP_ENTRY, STEP_KERNEL
 from rbcli.physics.tree.aba import forward_kinematics, tree_accelerations
 from rbcli.physics.tree.flow import advance_coords, coord_rate, normalise_quaternions
-from rbcli.physics.tree.limits import tree_limits, tree_response
+from rbcli.physics.tree.limits import limit_stage, tree_response
 from rbcli.physics.tree.reactions import joint_wrenches
 
 kernel_cache.install()
@@ -104,8 +106,8 @@ def step_euler(model, forces, contact, force_data, tree, tree_data, t, h, x, q, 
     for k in range(rate.shape[0]):
         rate[k] += h * qdd[k]
     advance_coords(tree, coord, rate, h)
-    if tree.limit_index.shape[0] > 0:  # the limits' and motors' impulses, with this step's ABA (limits.py)
-        tree_limits(tree, tree_data, h)
+    # the limits' and motors' impulses, with this step's ABA (limits.py; nothing where the tree has none)
+    limit_stage(tree.limits, tree, tree_data, h)
     forward_kinematics(tree, coord, rate, work, x, q, P, L)
     tree_data.fk_state[0] = 1.0
 
@@ -154,8 +156,7 @@ def step_rk4(model, forces, contact, force_data, tree, tree_data, t, h, x, q, P,
     for k in range(nd):
         rate[k] = rate0[k] + sixth * rate_sum[k]
     normalise_quaternions(tree, coord)
-    if tree.limit_index.shape[0] > 0:  # after the smooth step, with its last ABA (limits.py)
-        tree_limits(tree, tree_data, h)
+    limit_stage(tree.limits, tree, tree_data, h)  # after the smooth step, with its last ABA (limits.py)
     forward_kinematics(tree, coord, rate, tree_data.work, x, q, P, L)
     tree_data.fk_state[0] = 1.0
 
@@ -203,22 +204,38 @@ def tree_kick(tree, tree_data, x, q, P, L, F, tau) -> None:  # noqa: ANN001
     coordinates.py sets the start, and as the maximal joints' joint_begin projects a kick); then the state
     arrays rewritten by forward kinematics. M at the coordinates now: one ABA refreshes its factors (no
     armature: a kick takes no time, so no damper acts in it; F, tau only feed ABA's bias, unused here)."""
-    work, lw = tree_data.work, tree_data.limits
+    work, rw = tree_data.work, tree_data.response
     coord, rate = tree_data.coord, tree_data.rate
-    if tree_data.fk_state[0] != 1.0:  # the kinematics ABA reads, keeping the kicked momenta (lw.acc: scratch)
+    if tree_data.fk_state[0] != 1.0:  # the kinematics ABA reads, keeping the kicked momenta (rw.acc: scratch)
         for i in range(tree.parent.shape[0]):
             b = tree.body[i]
             for k in range(3):
-                lw.acc[i, k], lw.acc[i, 3 + k] = P[b, k], L[b, k]
+                rw.acc[i, k], rw.acc[i, 3 + k] = P[b, k], L[b, k]
         forward_kinematics(tree, coord, rate, work, x, q, P, L)
         for i in range(tree.parent.shape[0]):
             b = tree.body[i]
             for k in range(3):
-                P[b, k], L[b, k] = lw.acc[i, k], lw.acc[i, 3 + k]
+                P[b, k], L[b, k] = rw.acc[i, k], rw.acc[i, 3 + k]
     for k in range(rate.shape[0]):
         work.armature[k] = 0.0
     tree_accelerations(tree, work, F, tau, tree_data.joint_force, tree_data.qdd)
-    generalized_momentum(tree, work, P, L, lw.tau)
-    tree_response(tree, work, lw.tau, rate, lw.force, lw.u, lw.acc)
+    generalized_momentum(tree, work, P, L, rw.tau)
+    tree_response(tree, work, rw.tau, rate, rw.force, rw.u, rw.acc)
     forward_kinematics(tree, coord, rate, work, x, q, P, L)
     tree_data.fk_state[0] = 1.0
+
+
+def tree_kick_stage(forces, tree, tree_data, x, q, P, L, F, tau) -> None:  # noqa: ANN001
+    """tree_kick where the scene has impulses; compiled to nothing where it has none (physics/dispatch.py)."""
+    kernel_only()
+
+
+@overload(tree_kick_stage, jit_options=DISPATCH_OPTIONS)
+def _tree_kick_stage(forces, tree, tree_data, x, q, P, L, F, tau):  # noqa: ANN001, ANN202
+    if absent(member(forces, "impulse")):
+        return lambda forces, tree, tree_data, x, q, P, L, F, tau: None
+
+    def run(forces, tree, tree_data, x, q, P, L, F, tau):  # noqa: ANN001, ANN202
+        tree_kick(tree, tree_data, x, q, P, L, F, tau)
+
+    return run

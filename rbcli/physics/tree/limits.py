@@ -1,6 +1,6 @@
 """Joint limits and velocity motors in joint coordinates: impulses on the rates, solved together.
 
-What a row acts on (TreeTable.limit_index, limit_data; scene/compile_trees.py builds them from the
+What a row acts on (TreeTable.limits; scene/compile_trees.py builds them from the
 joints' limits, cones and motors):
 - LIMIT_COORD: a hinge's angle or a slider's travel, the coordinate itself, between two bounds;
 - LIMIT_TWIST, LIMIT_SWING: a ball joint's twist angle between bounds and its swing measure below 1, the
@@ -42,8 +42,10 @@ from __future__ import annotations
 import math
 
 import numba
+from numba.extending import overload
 
 from rbcli.physics import kernel_cache
+from rbcli.physics.dispatch import DISPATCH_OPTIONS, absent, kernel_only
 from rbcli.physics.joints.cone import swing_measure_row, twist_angle_row
 from rbcli.physics.joints.drives import LIMIT_CONTACT
 from rbcli.physics.joints.rows import quaternion_product
@@ -187,12 +189,12 @@ def tree_response(tree, work, tau, delta, force, u, acc) -> None:  # noqa: ANN00
 def _evaluate(tree, k, coord, row):  # noqa: ANN001, ANN202
     """Row k's coordinate at `coord` (a motor's: its coordinate, unused) and its row j over its link's
     rates into row (3,) (the module docstring)."""
-    link, kind = tree.limit_index[k, 0], tree.limit_index[k, 1]
+    link, kind = tree.limits.link_kind[k, 0], tree.limits.link_kind[k, 1]
     c0 = tree.coord_start[link]
     if kind == LIMIT_COORD or kind == MOTOR:
         row[0], row[1], row[2] = 1.0, 0.0, 0.0
         return coord[c0]
-    data = tree.limit_data[k]
+    data = tree.limits.data[k]
     side = data[LIMIT_SIDE]
     uw, ux, uy, uz = coord[c0], coord[c0 + 1], coord[c0 + 2], coord[c0 + 3]
     if side < 0.0:
@@ -218,7 +220,7 @@ def _evaluate(tree, k, coord, row):  # noqa: ANN001, ANN202
 @numba.njit(cache=True, inline="always")
 def _along(tree, k, row, vector) -> float:  # noqa: ANN001
     """j_k . vector over row k's link's rates."""
-    link = tree.limit_index[k, 0]
+    link = tree.limits.link_kind[k, 0]
     d0, d1 = tree.dof_start[link], tree.dof_start[link + 1]
     total = 0.0
     for e in range(d1 - d0):
@@ -229,17 +231,17 @@ def _along(tree, k, row, vector) -> float:  # noqa: ANN001
 @numba.njit(cache=True)
 def _respond(tree, tree_data, count) -> None:  # noqa: ANN001
     """lw.delta = M^-1 J^T lambda for the first `count` active rows' lambda (lw.stage_impulse)."""
-    lw = tree_data.limits
-    tau = lw.tau
+    lw, rw = tree_data.limits, tree_data.response
+    tau = rw.tau
     for d in range(tau.shape[0]):
         tau[d] = 0.0
     for a in range(count):
         k = lw.active[a]
-        link = tree.limit_index[k, 0]
+        link = tree.limits.link_kind[k, 0]
         d0, d1 = tree.dof_start[link], tree.dof_start[link + 1]
         for e in range(d1 - d0):
             tau[d0 + e] += lw.row[k, e] * lw.stage_impulse[k]
-    tree_response(tree, tree_data.work, tau, lw.delta, lw.force, lw.u, lw.acc)
+    tree_response(tree, tree_data.work, tau, rw.delta, rw.force, rw.u, rw.acc)
 
 
 @numba.njit(cache=True)
@@ -247,19 +249,19 @@ def _solve(tree, tree_data, count) -> None:  # noqa: ANN001
     """lambda (lw.stage_impulse) of the first `count` active rows: A lambda = target within [low, high]
     by projected Gauss-Seidel on the dense A = J M^-1 J^T (one response pass per row), then lw.delta =
     M^-1 J^T lambda."""
-    lw = tree_data.limits
-    A, tau = lw.delassus, lw.tau
+    lw, rw = tree_data.limits, tree_data.response
+    A, tau = lw.delassus, rw.tau
     for a in range(count):
         for d in range(tau.shape[0]):
             tau[d] = 0.0
         k = lw.active[a]
-        link = tree.limit_index[k, 0]
+        link = tree.limits.link_kind[k, 0]
         d0, d1 = tree.dof_start[link], tree.dof_start[link + 1]
         for e in range(d1 - d0):
             tau[d0 + e] = lw.row[k, e]
-        tree_response(tree, tree_data.work, tau, lw.delta, lw.force, lw.u, lw.acc)
+        tree_response(tree, tree_data.work, tau, rw.delta, rw.force, rw.u, rw.acc)
         for b in range(count):
-            A[b, a] = _along(tree, lw.active[b], lw.row, lw.delta)
+            A[b, a] = _along(tree, lw.active[b], lw.row, rw.delta)
     lam = lw.stage_impulse
     for a in range(count):
         lam[lw.active[a]] = 0.0
@@ -285,17 +287,17 @@ def _solve(tree, tree_data, count) -> None:  # noqa: ANN001
 def _apply(tree, tree_data, count, h, move) -> None:  # noqa: ANN001
     """rate += delta (and coord moved by h delta when `move`), lambda into lw.impulse, and the impulse's
     share of the reactions while they are recorded."""
-    lw = tree_data.limits
+    lw, rw = tree_data.limits, tree_data.response
     rate = tree_data.rate
     for d in range(rate.shape[0]):
-        rate[d] += lw.delta[d]
+        rate[d] += rw.delta[d]
     if move:
-        advance_coords(tree, tree_data.coord, lw.delta, h)
+        advance_coords(tree, tree_data.coord, rw.delta, h)
     for a in range(count):
         k = lw.active[a]
         lw.impulse[k] += lw.stage_impulse[k]
     if tree_data.reactions_on[0] == 1.0:
-        impulse_wrenches(tree, tree_data, lw.acc, 1.0 / h)
+        impulse_wrenches(tree, tree_data, rw.acc, 1.0 / h)
 
 
 @numba.njit(cache=True)
@@ -306,13 +308,30 @@ def _is_active(lw, count, k) -> bool:  # noqa: ANN001
     return False
 
 
+def limit_stage(limits, tree, tree_data, h) -> None:  # noqa: ANN001
+    """The limits' stages (tree_limits) where the tree has limits; compiled to nothing where it has none
+    (limits: the tree table's, None then: physics/dispatch.py)."""
+    kernel_only()
+
+
+@overload(limit_stage, jit_options=DISPATCH_OPTIONS)
+def _limit_stage(limits, tree, tree_data, h):  # noqa: ANN001, ANN202
+    if absent(limits):
+        return lambda limits, tree, tree_data, h: None
+
+    def run(limits, tree, tree_data, h):  # noqa: ANN001, ANN202
+        tree_limits(tree, tree_data, h)
+
+    return run
+
+
 @separately_compiled
 @numba.njit(**STEP_KERNEL)
 def tree_limits(tree, tree_data, h) -> None:  # noqa: ANN001
     """The limits' and motors' two stages (module docstring) on the step just taken: tree_data.coord and
     .rate in place, before the step's closing forward kinematics; the factors are its last ABA's."""
     lw = tree_data.limits
-    m = tree.limit_index.shape[0]
+    m = tree.limits.link_kind.shape[0]
     coord, rate = tree_data.coord, tree_data.rate
     for k in range(m):
         lw.impulse[k] = 0.0
@@ -323,11 +342,11 @@ def tree_limits(tree, tree_data, h) -> None:  # noqa: ANN001
         slack = 0.0 if iteration == 0 else POSITION_TOLERANCE
         count = 0
         for k in range(m):
-            data = tree.limit_data[k]
+            data = tree.limits.data[k]
             lower, upper = data[LIMIT_LOWER], data[LIMIT_UPPER]
             if iteration > 0:
                 lw.value[k] = _evaluate(tree, k, coord, lw.row[k])
-            if tree.limit_index[k, 1] == MOTOR:
+            if tree.limits.link_kind[k, 1] == MOTOR:
                 if iteration > 0:  # at its speed (or its cap) since the first pass
                     continue
                 cap = data[LIMIT_CAP] * h
@@ -346,10 +365,10 @@ def tree_limits(tree, tree_data, h) -> None:  # noqa: ANN001
             _solve(tree, tree_data, count)
             grown = count
             for k in range(m):
-                if tree.limit_index[k, 1] == MOTOR or _is_active(lw, count, k):
+                if tree.limits.link_kind[k, 1] == MOTOR or _is_active(lw, count, k):
                     continue
-                data = tree.limit_data[k]
-                moved = lw.value[k] + h * _along(tree, k, lw.row, lw.delta)
+                data = tree.limits.data[k]
+                moved = lw.value[k] + h * _along(tree, k, lw.row, tree_data.response.delta)
                 if moved < data[LIMIT_LOWER]:
                     lw.target[k], lw.low[k], lw.high[k] = (data[LIMIT_LOWER] - lw.value[k]) / h, 0.0, math.inf
                 elif moved > data[LIMIT_UPPER]:
@@ -365,11 +384,11 @@ def tree_limits(tree, tree_data, h) -> None:  # noqa: ANN001
     # velocity stage: a limit at its bound and moving out is stopped; motors keep their speed
     count, stops = 0, 0
     for k in range(m):
-        data = tree.limit_data[k]
+        data = tree.limits.data[k]
         lower, upper = data[LIMIT_LOWER], data[LIMIT_UPPER]
         lw.value[k] = _evaluate(tree, k, coord, lw.row[k])
         r = _along(tree, k, lw.row, rate)
-        if tree.limit_index[k, 1] == MOTOR:
+        if tree.limits.link_kind[k, 1] == MOTOR:
             cap = data[LIMIT_CAP] * h
             lw.target[k], lw.low[k], lw.high[k] = lower - r, -cap - lw.impulse[k], cap - lw.impulse[k]
         elif lw.value[k] <= lower + LIMIT_CONTACT and r < 0.0:

@@ -81,19 +81,25 @@ class TreeTable(NamedTuple):
     # int64 (n,): +1 where the link is its joint's body_a (the JointTable's first body), -1 where it is
     # body_b, 0 without a joint (a free root): how its reaction maps onto the joint's (J, 12) row
     joint_side: np.ndarray
-    # the joints' limits and motors acting on the coordinates (limits.py), one row each: int64 (m, 2) the
-    # row's link and its kind (LIMIT_COORD, LIMIT_TWIST, LIMIT_SWING, MOTOR); (m, LIMIT_COLUMNS) its
-    # numbers (the LIMIT_* columns below), in the tree's own coordinates (a joint whose link is its body_b
-    # has its hinge angle and slider travel negated: its bounds and motor speed are turned so)
-    limit_index: np.ndarray
-    limit_data: np.ndarray
+    # the joints' limits and motors (limits.py); None without any, so a scene without them compiles no
+    # limit stage (physics/dispatch.py)
+    limits: TreeLimits | None
 
 
-# kinds of limit rows (TreeTable.limit_index[:, 1]): a hinge's or slider's coordinate between bounds, a
+class TreeLimits(NamedTuple):
+    """The joints' limits and motors acting on the coordinates (limits.py), one row each, in the tree's own
+    coordinates (a joint whose link is its body_b has its hinge angle and slider travel negated: its
+    bounds and motor speed are turned so)."""
+
+    link_kind: np.ndarray  # int64 (m, 2): the row's link and its kind (LIMIT_COORD, LIMIT_TWIST, LIMIT_SWING, MOTOR)
+    data: np.ndarray  # (m, LIMIT_COLUMNS): its numbers (the LIMIT_* columns below)
+
+
+# kinds of limit rows (TreeLimits.link_kind[:, 1]): a hinge's or slider's coordinate between bounds, a
 # ball joint's twist angle between bounds and its swing measure below 1 (physics/joints/cone.py), a
 # hinge's or slider's velocity motor
 LIMIT_COORD, LIMIT_TWIST, LIMIT_SWING, MOTOR = range(4)
-# columns of TreeTable.limit_data: the lower and upper bound [rad, m or 1] (a motor's speed in both, rad/s
+# columns of TreeLimits.data: the lower and upper bound [rad, m or 1] (a motor's speed in both, rad/s
 # or m/s), the motor's largest torque or force [N m or N] (inf for a limit), a ball joint's relative
 # rotation Q = A u B (or A u^* B: side -1) from its coordinate u (limits.py), the cone's half-angles
 # [rad], and the side (+1: the link is the joint's body_a)
@@ -147,11 +153,22 @@ class TreeData(NamedTuple):
     reaction: np.ndarray
     reactions_on: np.ndarray
     wrench: np.ndarray
-    limits: LimitWork
+    response: ResponseWork
+    limits: LimitWork | None  # None where the table has no limits
+
+
+class ResponseWork(NamedTuple):
+    """The arrays of M^-1 tau (limits.py tree_response: a limit's or an impulse's velocity change)."""
+
+    tau: np.ndarray  # (D,): a generalized impulse, dual to the rates (J^T lambda, J^T h)
+    delta: np.ndarray  # (D,): M^-1 tau
+    u: np.ndarray  # (D,): scratch
+    force: np.ndarray  # (n, 6): the articulated forces
+    acc: np.ndarray  # (n, 6): the links' spatial velocity changes of M^-1 tau
 
 
 class LimitWork(NamedTuple):
-    """The limits' and motors' arrays (limits.py), over the table's m rows, D rates and n links."""
+    """The limits' and motors' arrays (limits.py), over the table's m rows."""
 
     value: np.ndarray  # (m,): each row's coordinate at the end of the step (a motor's: its rate)
     row: np.ndarray  # (m, 3): d value / d rate over its link's rates (1 or 3 of them)
@@ -162,20 +179,19 @@ class LimitWork(NamedTuple):
     high: np.ndarray
     impulse: np.ndarray  # [N m s or N s] (m,): lambda of the last step, both stages summed
     stage_impulse: np.ndarray  # (m,): one stage's lambda
-    tau: np.ndarray  # (D,): J^T lambda
-    delta: np.ndarray  # (D,): M^-1 tau
-    u: np.ndarray  # (D,): the response's scratch
-    force: np.ndarray  # (n, 6): its articulated forces
-    acc: np.ndarray  # (n, 6): the links' spatial accelerations of M^-1 tau
 
 
-def make_limit_work(tree: TreeTable) -> LimitWork:
-    m, D, n = tree.limit_index.shape[0], tree_dof_count(tree), tree_link_count(tree)
+def make_limit_work(limits: TreeLimits) -> LimitWork:
+    m = limits.link_kind.shape[0]
     return LimitWork(
         np.zeros(m), np.zeros((m, 3)), np.zeros(m, dtype=np.int64), np.zeros((m, m)), np.zeros(m), np.zeros(m),
-        np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(D), np.zeros(D), np.zeros(D), np.zeros((n, 6)),
-        np.zeros((n, 6)),
+        np.zeros(m), np.zeros(m), np.zeros(m),
     )  # fmt: skip
+
+
+def make_response_work(tree: TreeTable) -> ResponseWork:
+    D, n = tree_dof_count(tree), tree_link_count(tree)
+    return ResponseWork(np.zeros(D), np.zeros(D), np.zeros(D), np.zeros((n, 6)), np.zeros((n, 6)))
 
 
 def make_tree_data(tree: TreeTable) -> TreeData:
@@ -184,7 +200,7 @@ def make_tree_data(tree: TreeTable) -> TreeData:
     return TreeData(
         make_tree_work(tree), zero_coords(tree), np.zeros(D), np.zeros(D), np.zeros(D), np.zeros(C), np.zeros(D),
         np.zeros(C), np.zeros(D), np.zeros(C), np.zeros(1), np.full((n, 12), np.nan), np.zeros(1), np.zeros((n, 6)),
-        make_limit_work(tree),
+        make_response_work(tree), None if tree.limits is None else make_limit_work(tree.limits),
     )  # fmt: skip
 
 
@@ -264,8 +280,9 @@ def tree_table(
         frozen_floats(motion, 6),
         frozen_floats(np.zeros(int(dofs.sum())) if damping is None else damping),
         frozen_ints(np.zeros(n) if joint_side is None else joint_side),
-        _frozen_index(np.zeros((0, 2)) if limit_index is None else limit_index),
-        frozen_floats(np.zeros((0, LIMIT_COLUMNS)) if limit_data is None else limit_data, LIMIT_COLUMNS),
+        None
+        if limit_index is None or len(limit_index) == 0
+        else TreeLimits(_frozen_index(limit_index), frozen_floats(limit_data, LIMIT_COLUMNS)),
     )
 
 
