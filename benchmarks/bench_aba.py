@@ -48,6 +48,10 @@ from rbcli.physics.tree.table import TreeTable, make_tree_work, tree_table, zero
 
 SIZES = (10, 100, 400, 1_000, 10_000)
 MUJOCO_SIZES = (10, 100, 400)  # MJCF nests bodies: its XML parser refuses 1,000 levels
+# Pinocchio's model of a chain takes memory superlinear in its degrees of freedom (4 GB at 400 hinge links,
+# 15 GB at 600, pin 4.1.0: a 400-link ball chain's 1,200 do not fit), and below 100 links a Python call per
+# ABA hides its rate: it runs at 100 links and up to 400 degrees of freedom
+PINOCCHIO_LINKS, PINOCCHIO_DOFS = 100, 400
 SEGMENT = 1000  # steps from the released pose, as bench_joints.MujocoRun
 GRAVITY = np.array([0.0, 0.0, -9.81])
 # the issue's targets (rbsim / MuJoCo) at 10 / 100 / 400 links; per link, 10,000 over 10 links at most 1.5
@@ -147,6 +151,50 @@ class TreeRun:
         return elapsed
 
 
+def have_pinocchio() -> bool:
+    try:
+        import pinocchio  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+class PinocchioRun:
+    """The same chain as a Pinocchio model (`pip install pin`: not a dependency of rbsim, a reference
+    point): revolute-y or spherical joints at each link's near end, the capsule's mass, centre (+l/2 x)
+    and principal moments; `pinocchio.aba(model, data, q, v, tau)` at the state TreeRun's FK+ABA uses (its
+    angles, random rates, gravity -9.81 z as Pinocchio's default), the same work as FK+ABA: Pinocchio's
+    ABA computes its kinematics itself. Called from Python (~1 us a call), so its rate per link is
+    measured from 100 links up to 400 degrees of freedom (PINOCCHIO_LINKS, PINOCCHIO_DOFS)."""
+
+    def __init__(self, links: int, joint: str, coord: np.ndarray, rate: np.ndarray) -> None:
+        import pinocchio as pin
+
+        self.pin = pin
+        mass, axial, transverse = capsule_mass_properties()
+        model = pin.Model()
+        parent = 0
+        for i in range(links):
+            at = pin.SE3(np.eye(3), np.array([LINK_LENGTH if i else 0.0, 0.0, 0.0]))
+            kind = pin.JointModelRY() if joint == "hinge" else pin.JointModelSpherical()
+            parent = model.addJoint(parent, kind, at, f"j{i}")
+            inertia = pin.Inertia(
+                mass, np.array([0.5 * LINK_LENGTH, 0.0, 0.0]), np.diag([axial, transverse, transverse])
+            )
+            model.appendBodyToJoint(parent, inertia, pin.SE3.Identity())
+        self.model, self.data = model, model.createData()
+        self.q = coord.copy() if joint == "hinge" else pin.neutral(model)
+        self.v = rate.copy()
+        self.tau = np.zeros(model.nv)
+
+    def run(self, calls: int) -> float:
+        aba, model, data, q, v, tau = self.pin.aba, self.model, self.data, self.q, self.v, self.tau
+        started = time.process_time()
+        for _ in range(calls):
+            aba(model, data, q, v, tau)
+        return time.process_time() - started
+
+
 def spread(times: list[float]) -> float:
     return statistics.median(times) / min(times) - 1.0
 
@@ -158,10 +206,15 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5)
     options = parser.parse_args()
     budget, repeats = (4e5, 3) if options.quick else (options.link_steps, options.repeats)
-    mujoco_present = have_mujoco()
+    mujoco_present, pinocchio_present = have_mujoco(), have_pinocchio()
     print(f"load average {os.getloadavg()[0]:.2f} at the start, {os.cpu_count()} cores; CPU ns per link-step")
     print("FK+ABA: the kernels at one state; step: + semi-implicit Euler; MuJoCo: mj_step (Euler);")
     print("ratio = MuJoCo / step; spread = median / best - 1 of the repeats (FK+ABA / step / MuJoCo)")
+    print(
+        "Pinocchio: pinocchio.aba at FK+ABA's state (100 links to 400 rates: a Python call each), / FK+ABA its ratio"
+        if pinocchio_present
+        else "Pinocchio: not installed (pip install pin), no ratio"
+    )
     print(
         f"{'chain':>6} {'links':>6} {'FK+ABA':>7} {'step':>7} {'MuJoCo':>8} {'ratio':>7} {'target':>6}"
         f" {'fell':>7} {'spread':>16}"
@@ -173,12 +226,16 @@ def main() -> None:
             run = TreeRun(links, joint)
             mj = MujocoRun(links, joint) if mujoco_present and links in MUJOCO_SIZES else None
             mj_steps = mj.steps_for(0.5 / (4 if options.quick else 1)) if mj is not None else 0
-            kernel_times, step_times, mj_times = [], [], []
+            fits = PINOCCHIO_LINKS <= links and run.rate.shape[0] <= PINOCCHIO_DOFS
+            pin = PinocchioRun(links, joint, run.coord, run.rate) if pinocchio_present and fits else None
+            kernel_times, step_times, mj_times, pin_times = [], [], [], []
             for _ in range(repeats):  # interleaved, so a change of load hits both engines alike
                 kernel_times.append(run.kernels(steps))
                 step_times.append(run.steps(steps))
                 if mj is not None:
                     mj_times.append(mj.run(mj_steps))
+                if pin is not None:
+                    pin_times.append(pin.run(steps))
             per = 1e9 / (links * steps)
             kernel_ns, step_ns = min(kernel_times) * per, min(step_times) * per
             cost[links] = step_ns
@@ -187,9 +244,13 @@ def main() -> None:
             spreads = f"{spread(kernel_times):3.0%}/{spread(step_times):3.0%}" + (
                 f"/{spread(mj_times):3.0%}" if mj_times else ""
             )
+            pinocchio = ""
+            if pin_times:
+                pin_ns = 1e9 * min(pin_times) / (links * steps)
+                pinocchio = f"  Pinocchio {pin_ns:6.1f} ns, / FK+ABA {pin_ns / kernel_ns:5.2f}"
             print(
                 f"{joint:>6} {links:>6} {kernel_ns:7.1f} {step_ns:7.1f} {mj_ns:8.1f} {mj_ns / step_ns:7.2f}"
-                f" {target:6.1f} {run.sag:7.3f} {spreads:>16}"
+                f" {target:6.1f} {run.sag:7.3f} {spreads:>16}{pinocchio}"
             )
         flat = cost[SIZES[-1]] / cost[SIZES[0]]
         print(f"{joint}: step cost per link at {SIZES[-1]:,} / at {SIZES[0]} links = {flat:.2f} (target <= 1.5)")
