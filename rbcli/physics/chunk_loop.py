@@ -183,9 +183,9 @@ def fixed_step_loop(
         "tree_step": integrator.step if reduced else _unbound,
     }
     if reduced:
-        from rbcli.physics.tree.integrate import tree_kick_stage, tree_record
+        from rbcli.physics.tree.integrate import tree_kick_stage, tree_record_stage
 
-        bound.update(tree_record=tree_record, tree_kick=tree_kick_stage)
+        bound.update(tree_record=tree_record_stage, tree_kick=tree_kick_stage)
     if joints:
         from rbcli.physics.joints import rattle, stages
 

@@ -203,12 +203,14 @@ def make_data(
     tolerance: float = 0.0,
     duration: float = 0.0,
     contact_threads: int = 1,
+    tree_reactions: bool = False,
 ) -> Data:
     """A Data for `initial` (copied) and the model `model` (either form; its contact and joint tables
     size the contact and joint work): zeroed accumulators, scratch, force data and joint work; with
     `adaptive`, the adaptive loop's arrays (physics/adaptive.py: adaptive_work, their one definition)
     and its error budget `tolerance` for a run `duration` [s] long; contact_threads > 1: the contact
-    pair search on that many threads (contact/threaded.py)."""
+    pair search on that many threads (contact/threaded.py); tree_reactions: in joint coordinates, the run
+    computes the joints' reactions (the joint_forces stream: tree/reactions.py)."""
     n = initial.x.shape[0]
     state = initial.copy()
     if substeps < 1:
@@ -223,7 +225,7 @@ def make_data(
     if tree is not None:  # the trees' state from the bodies' (the velocities the joints allow: tree/coordinates.py)
         from rbcli.physics.tree.coordinates import set_from_bodies
 
-        data.tree, data.tree_table = make_tree_data(tree), tree
+        data.tree, data.tree_table = make_tree_data(tree, tree_reactions), tree
         set_from_bodies(tree, data.tree, state.x, state.q, state.P, state.L)
     if adaptive:
         from rbcli.physics.adaptive import adaptive_work

@@ -103,13 +103,25 @@ def recorded_joint_count(compiled: CompiledScene) -> int:
     return int(table.body_a.shape[0])
 
 
+# in joint coordinates (whose loop compiles none of the maximal joints' rows) a scene of at most this
+# many joints evaluates its joint invariants in numpy: compiling joint_violations costs ~3.5 s of its first
+# run, the numpy twin ~50 us a joint a recorded frame (the recording thread's, beside the steps)
+NUMPY_INVARIANT_JOINTS = 64
+
+
 def joint_invariants(compiled: CompiledScene, x: np.ndarray, q: np.ndarray, P: np.ndarray, L: np.ndarray) -> np.ndarray:
-    """(K, 2): each raw state's largest joint violation in position and velocity (physics/joints/violation.py)."""
+    """(K, 2): each raw state's largest joint violation in position and velocity (physics/joints/violation.py;
+    its numpy twin in small scenes in joint coordinates: NUMPY_INVARIANT_JOINTS)."""
     from rbcli.physics.joints.tables import make_joint_work
-    from rbcli.physics.joints.violation import joint_violations
 
     table = compiled.model.joint
     assert table is not None
+    if compiled.model.tree is not None and table.kind.shape[0] <= NUMPY_INVARIANT_JOINTS:
+        from rbcli.physics.joints.reference import joint_violations_numpy
+
+        return joint_violations_numpy(compiled.model, table, x, q, P, L)
+    from rbcli.physics.joints.violation import joint_violations
+
     out = np.zeros((x.shape[0], 2))
     joint_violations(compiled.model.kernel_bodies(), table, make_joint_work(table), x, q, P, L, out)
     return out

@@ -179,10 +179,8 @@ class Simulation:
             self._chunk = chunk.run_chunk
             self.data = make_data(
                 compiled.initial_state, self.model, chunk.SCRATCH_WIDTH, substeps=self.settings.substeps,
-                contact_threads=self.contact_threads,
+                contact_threads=self.contact_threads, tree_reactions="joint_forces" in self.settings.streams,
             )  # fmt: skip
-        if self.data.tree is not None and "joint_forces" in self.settings.streams:  # their backward pass: ~10 %
-            self.data.tree.reactions_on[0] = 1.0
         # welds (scene/welds.py): the scene's bodies on the simulated ones, and the simulated state before the
         # last step, (body_count, 13) x, q, P, L, from which the welds' reactions are read (runner/weld_reactions.py)
         self.parts = compiled.parts

@@ -210,3 +210,26 @@ def test_an_impulse_on_a_link_is_the_joint_s_exact_impulsive_reaction(integrator
     point = x0 + np.array([0.2, 0.05, 0.0]) - centre
     omega = np.cross(point, [0.3, 1.0, -0.4]) @ a / I_a
     np.testing.assert_allclose(sim.state.omega[0], omega * a, rtol=0, atol=1e-12 * abs(omega))
+
+
+def test_the_numpy_joint_invariants_are_the_kernel_s():
+    """Small scenes in joint coordinates record their joint invariants with the numpy twin
+    (runner/blocks.py NUMPY_INVARIANT_JOINTS): on states that break every joint (the chain's bodies moved
+    and turned at random, random momenta) it gives violation.joint_violations' max |g| and max |G V| to
+    1e-12 relative."""
+    from rbcli.physics.joints.reference import joint_violations_numpy
+    from rbcli.physics.joints.tables import make_joint_work
+    from rbcli.physics.joints.violation import joint_violations
+    from rbcli.physics.rotation import quat_normalize
+
+    sim = Simulation(load_scene_text(CHAIN.replace("integrator: split2", "integrator: reduced-euler")))
+    rng = np.random.default_rng(7)
+    s, K = sim.data.state, 5
+    x = s.x[None] + 0.01 * rng.normal(size=(K, *s.x.shape))
+    q = np.array([[quat_normalize(row + 0.05 * rng.normal(size=4)) for row in s.q] for _ in range(K)])
+    P, L = rng.normal(size=(K, *s.P.shape)), rng.normal(size=(K, *s.L.shape))
+    table = sim.model.joint
+    kernel = np.zeros((K, 2))
+    joint_violations(sim.model.kernel_bodies(), table, make_joint_work(table), x, q, P, L, kernel)
+    np.testing.assert_allclose(joint_violations_numpy(sim.model, table, x, q, P, L), kernel, rtol=1e-12, atol=0)
+    assert kernel.min() > 1e-4  # the states do break the joints

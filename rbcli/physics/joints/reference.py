@@ -73,6 +73,22 @@ def joint_rows_numpy(table: JointTable, x: np.ndarray, q: np.ndarray) -> tuple[n
     return g, ga, gb
 
 
+def joint_violations_numpy(model, table: JointTable, x, q, P, L) -> np.ndarray:  # noqa: ANN001
+    """violation.joint_violations in numpy: (K, 2), each frame's max |g| and max |G V| (every body's own
+    velocity, ground bodies' too) of the (K, N, ...) states; model: a Model or KernelModel."""
+    out = np.zeros((x.shape[0], 2))
+    for k in range(x.shape[0]):
+        g, ga, gb = joint_rows_numpy(table, x[k], q[k])
+        R = quat_to_matrix(q[k])
+        omega = np.einsum("bij,bj,bkj,bk->bi", R, 1.0 / model.body_inertia, R, L[k])
+        V = np.concatenate([P[k] / model.body_mass[:, None], omega], axis=1)  # (N, 6): (v, omega)
+        rows = np.repeat(np.arange(table.kind.shape[0]), table.row_count)
+        a, b = table.body_a[rows], table.body_b[rows]
+        gv = np.einsum("rc,rc->r", ga, V[a]) + np.where(b >= 0, np.einsum("rc,rc->r", gb, V[np.maximum(b, 0)]), 0.0)
+        out[k] = (np.abs(g).max(initial=0.0), np.abs(gv).max(initial=0.0))
+    return out
+
+
 def body_weights_numpy(model, table: JointTable, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001
     """(1 / M (N,), R I0^-1 R^T (N, 3, 3)) at orientations q, zero for ground bodies; model: a Model or
     KernelModel (body_mass, body_inertia)."""

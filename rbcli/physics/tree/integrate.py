@@ -44,7 +44,7 @@ from rbcli.physics.step import STEP_ENTRY, STEP_KERNEL
 from rbcli.physics.tree.aba import forward_kinematics, tree_accelerations
 from rbcli.physics.tree.flow import advance_coords, coord_rate, normalise_quaternions
 from rbcli.physics.tree.limits import limit_stage, tree_response
-from rbcli.physics.tree.reactions import joint_wrenches
+from rbcli.physics.tree.reactions import joint_wrench_stage
 
 kernel_cache.install()
 
@@ -101,8 +101,8 @@ def step_euler(model, forces, contact, force_data, tree, tree_data, t, h, x, q, 
     accumulate_wrench(model, forces, contact, force_data, t, x, q, P, L, F, tau)
     damper_forces(tree.damping, rate, tree_data.joint_force, work.armature, h)  # implicit: (M + h C) qdd = f - C rate
     tree_accelerations(tree, work, F, tau, tree_data.joint_force, qdd)
-    if tree_data.reactions_on[0] == 1.0:  # the step's accelerations are constant over it: its mean
-        joint_wrenches(tree, tree_data, F, tau, 1.0, True)
+    # the reactions (while recorded): the step's accelerations are constant over it, so its mean
+    joint_wrench_stage(tree_data.wrench, tree, tree_data, F, tau, 1.0, True)
     for k in range(rate.shape[0]):
         rate[k] += h * qdd[k]
     advance_coords(tree, coord, rate, h)
@@ -143,8 +143,8 @@ def step_rk4(model, forces, contact, force_data, tree, tree_data, t, h, x, q, P,
         else:
             _accelerations(model, forces, contact, force_data, tree, tree_data, t + a * h, coord, rate, x, q, P, L,
                            F, tau)  # fmt: skip
-        if tree_data.reactions_on[0] == 1.0:  # the mean over the step, with the stages' weights
-            joint_wrenches(tree, tree_data, F, tau, weight / 6.0, stage == 0)
+        # the reactions (while recorded): the mean over the step, with the stages' weights
+        joint_wrench_stage(tree_data.wrench, tree, tree_data, F, tau, weight / 6.0, stage == 0)
         coord_rate(tree, coord, rate, dcoord)
         for k in range(nc):
             coord_sum[k] += weight * dcoord[k]
@@ -237,5 +237,21 @@ def _tree_kick_stage(forces, tree, tree_data, x, q, P, L, F, tau):  # noqa: ANN0
 
     def run(forces, tree, tree_data, x, q, P, L, F, tau):  # noqa: ANN001, ANN202
         tree_kick(tree, tree_data, x, q, P, L, F, tau)
+
+    return run
+
+
+def tree_record_stage(tree, tree_data, frames, filled, due) -> None:  # noqa: ANN001
+    """tree_record in a run that records the reactions (TreeData.wrench not None); else nothing to write."""
+    kernel_only()
+
+
+@overload(tree_record_stage, jit_options=DISPATCH_OPTIONS)
+def _tree_record_stage(tree, tree_data, frames, filled, due):  # noqa: ANN001, ANN202
+    if absent(member(tree_data, "wrench")):
+        return lambda tree, tree_data, frames, filled, due: None
+
+    def run(tree, tree_data, frames, filled, due):  # noqa: ANN001, ANN202
+        tree_record(tree, tree_data, frames, filled, due)
 
     return run

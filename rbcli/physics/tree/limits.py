@@ -53,7 +53,7 @@ from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.rotation_kernels import rotate_inverse
 from rbcli.physics.step import STEP_KERNEL
 from rbcli.physics.tree.flow import advance_coords
-from rbcli.physics.tree.reactions import impulse_wrenches
+from rbcli.physics.tree.reactions import impulse_wrench_stage
 from rbcli.physics.tree.table import (
     LIMIT_A,
     LIMIT_B,
@@ -296,8 +296,7 @@ def _apply(tree, tree_data, count, h, move) -> None:  # noqa: ANN001
     for a in range(count):
         k = lw.active[a]
         lw.impulse[k] += lw.stage_impulse[k]
-    if tree_data.reactions_on[0] == 1.0:
-        impulse_wrenches(tree, tree_data, rw.acc, 1.0 / h)
+    impulse_wrench_stage(tree_data.wrench, tree, tree_data, rw.acc, 1.0 / h)  # while the reactions are recorded
 
 
 @numba.njit(cache=True)

@@ -1,13 +1,17 @@
 """The joints' reactions in joint coordinates: each link's joint wrench from the Newton-Euler equations
 of its subtree, summed from the leaves (the reaction stream, Simulation.joint_reactions; table.py
 TreeData.reaction has the layout). `joint_wrenches` takes an evaluation's accelerations (integrate.py),
-`impulse_wrenches` a limit's or motor's velocity change over a step (limits.py)."""
+`impulse_wrenches` a limit's or motor's velocity change over a step (limits.py). Each is called through a
+stage that compiles to nothing in a run that records no reactions (TreeData.wrench None:
+physics/dispatch.py), and runs while TreeData.reactions_on[0] is 1."""
 
 from __future__ import annotations
 
 import numba
+from numba.extending import overload
 
 from rbcli.physics import kernel_cache
+from rbcli.physics.dispatch import DISPATCH_OPTIONS, absent, kernel_only
 from rbcli.physics.step import STEP_KERNEL
 
 kernel_cache.install()
@@ -90,3 +94,37 @@ def impulse_wrenches(tree, tree_data, dacc, scale) -> None:  # noqa: ANN001
         W[i, 5] = iw[2] * ax + iw[4] * ay + iw[5] * az
         W[i, 0], W[i, 1], W[i, 2] = m * scale * dacc[i, 3], m * scale * dacc[i, 4], m * scale * dacc[i, 5]
     accumulate_subtrees(tree, work, W, tree_data.reaction, 1.0, False)
+
+
+def joint_wrench_stage(wrench, tree, tree_data, F, tau, weight, first) -> None:  # noqa: ANN001
+    """joint_wrenches in a run that records the reactions (wrench: TreeData.wrench, None otherwise)."""
+    kernel_only()
+
+
+@overload(joint_wrench_stage, jit_options=DISPATCH_OPTIONS)
+def _joint_wrench_stage(wrench, tree, tree_data, F, tau, weight, first):  # noqa: ANN001, ANN202
+    if absent(wrench):
+        return lambda wrench, tree, tree_data, F, tau, weight, first: None
+
+    def run(wrench, tree, tree_data, F, tau, weight, first):  # noqa: ANN001, ANN202
+        if tree_data.reactions_on[0] == 1.0:
+            joint_wrenches(tree, tree_data, F, tau, weight, first)
+
+    return run
+
+
+def impulse_wrench_stage(wrench, tree, tree_data, dacc, scale) -> None:  # noqa: ANN001
+    """impulse_wrenches in a run that records the reactions (wrench: TreeData.wrench, None otherwise)."""
+    kernel_only()
+
+
+@overload(impulse_wrench_stage, jit_options=DISPATCH_OPTIONS)
+def _impulse_wrench_stage(wrench, tree, tree_data, dacc, scale):  # noqa: ANN001, ANN202
+    if absent(wrench):
+        return lambda wrench, tree, tree_data, dacc, scale: None
+
+    def run(wrench, tree, tree_data, dacc, scale):  # noqa: ANN001, ANN202
+        if tree_data.reactions_on[0] == 1.0:
+            impulse_wrenches(tree, tree_data, dacc, scale)
+
+    return run

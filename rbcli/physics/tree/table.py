@@ -149,10 +149,11 @@ class TreeData(NamedTuple):
     # [N, N m] (n, 12): each link's joint's force and torque over the last step (world, torques about the
     # centres of mass), [0:6] on the link, [6:12] on its parent (0 for a root), the mean over the step's
     # force evaluations (integrate.py joint_wrenches), computed while reactions_on[0] is 1 (the
-    # joint_forces stream: ~10 % of a step); wrench (n, 6): their scratch
+    # joint_forces stream: ~10 % of a step); wrench (n, 6): their scratch, None in a run that records no
+    # reactions, so that its loop compiles none of their stages (reactions.py)
     reaction: np.ndarray
     reactions_on: np.ndarray
-    wrench: np.ndarray
+    wrench: np.ndarray | None
     response: ResponseWork
     limits: LimitWork | None  # None where the table has no limits
 
@@ -194,12 +195,14 @@ def make_response_work(tree: TreeTable) -> ResponseWork:
     return ResponseWork(np.zeros(D), np.zeros(D), np.zeros(D), np.zeros((n, 6)), np.zeros((n, 6)))
 
 
-def make_tree_data(tree: TreeTable) -> TreeData:
-    """Zeroed tree data for `tree` (coordinates at zero_coords; the runner sets them from the state)."""
+def make_tree_data(tree: TreeTable, reactions: bool = False) -> TreeData:
+    """Zeroed tree data for `tree` (coordinates at zero_coords; the runner sets them from the state);
+    reactions: the run computes the joints' reactions (reactions_on set, their scratch made)."""
     C, D, n = tree_coord_count(tree), tree_dof_count(tree), tree_link_count(tree)
     return TreeData(
         make_tree_work(tree), zero_coords(tree), np.zeros(D), np.zeros(D), np.zeros(D), np.zeros(C), np.zeros(D),
-        np.zeros(C), np.zeros(D), np.zeros(C), np.zeros(1), np.full((n, 12), np.nan), np.zeros(1), np.zeros((n, 6)),
+        np.zeros(C), np.zeros(D), np.zeros(C), np.zeros(1), np.full((n, 12), np.nan), np.full(1, float(reactions)),
+        np.zeros((n, 6)) if reactions else None,
         make_response_work(tree), None if tree.limits is None else make_limit_work(tree.limits),
     )  # fmt: skip
 
