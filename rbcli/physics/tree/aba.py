@@ -32,8 +32,10 @@ from __future__ import annotations
 import math
 
 import numba
+from numba.extending import overload
 
 from rbcli.physics import kernel_cache
+from rbcli.physics.dispatch import DISPATCH_OPTIONS, absent, kernel_only
 from rbcli.physics.joints.tables import JOINT_BALL, JOINT_HINGE, JOINT_SLIDER
 from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.step import STEP_KERNEL
@@ -299,6 +301,208 @@ def _add_to_parent(work, i, p) -> None:  # noqa: ANN001
     F[5] += f[5]
 
 
+# ---- the ball and the fixed / free links' passes, each compiled only into trees that have such links ----
+# (TreeTable.balls, .others: None where a tree has none, physics/dispatch.py): a hinge chain's ABA then
+# compiles neither, ~1.7 s of a first run (docs/trees.md, "Start-up")
+
+
+def _ball_backward(balls, work, i, p, d0, e0, joint_force) -> None:  # noqa: ANN001
+    """Pass 2 at ball link i (tree_accelerations)."""
+    kernel_only()
+
+
+@overload(_ball_backward, jit_options=DISPATCH_OPTIONS, inline="always")
+def _ball_backward_impl(balls, work, i, p, d0, e0, joint_force):  # noqa: ANN001, ANN202
+    if absent(balls):
+        return lambda balls, work, i, p, d0, e0, joint_force: None
+
+    def run(balls, work, i, p, d0, e0, joint_force):  # noqa: ANN001, ANN202
+        IA, pA, motion, U, u, dinv = work.inertia_art, work.bias_force, work.motion, work.U, work.u, work.dinv
+        c = work.bias_acc[i]
+        cx, cy, cz = motion[d0 + 1, 5], -motion[d0, 5], motion[d0, 4]
+        a = IA[i]
+        h00, h01, h02, h10, h11, h12, h20, h21, h22 = a[3], a[4], a[5], a[8], a[9], a[10], a[12], a[13], a[14]
+        m00, m01, m02, m11, m12, m22 = a[15], a[16], a[17], a[18], a[19], a[20]
+        # U' = I^A S' = [[B + H [c]], [H^T + M [c]]] (row a of X [c] is X_a x c): T on top, W below
+        t00, t01, t02 = _cross(h00, h01, h02, cx, cy, cz)
+        t10, t11, t12 = _cross(h10, h11, h12, cx, cy, cz)
+        t20, t21, t22 = _cross(h20, h21, h22, cx, cy, cz)
+        t00, t01, t02, t10, t11, t12 = t00 + a[0], t01 + a[1], t02 + a[2], t10 + a[1], t11 + a[6], t12 + a[7]
+        t20, t21, t22 = t20 + a[2], t21 + a[7], t22 + a[11]
+        w00, w01, w02 = _cross(m00, m01, m02, cx, cy, cz)
+        w10, w11, w12 = _cross(m01, m11, m12, cx, cy, cz)
+        w20, w21, w22 = _cross(m02, m12, m22, cx, cy, cz)
+        w00, w01, w02, w10, w11, w12 = w00 + h00, w01 + h10, w02 + h20, w10 + h01, w11 + h11, w12 + h21
+        w20, w21, w22 = w20 + h02, w21 + h12, w22 + h22
+        # D' = S'^T U' = T - [c] W (column j: T_j - c x W_j), symmetric; its inverse by cofactors
+        z00, z10, z20 = _cross(cx, cy, cz, w00, w10, w20)
+        z01, z11, z21 = _cross(cx, cy, cz, w01, w11, w21)
+        z02, z12, z22 = _cross(cx, cy, cz, w02, w12, w22)
+        d00, d01, d02, d11, d12, d22 = t00 - z00, t01 - z01, t02 - z02, t11 - z11, t12 - z12, t22 - z22
+        # a ball's armature is isotropic (one damper on its relative spin), so the basis does not matter
+        d00, d11, d22 = d00 + work.armature[d0], d11 + work.armature[d0 + 1], d22 + work.armature[d0 + 2]
+        k00, k01, k02 = d11 * d22 - d12 * d12, d02 * d12 - d01 * d22, d01 * d12 - d02 * d11
+        k11, k12, k22 = d00 * d22 - d02 * d02, d01 * d02 - d00 * d12, d00 * d11 - d01 * d01
+        det = 1.0 / (d00 * k00 + d01 * k01 + d02 * k02)
+        k00, k01, k02, k11, k12, k22 = k00 * det, k01 * det, k02 * det, k11 * det, k12 * det, k22 * det
+        dinv[e0], dinv[e0 + 1], dinv[e0 + 2] = k00, k01, k02
+        dinv[e0 + 3], dinv[e0 + 4], dinv[e0 + 5] = k01, k11, k12
+        dinv[e0 + 6], dinv[e0 + 7], dinv[e0 + 8] = k02, k12, k22
+        _store6(U[d0], t00, t10, t20, w00, w10, w20)
+        _store6(U[d0 + 1], t01, t11, t21, w01, w11, w21)
+        _store6(U[d0 + 2], t02, t12, t22, w02, w12, w22)
+        # u' = R tau - S'^T p^A, S'^T p = p_top - c x p_bottom
+        f, Rm = pA[i], work.rotation[i]
+        o0, o1, o2 = joint_force[d0], joint_force[d0 + 1], joint_force[d0 + 2]
+        g0, g1, g2 = _cross(cx, cy, cz, f[3], f[4], f[5])
+        u[d0] = Rm[0, 0] * o0 + Rm[0, 1] * o1 + Rm[0, 2] * o2 - f[0] + g0
+        u[d0 + 1] = Rm[1, 0] * o0 + Rm[1, 1] * o1 + Rm[1, 2] * o2 - f[1] + g1
+        u[d0 + 2] = Rm[2, 0] * o0 + Rm[2, 1] * o1 + Rm[2, 2] * o2 - f[2] + g2
+        if p < 0:
+            return
+        # p^a = p^A + I^A c + U' D'^-1 (u' - U'^T c), then I^a = I^A - (U' D'^-1) U'^T
+        a0, a1, a2, a3, a4, a5 = _sym6_times(IA, i, c[0], c[1], c[2], c[3], c[4], c[5])
+        g0 = u[d0] - _dot6(U[d0], c[0], c[1], c[2], c[3], c[4], c[5])
+        g1 = u[d0 + 1] - _dot6(U[d0 + 1], c[0], c[1], c[2], c[3], c[4], c[5])
+        g2 = u[d0 + 2] - _dot6(U[d0 + 2], c[0], c[1], c[2], c[3], c[4], c[5])
+        g0, g1, g2 = k00 * g0 + k01 * g1 + k02 * g2, k01 * g0 + k11 * g1 + k12 * g2, k02 * g0 + k12 * g1 + k22 * g2
+        f[0] += a0 + t00 * g0 + t01 * g1 + t02 * g2
+        f[1] += a1 + t10 * g0 + t11 * g1 + t12 * g2
+        f[2] += a2 + t20 * g0 + t21 * g1 + t22 * g2
+        f[3] += a3 + w00 * g0 + w01 * g1 + w02 * g2
+        f[4] += a4 + w10 * g0 + w11 * g1 + w12 * g2
+        f[5] += a5 + w20 * g0 + w21 * g1 + w22 * g2
+        for row in range(6):  # constant trip counts: unrolled, SYM6_INDEX folded
+            x0, x1, x2 = U[d0, row], U[d0 + 1, row], U[d0 + 2, row]
+            y0, y1, y2 = _sym3_times(k00, k01, k02, k11, k12, k22, x0, x1, x2)
+            for col in range(row, 6):
+                a[SYM6_INDEX[row, col]] -= y0 * U[d0, col] + y1 * U[d0 + 1, col] + y2 * U[d0 + 2, col]
+
+    return run
+
+
+def _general_backward(others, work, i, p, d0, d1, e0, joint_force) -> None:  # noqa: ANN001
+    """Pass 2 at a fixed or free link i (tree_accelerations)."""
+    kernel_only()
+
+
+@overload(_general_backward, jit_options=DISPATCH_OPTIONS, inline="always")
+def _general_backward_impl(others, work, i, p, d0, d1, e0, joint_force):  # noqa: ANN001, ANN202
+    if absent(others):
+        return lambda others, work, i, p, d0, d1, e0, joint_force: None
+
+    def run(others, work, i, p, d0, d1, e0, joint_force):  # noqa: ANN001, ANN202
+        IA, pA, motion, U, u, dinv = work.inertia_art, work.bias_force, work.motion, work.U, work.u, work.dinv
+        c = work.bias_acc[i]
+        k = d1 - d0
+        for j in range(d0, d1):
+            s = motion[j]
+            s0, s1, s2, s3, s4, s5 = s[0], s[1], s[2], s[3], s[4], s[5]
+            U[j, 0], U[j, 1], U[j, 2], U[j, 3], U[j, 4], U[j, 5] = _sym6_times(IA, i, s0, s1, s2, s3, s4, s5)
+            u[j] = joint_force[j] - _dot6(pA[i], s0, s1, s2, s3, s4, s5)
+        for j in range(k):
+            for l in range(k):
+                s = U[d0 + l]
+                dinv[e0 + j * k + l] = _dot6(motion[d0 + j], s[0], s[1], s[2], s[3], s[4], s[5])
+            dinv[e0 + j * k + j] += work.armature[d0 + j]
+        for j in range(k):
+            pivot = dinv[e0 + j * k + j]
+            dinv[e0 + j * k + j] = 1.0
+            for l in range(k):
+                dinv[e0 + j * k + l] /= pivot
+            for row in range(k):
+                if row != j:
+                    factor = dinv[e0 + row * k + j]
+                    dinv[e0 + row * k + j] = 0.0
+                    for l in range(k):
+                        dinv[e0 + row * k + l] -= factor * dinv[e0 + j * k + l]
+        if p < 0:
+            return
+        # p^a = p^A + I^A c + U D^-1 (u - U^T c), then I^a = I^A - U D^-1 U^T (same as p^A + I^a c + U D^-1 u)
+        a0, a1, a2, a3, a4, a5 = _sym6_times(IA, i, c[0], c[1], c[2], c[3], c[4], c[5])
+        pA[i, 0] += a0
+        pA[i, 1] += a1
+        pA[i, 2] += a2
+        pA[i, 3] += a3
+        pA[i, 4] += a4
+        pA[i, 5] += a5
+        for j in range(k):
+            g = 0.0
+            for l in range(k):
+                g += dinv[e0 + j * k + l] * (u[d0 + l] - _dot6(U[d0 + l], c[0], c[1], c[2], c[3], c[4], c[5]))
+            for col in range(6):
+                pA[i, col] += U[d0 + j, col] * g
+        for row in range(6):
+            for col in range(row, 6):
+                total = 0.0
+                for j in range(k):
+                    w = 0.0
+                    for l in range(k):
+                        w += dinv[e0 + j * k + l] * U[d0 + l, col]
+                    total += U[d0 + j, row] * w
+                IA[i, SYM6_INDEX[row, col]] -= total
+
+    return run
+
+
+def _ball_forward(balls, work, i, d0, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd):  # noqa: ANN001, ANN202
+    """Pass 3 at ball link i: its qdd, and the link's spatial acceleration (the six e's) returned."""
+    kernel_only()
+
+
+@overload(_ball_forward, jit_options=DISPATCH_OPTIONS, inline="always")
+def _ball_forward_impl(balls, work, i, d0, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd):  # noqa: ANN001, ANN202
+    if absent(balls):
+        return lambda balls, work, i, d0, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd: (e0_, e1_, e2_, e3_, e4_, e5_)
+
+    def run(balls, work, i, d0, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd):  # noqa: ANN001, ANN202
+        motion, U, u, dinv = work.motion, work.U, work.u, work.dinv
+        g0 = u[d0] - _dot6(U[d0], e0_, e1_, e2_, e3_, e4_, e5_)
+        g1 = u[d0 + 1] - _dot6(U[d0 + 1], e0_, e1_, e2_, e3_, e4_, e5_)
+        g2 = u[d0 + 2] - _dot6(U[d0 + 2], e0_, e1_, e2_, e3_, e4_, e5_)
+        z0 = dinv[e0] * g0 + dinv[e0 + 1] * g1 + dinv[e0 + 2] * g2
+        z1 = dinv[e0 + 3] * g0 + dinv[e0 + 4] * g1 + dinv[e0 + 5] * g2
+        z2 = dinv[e0 + 6] * g0 + dinv[e0 + 7] * g1 + dinv[e0 + 8] * g2
+        cx, cy, cz = motion[d0 + 1, 5], -motion[d0, 5], motion[d0, 4]
+        y0, y1, y2 = _cross(cx, cy, cz, z0, z1, z2)
+        e0_, e1_, e2_, e3_, e4_, e5_ = e0_ + z0, e1_ + z1, e2_ + z2, e3_ + y0, e4_ + y1, e5_ + y2
+        Rm = work.rotation[i]
+        qdd[d0] = Rm[0, 0] * z0 + Rm[1, 0] * z1 + Rm[2, 0] * z2
+        qdd[d0 + 1] = Rm[0, 1] * z0 + Rm[1, 1] * z1 + Rm[2, 1] * z2
+        qdd[d0 + 2] = Rm[0, 2] * z0 + Rm[1, 2] * z1 + Rm[2, 2] * z2
+        return e0_, e1_, e2_, e3_, e4_, e5_
+
+    return run
+
+
+def _general_forward(others, work, d0, d1, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd):  # noqa: ANN001, ANN202
+    """Pass 3 at a free link (k > 1: six rates): its qdd, and its spatial acceleration returned."""
+    kernel_only()
+
+
+@overload(_general_forward, jit_options=DISPATCH_OPTIONS, inline="always")
+def _general_forward_impl(others, work, d0, d1, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd):  # noqa: ANN001, ANN202
+    if absent(others):
+        return lambda others, work, d0, d1, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd: (e0_, e1_, e2_, e3_, e4_, e5_)
+
+    def run(others, work, d0, d1, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd):  # noqa: ANN001, ANN202
+        motion, U, u, dinv = work.motion, work.U, work.u, work.dinv
+        k = d1 - d0
+        for l in range(d0, d1):  # u becomes u - U^T a' (recomputed by every call)
+            u[l] -= _dot6(U[l], e0_, e1_, e2_, e3_, e4_, e5_)
+        for j in range(k):
+            g = 0.0
+            for l in range(k):
+                g += dinv[e0 + j * k + l] * u[d0 + l]
+            qdd[d0 + j] = g
+            s = motion[d0 + j]
+            e0_, e1_, e2_ = e0_ + s[0] * g, e1_ + s[1] * g, e2_ + s[2] * g
+            e3_, e4_, e5_ = e3_ + s[3] * g, e4_ + s[4] * g, e5_ + s[5] * g
+        return e0_, e1_, e2_, e3_, e4_, e5_
+
+    return run
+
+
 @separately_compiled
 @numba.njit(**STEP_KERNEL)
 def tree_accelerations(tree, work, force, torque, joint_force, qdd) -> None:  # noqa: ANN001
@@ -382,112 +586,11 @@ def tree_accelerations(tree, work, force, torque, joint_force, qdd) -> None:  # 
             a[19] -= V4 * U5
             a[20] -= V5 * U5
         elif d1 - d0 == 3:  # ball, its rates in the world-aligned basis S' = [1; [c_w]] (see the docstring)
-            cx, cy, cz = motion[d0 + 1, 5], -motion[d0, 5], motion[d0, 4]
-            a = IA[i]
-            h00, h01, h02, h10, h11, h12, h20, h21, h22 = a[3], a[4], a[5], a[8], a[9], a[10], a[12], a[13], a[14]
-            m00, m01, m02, m11, m12, m22 = a[15], a[16], a[17], a[18], a[19], a[20]
-            # U' = I^A S' = [[B + H [c]], [H^T + M [c]]] (row a of X [c] is X_a x c): T on top, W below
-            t00, t01, t02 = _cross(h00, h01, h02, cx, cy, cz)
-            t10, t11, t12 = _cross(h10, h11, h12, cx, cy, cz)
-            t20, t21, t22 = _cross(h20, h21, h22, cx, cy, cz)
-            t00, t01, t02, t10, t11, t12 = t00 + a[0], t01 + a[1], t02 + a[2], t10 + a[1], t11 + a[6], t12 + a[7]
-            t20, t21, t22 = t20 + a[2], t21 + a[7], t22 + a[11]
-            w00, w01, w02 = _cross(m00, m01, m02, cx, cy, cz)
-            w10, w11, w12 = _cross(m01, m11, m12, cx, cy, cz)
-            w20, w21, w22 = _cross(m02, m12, m22, cx, cy, cz)
-            w00, w01, w02, w10, w11, w12 = w00 + h00, w01 + h10, w02 + h20, w10 + h01, w11 + h11, w12 + h21
-            w20, w21, w22 = w20 + h02, w21 + h12, w22 + h22
-            # D' = S'^T U' = T - [c] W (column j: T_j - c x W_j), symmetric; its inverse by cofactors
-            z00, z10, z20 = _cross(cx, cy, cz, w00, w10, w20)
-            z01, z11, z21 = _cross(cx, cy, cz, w01, w11, w21)
-            z02, z12, z22 = _cross(cx, cy, cz, w02, w12, w22)
-            d00, d01, d02, d11, d12, d22 = t00 - z00, t01 - z01, t02 - z02, t11 - z11, t12 - z12, t22 - z22
-            # a ball's armature is isotropic (one damper on its relative spin), so the basis does not matter
-            d00, d11, d22 = d00 + work.armature[d0], d11 + work.armature[d0 + 1], d22 + work.armature[d0 + 2]
-            k00, k01, k02 = d11 * d22 - d12 * d12, d02 * d12 - d01 * d22, d01 * d12 - d02 * d11
-            k11, k12, k22 = d00 * d22 - d02 * d02, d01 * d02 - d00 * d12, d00 * d11 - d01 * d01
-            det = 1.0 / (d00 * k00 + d01 * k01 + d02 * k02)
-            k00, k01, k02, k11, k12, k22 = k00 * det, k01 * det, k02 * det, k11 * det, k12 * det, k22 * det
-            dinv[e0], dinv[e0 + 1], dinv[e0 + 2] = k00, k01, k02
-            dinv[e0 + 3], dinv[e0 + 4], dinv[e0 + 5] = k01, k11, k12
-            dinv[e0 + 6], dinv[e0 + 7], dinv[e0 + 8] = k02, k12, k22
-            _store6(U[d0], t00, t10, t20, w00, w10, w20)
-            _store6(U[d0 + 1], t01, t11, t21, w01, w11, w21)
-            _store6(U[d0 + 2], t02, t12, t22, w02, w12, w22)
-            # u' = R tau - S'^T p^A, S'^T p = p_top - c x p_bottom
-            f, Rm = pA[i], work.rotation[i]
-            o0, o1, o2 = joint_force[d0], joint_force[d0 + 1], joint_force[d0 + 2]
-            g0, g1, g2 = _cross(cx, cy, cz, f[3], f[4], f[5])
-            u[d0] = Rm[0, 0] * o0 + Rm[0, 1] * o1 + Rm[0, 2] * o2 - f[0] + g0
-            u[d0 + 1] = Rm[1, 0] * o0 + Rm[1, 1] * o1 + Rm[1, 2] * o2 - f[1] + g1
-            u[d0 + 2] = Rm[2, 0] * o0 + Rm[2, 1] * o1 + Rm[2, 2] * o2 - f[2] + g2
-            if p < 0:
-                continue
-            # p^a = p^A + I^A c + U' D'^-1 (u' - U'^T c), then I^a = I^A - (U' D'^-1) U'^T
-            a0, a1, a2, a3, a4, a5 = _sym6_times(IA, i, c[0], c[1], c[2], c[3], c[4], c[5])
-            g0 = u[d0] - _dot6(U[d0], c[0], c[1], c[2], c[3], c[4], c[5])
-            g1 = u[d0 + 1] - _dot6(U[d0 + 1], c[0], c[1], c[2], c[3], c[4], c[5])
-            g2 = u[d0 + 2] - _dot6(U[d0 + 2], c[0], c[1], c[2], c[3], c[4], c[5])
-            g0, g1, g2 = k00 * g0 + k01 * g1 + k02 * g2, k01 * g0 + k11 * g1 + k12 * g2, k02 * g0 + k12 * g1 + k22 * g2
-            f[0] += a0 + t00 * g0 + t01 * g1 + t02 * g2
-            f[1] += a1 + t10 * g0 + t11 * g1 + t12 * g2
-            f[2] += a2 + t20 * g0 + t21 * g1 + t22 * g2
-            f[3] += a3 + w00 * g0 + w01 * g1 + w02 * g2
-            f[4] += a4 + w10 * g0 + w11 * g1 + w12 * g2
-            f[5] += a5 + w20 * g0 + w21 * g1 + w22 * g2
-            for row in range(6):  # constant trip counts: unrolled, SYM6_INDEX folded
-                x0, x1, x2 = U[d0, row], U[d0 + 1, row], U[d0 + 2, row]
-                y0, y1, y2 = _sym3_times(k00, k01, k02, k11, k12, k22, x0, x1, x2)
-                for col in range(row, 6):
-                    a[SYM6_INDEX[row, col]] -= y0 * U[d0, col] + y1 * U[d0 + 1, col] + y2 * U[d0 + 2, col]
+            _ball_backward(tree.balls, work, i, p, d0, e0, joint_force)
         else:  # fixed (k = 0), free (6): D k x k, inverted in place (Gauss-Jordan: D is SPD)
-            k = d1 - d0
-            for j in range(d0, d1):
-                s = motion[j]
-                s0, s1, s2, s3, s4, s5 = s[0], s[1], s[2], s[3], s[4], s[5]
-                U[j, 0], U[j, 1], U[j, 2], U[j, 3], U[j, 4], U[j, 5] = _sym6_times(IA, i, s0, s1, s2, s3, s4, s5)
-                u[j] = joint_force[j] - _dot6(pA[i], s0, s1, s2, s3, s4, s5)
-            for j in range(k):
-                for l in range(k):
-                    s = U[d0 + l]
-                    dinv[e0 + j * k + l] = _dot6(motion[d0 + j], s[0], s[1], s[2], s[3], s[4], s[5])
-                dinv[e0 + j * k + j] += work.armature[d0 + j]
-            for j in range(k):
-                pivot = dinv[e0 + j * k + j]
-                dinv[e0 + j * k + j] = 1.0
-                for l in range(k):
-                    dinv[e0 + j * k + l] /= pivot
-                for row in range(k):
-                    if row != j:
-                        factor = dinv[e0 + row * k + j]
-                        dinv[e0 + row * k + j] = 0.0
-                        for l in range(k):
-                            dinv[e0 + row * k + l] -= factor * dinv[e0 + j * k + l]
-            if p < 0:
-                continue
-            # p^a = p^A + I^A c + U D^-1 (u - U^T c), then I^a = I^A - U D^-1 U^T (same as p^A + I^a c + U D^-1 u)
-            a0, a1, a2, a3, a4, a5 = _sym6_times(IA, i, c[0], c[1], c[2], c[3], c[4], c[5])
-            pA[i, 0] += a0
-            pA[i, 1] += a1
-            pA[i, 2] += a2
-            pA[i, 3] += a3
-            pA[i, 4] += a4
-            pA[i, 5] += a5
-            for j in range(k):
-                g = 0.0
-                for l in range(k):
-                    g += dinv[e0 + j * k + l] * (u[d0 + l] - _dot6(U[d0 + l], c[0], c[1], c[2], c[3], c[4], c[5]))
-                for col in range(6):
-                    pA[i, col] += U[d0 + j, col] * g
-            for row in range(6):
-                for col in range(row, 6):
-                    total = 0.0
-                    for j in range(k):
-                        w = 0.0
-                        for l in range(k):
-                            w += dinv[e0 + j * k + l] * U[d0 + l, col]
-                        total += U[d0 + j, row] * w
-                    IA[i, SYM6_INDEX[row, col]] -= total
+            _general_backward(tree.others, work, i, p, d0, d1, e0, joint_force)
+        if p < 0:
+            continue
         _add_to_parent(work, i, p)
 
     acc = work.acc
@@ -508,28 +611,9 @@ def tree_accelerations(tree, work, force, torque, joint_force, qdd) -> None:  # 
             e0_, e1_, e2_ = e0_ + s[0] * g, e1_ + s[1] * g, e2_ + s[2] * g
             e3_, e4_, e5_ = e3_ + s[3] * g, e4_ + s[4] * g, e5_ + s[5] * g
         elif k == 3:  # ball: omega'' (world-aligned) = D'^-1 (u' - U'^T a'), a += S' omega'', qdd = R^T omega''
-            g0 = u[d0] - _dot6(U[d0], e0_, e1_, e2_, e3_, e4_, e5_)
-            g1 = u[d0 + 1] - _dot6(U[d0 + 1], e0_, e1_, e2_, e3_, e4_, e5_)
-            g2 = u[d0 + 2] - _dot6(U[d0 + 2], e0_, e1_, e2_, e3_, e4_, e5_)
-            z0 = dinv[e0] * g0 + dinv[e0 + 1] * g1 + dinv[e0 + 2] * g2
-            z1 = dinv[e0 + 3] * g0 + dinv[e0 + 4] * g1 + dinv[e0 + 5] * g2
-            z2 = dinv[e0 + 6] * g0 + dinv[e0 + 7] * g1 + dinv[e0 + 8] * g2
-            cx, cy, cz = motion[d0 + 1, 5], -motion[d0, 5], motion[d0, 4]
-            y0, y1, y2 = _cross(cx, cy, cz, z0, z1, z2)
-            e0_, e1_, e2_, e3_, e4_, e5_ = e0_ + z0, e1_ + z1, e2_ + z2, e3_ + y0, e4_ + y1, e5_ + y2
-            Rm = work.rotation[i]
-            qdd[d0] = Rm[0, 0] * z0 + Rm[1, 0] * z1 + Rm[2, 0] * z2
-            qdd[d0 + 1] = Rm[0, 1] * z0 + Rm[1, 1] * z1 + Rm[2, 1] * z2
-            qdd[d0 + 2] = Rm[0, 2] * z0 + Rm[1, 2] * z1 + Rm[2, 2] * z2
+            e0_, e1_, e2_, e3_, e4_, e5_ = _ball_forward(tree.balls, work, i, d0, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd)
         elif k > 1:
-            for l in range(d0, d1):  # u becomes u - U^T a' (recomputed by every call)
-                u[l] -= _dot6(U[l], e0_, e1_, e2_, e3_, e4_, e5_)
-            for j in range(k):
-                g = 0.0
-                for l in range(k):
-                    g += dinv[e0 + j * k + l] * u[d0 + l]
-                qdd[d0 + j] = g
-                s = motion[d0 + j]
-                e0_, e1_, e2_ = e0_ + s[0] * g, e1_ + s[1] * g, e2_ + s[2] * g
-                e3_, e4_, e5_ = e3_ + s[3] * g, e4_ + s[4] * g, e5_ + s[5] * g
+            e0_, e1_, e2_, e3_, e4_, e5_ = _general_forward(
+                tree.others, work, d0, d1, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd
+            )
         acc[i, 0], acc[i, 1], acc[i, 2], acc[i, 3], acc[i, 4], acc[i, 5] = e0_, e1_, e2_, e3_, e4_, e5_

@@ -84,6 +84,10 @@ class TreeTable(NamedTuple):
     # the joints' limits and motors (limits.py); None without any, so a scene without them compiles no
     # limit stage (physics/dispatch.py)
     limits: TreeLimits | None
+    # int64: the ball links, and the fixed and free ones; None where the table has none, so ABA's passes
+    # for those kinds compile only into the trees that have them (aba.py)
+    balls: np.ndarray | None
+    others: np.ndarray | None
 
 
 class TreeLimits(NamedTuple):
@@ -286,7 +290,13 @@ def tree_table(
         None
         if limit_index is None or len(limit_index) == 0
         else TreeLimits(_frozen_index(limit_index), frozen_floats(limit_data, LIMIT_COLUMNS)),
+        _links_or_none(np.flatnonzero(kind == JOINT_BALL)),
+        _links_or_none(np.flatnonzero((kind == JOINT_FIXED) | (kind == TREE_FREE))),
     )
+
+
+def _links_or_none(links: np.ndarray) -> np.ndarray | None:
+    return frozen_ints(links) if links.size else None
 
 
 def _frozen_index(values) -> np.ndarray:  # noqa: ANN001
