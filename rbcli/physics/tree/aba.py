@@ -303,7 +303,9 @@ def _add_to_parent(work, i, p) -> None:  # noqa: ANN001
 
 # ---- the ball and the fixed / free links' passes, each compiled only into trees that have such links ----
 # (TreeTable.balls, .others: None where a tree has none, physics/dispatch.py): a hinge chain's ABA then
-# compiles neither, ~1.7 s of a first run (docs/trees.md, "Start-up")
+# compiles neither, ~2 s of a first run (docs/trees.md, "Start-up"). The ball passes are inlined (a call
+# per ball link cost ~11 % of a 10-link ball chain's step); the fixed / free ones (a root, once a tree)
+# are called, which compiles faster
 
 
 def _ball_backward(balls, work, i, p, d0, e0, joint_force) -> None:  # noqa: ANN001
@@ -386,7 +388,7 @@ def _general_backward(others, work, i, p, d0, d1, e0, joint_force) -> None:  # n
     kernel_only()
 
 
-@overload(_general_backward, jit_options=DISPATCH_OPTIONS, inline="always")
+@overload(_general_backward, jit_options=DISPATCH_OPTIONS)
 def _general_backward_impl(others, work, i, p, d0, d1, e0, joint_force):  # noqa: ANN001, ANN202
     if absent(others):
         return lambda others, work, i, p, d0, d1, e0, joint_force: None
@@ -480,7 +482,7 @@ def _general_forward(others, work, d0, d1, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd
     kernel_only()
 
 
-@overload(_general_forward, jit_options=DISPATCH_OPTIONS, inline="always")
+@overload(_general_forward, jit_options=DISPATCH_OPTIONS)
 def _general_forward_impl(others, work, d0, d1, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd):  # noqa: ANN001, ANN202
     if absent(others):
         return lambda others, work, d0, d1, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd: (e0_, e1_, e2_, e3_, e4_, e5_)
