@@ -16,6 +16,11 @@ The joints' dampers (-c rate on each rate) are implicit in reduced-euler, as MuJ
 (backward Euler in the damper: stable at any c h), by adding h c to D = S^T I^A S in ABA (the armature
 term, work.armature); explicit in reduced-rk4 (stable while c h is below ~2.8 of the joint's inertia).
 
+Limits, cones and motors act after either step's smooth part as impulses on the rates, with the step's
+last ABA factors (limits.py `limit_stage`: nothing where the tree has none); an impulse on a link is
+projected onto the rates before the step (`tree_kick`, the chunk loop's stage after the impulses); the
+joints' reactions are summed only in a run that records them (reactions.py).
+
 First order / fourth order (tests/physics/test_tree_integrate.py measures both on the compound pendulum's
 exact period). Neither is symplectic: in joint coordinates the Hamiltonian H = p^T M(q)^-1 p / 2 + V(q) is
 not separable, so no explicit splitting keeps it (Leimkuhler-Reich ch. 4); semi-implicit Euler is
