@@ -447,13 +447,14 @@ def _general_backward_impl(others, work, i, p, d0, d1, e0, joint_force):  # noqa
     return run
 
 
-def _ball_forward(balls, work, i, d0, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd):  # noqa: ANN001, ANN202
-    """Pass 3 at ball link i: its qdd, and the link's spatial acceleration (the six e's) returned."""
+def ball_forward(balls, work, i, d0, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd):  # noqa: ANN001, ANN202
+    """Pass 3 at ball link i from u' in work.u: its qdd, and the link's spatial acceleration (the six e's,
+    its parent's shifted on entry) returned. Also limits.py's response pass (the same pass with no bias)."""
     kernel_only()
 
 
-@overload(_ball_forward, jit_options=DISPATCH_OPTIONS, inline="always")
-def _ball_forward_impl(balls, work, i, d0, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd):  # noqa: ANN001, ANN202
+@overload(ball_forward, jit_options=DISPATCH_OPTIONS, inline="always")
+def _ball_forward_overload(balls, work, i, d0, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd):  # noqa: ANN001, ANN202
     if absent(balls):
         return lambda balls, work, i, d0, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd: (e0_, e1_, e2_, e3_, e4_, e5_)
 
@@ -477,13 +478,14 @@ def _ball_forward_impl(balls, work, i, d0, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd
     return run
 
 
-def _general_forward(others, work, d0, d1, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd):  # noqa: ANN001, ANN202
-    """Pass 3 at a free link (k > 1: six rates): its qdd, and its spatial acceleration returned."""
+def general_forward(others, work, d0, d1, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd):  # noqa: ANN001, ANN202
+    """Pass 3 at a free link (k > 1: six rates) from u in work.u: its qdd, and its spatial acceleration
+    returned. Also limits.py's response pass."""
     kernel_only()
 
 
-@overload(_general_forward, jit_options=DISPATCH_OPTIONS)
-def _general_forward_impl(others, work, d0, d1, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd):  # noqa: ANN001, ANN202
+@overload(general_forward, jit_options=DISPATCH_OPTIONS)
+def _general_forward_overload(others, work, d0, d1, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd):  # noqa: ANN001, ANN202
     if absent(others):
         return lambda others, work, d0, d1, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd: (e0_, e1_, e2_, e3_, e4_, e5_)
 
@@ -613,9 +615,9 @@ def tree_accelerations(tree, work, force, torque, joint_force, qdd) -> None:  # 
             e0_, e1_, e2_ = e0_ + s[0] * g, e1_ + s[1] * g, e2_ + s[2] * g
             e3_, e4_, e5_ = e3_ + s[3] * g, e4_ + s[4] * g, e5_ + s[5] * g
         elif k == 3:  # ball: omega'' (world-aligned) = D'^-1 (u' - U'^T a'), a += S' omega'', qdd = R^T omega''
-            e0_, e1_, e2_, e3_, e4_, e5_ = _ball_forward(tree.balls, work, i, d0, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd)
+            e0_, e1_, e2_, e3_, e4_, e5_ = ball_forward(tree.balls, work, i, d0, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd)
         elif k > 1:
-            e0_, e1_, e2_, e3_, e4_, e5_ = _general_forward(
+            e0_, e1_, e2_, e3_, e4_, e5_ = general_forward(
                 tree.others, work, d0, d1, e0, e0_, e1_, e2_, e3_, e4_, e5_, qdd
             )
         acc[i, 0], acc[i, 1], acc[i, 2], acc[i, 3], acc[i, 4], acc[i, 5] = e0_, e1_, e2_, e3_, e4_, e5_

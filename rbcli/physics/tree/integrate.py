@@ -225,7 +225,7 @@ def tree_kick(tree, tree_data, x, q, P, L, F, tau) -> None:  # noqa: ANN001
         work.armature[k] = 0.0
     tree_accelerations(tree, work, F, tau, tree_data.joint_force, tree_data.qdd)
     generalized_momentum(tree, work, P, L, rw.tau)
-    tree_response(tree, work, rw.tau, rate, rw.force, rw.u, rw.acc)
+    tree_response(tree, work, rw.tau, rate, rw.force, rw.acc)
     forward_kinematics(tree, coord, rate, work, x, q, P, L)
     tree_data.fk_state[0] = 1.0
 

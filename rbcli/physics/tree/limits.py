@@ -52,6 +52,7 @@ from rbcli.physics.joints.rows import quaternion_product
 from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.rotation_kernels import rotate_inverse
 from rbcli.physics.step import STEP_KERNEL
+from rbcli.physics.tree.aba import ball_forward, general_forward
 from rbcli.physics.tree.flow import advance_coords
 from rbcli.physics.tree.reactions import impulse_wrench_stage
 from rbcli.physics.tree.table import (
@@ -81,13 +82,14 @@ POSITION_TOLERANCE = 1e-14
 
 @separately_compiled
 @numba.njit(**STEP_KERNEL)
-def tree_response(tree, work, tau, delta, force, u, acc) -> None:  # noqa: ANN001
+def tree_response(tree, work, tau, delta, force, acc) -> None:  # noqa: ANN001
     """delta (D,) = M^-1 tau for a generalized impulse tau (D,), dual to the rates, with the factors of
     the last ABA in `work` (its U, D^-1, S, r: tree_accelerations' passes 2 and 3 with no velocity terms
     and no external force); acc (n, 6): each link's spatial velocity change (world-aligned at its centre
-    of mass); force (n, 6), u (D,): scratch."""
+    of mass); force (n, 6): scratch. Overwrites work.u (ABA's, used only within an ABA) with the pass's
+    own, so the forward pass is aba.py's ball_forward and general_forward for those links."""
     n = tree.parent.shape[0]
-    motion, U, dinv = work.motion, work.U, work.dinv
+    motion, U, dinv, u = work.motion, work.U, work.dinv, work.u
     for i in range(n):
         for k in range(6):
             force[i, k] = 0.0
@@ -155,33 +157,9 @@ def tree_response(tree, work, tau, delta, force, u, acc) -> None:  # noqa: ANN00
             a0, a1, a2 = a0 + s[0] * g, a1 + s[1] * g, a2 + s[2] * g
             a3, a4, a5 = a3 + s[3] * g, a4 + s[4] * g, a5 + s[5] * g
         elif k == 3:
-            g0 = u[d0] - (U[d0, 0] * a0 + U[d0, 1] * a1 + U[d0, 2] * a2 + U[d0, 3] * a3 + U[d0, 4] * a4 + U[d0, 5] * a5)
-            g1 = u[d0 + 1] - (U[d0 + 1, 0] * a0 + U[d0 + 1, 1] * a1 + U[d0 + 1, 2] * a2 + U[d0 + 1, 3] * a3
-                              + U[d0 + 1, 4] * a4 + U[d0 + 1, 5] * a5)  # fmt: skip
-            g2 = u[d0 + 2] - (U[d0 + 2, 0] * a0 + U[d0 + 2, 1] * a1 + U[d0 + 2, 2] * a2 + U[d0 + 2, 3] * a3
-                              + U[d0 + 2, 4] * a4 + U[d0 + 2, 5] * a5)  # fmt: skip
-            z0 = dinv[e0] * g0 + dinv[e0 + 1] * g1 + dinv[e0 + 2] * g2
-            z1 = dinv[e0 + 3] * g0 + dinv[e0 + 4] * g1 + dinv[e0 + 5] * g2
-            z2 = dinv[e0 + 6] * g0 + dinv[e0 + 7] * g1 + dinv[e0 + 8] * g2
-            cx, cy, cz = motion[d0 + 1, 5], -motion[d0, 5], motion[d0, 4]
-            a0, a1, a2 = a0 + z0, a1 + z1, a2 + z2
-            a3, a4, a5 = a3 + cy * z2 - cz * z1, a4 + cz * z0 - cx * z2, a5 + cx * z1 - cy * z0
-            Rm = work.rotation[i]
-            delta[d0] = Rm[0, 0] * z0 + Rm[1, 0] * z1 + Rm[2, 0] * z2
-            delta[d0 + 1] = Rm[0, 1] * z0 + Rm[1, 1] * z1 + Rm[2, 1] * z2
-            delta[d0 + 2] = Rm[0, 2] * z0 + Rm[1, 2] * z1 + Rm[2, 2] * z2
+            a0, a1, a2, a3, a4, a5 = ball_forward(tree.balls, work, i, d0, e0, a0, a1, a2, a3, a4, a5, delta)
         elif k > 1:
-            for l in range(d0, d1):
-                w = U[l]
-                u[l] -= w[0] * a0 + w[1] * a1 + w[2] * a2 + w[3] * a3 + w[4] * a4 + w[5] * a5
-            for j in range(k):
-                g = 0.0
-                for l in range(k):
-                    g += dinv[e0 + j * k + l] * u[d0 + l]
-                delta[d0 + j] = g
-                s = motion[d0 + j]
-                a0, a1, a2 = a0 + s[0] * g, a1 + s[1] * g, a2 + s[2] * g
-                a3, a4, a5 = a3 + s[3] * g, a4 + s[4] * g, a5 + s[5] * g
+            a0, a1, a2, a3, a4, a5 = general_forward(tree.others, work, d0, d1, e0, a0, a1, a2, a3, a4, a5, delta)
         acc[i, 0], acc[i, 1], acc[i, 2], acc[i, 3], acc[i, 4], acc[i, 5] = a0, a1, a2, a3, a4, a5
 
 
@@ -241,7 +219,7 @@ def _respond(tree, tree_data, count) -> None:  # noqa: ANN001
         d0, d1 = tree.dof_start[link], tree.dof_start[link + 1]
         for e in range(d1 - d0):
             tau[d0 + e] += lw.row[k, e] * lw.stage_impulse[k]
-    tree_response(tree, tree_data.work, tau, rw.delta, rw.force, rw.u, rw.acc)
+    tree_response(tree, tree_data.work, tau, rw.delta, rw.force, rw.acc)
 
 
 @numba.njit(cache=True)
@@ -259,7 +237,7 @@ def _solve(tree, tree_data, count) -> None:  # noqa: ANN001
         d0, d1 = tree.dof_start[link], tree.dof_start[link + 1]
         for e in range(d1 - d0):
             tau[d0 + e] = lw.row[k, e]
-        tree_response(tree, tree_data.work, tau, rw.delta, rw.force, rw.u, rw.acc)
+        tree_response(tree, tree_data.work, tau, rw.delta, rw.force, rw.acc)
         for b in range(count):
             A[b, a] = _along(tree, lw.active[b], lw.row, rw.delta)
     lam = lw.stage_impulse

@@ -167,7 +167,6 @@ class ResponseWork(NamedTuple):
 
     tau: np.ndarray  # (D,): a generalized impulse, dual to the rates (J^T lambda, J^T h)
     delta: np.ndarray  # (D,): M^-1 tau
-    u: np.ndarray  # (D,): scratch
     force: np.ndarray  # (n, 6): the articulated forces
     acc: np.ndarray  # (n, 6): the links' spatial velocity changes of M^-1 tau
 
@@ -196,7 +195,7 @@ def make_limit_work(limits: TreeLimits) -> LimitWork:
 
 def make_response_work(tree: TreeTable) -> ResponseWork:
     D, n = tree_dof_count(tree), tree_link_count(tree)
-    return ResponseWork(np.zeros(D), np.zeros(D), np.zeros(D), np.zeros((n, 6)), np.zeros((n, 6)))
+    return ResponseWork(np.zeros(D), np.zeros(D), np.zeros((n, 6)), np.zeros((n, 6)))
 
 
 def make_tree_data(tree: TreeTable, reactions: bool = False) -> TreeData:
