@@ -33,7 +33,6 @@ import numpy as np
 
 from rbcli.physics.joints.tables import (
     JOINT_BALL,
-    JOINT_DISTANCE,
     JOINT_FIXED,
     JOINT_HINGE,
     JOINT_SLIDER,
@@ -54,7 +53,7 @@ from rbcli.physics.tree.table import (
     TreeTable,
     tree_table,
 )
-from rbcli.scene.joint_spec import JointSpec
+from rbcli.scene.joint_spec import JointSpec, tree_refusals
 from rbcli.scene.spec import BodySpec, SceneError, SceneIssue, SourceLocation
 
 GROUND = -1  # the world and every static body: one vertex of the joints' graph
@@ -82,51 +81,22 @@ def compile_trees(
         issues.append(SceneIssue(where, f"joint '{spec.name}': {reason} (in joint coordinates, {REDUCED})",
                                  expected))  # fmt: skip
 
-    J = 0 if table is None else table.kind.shape[0]
-    usable = []
-    for j in range(J):
-        assert table is not None
-        a, b = int(table.body_a[j]), int(table.body_b[j])
-        kind = int(table.kind[j])
-        if kind == JOINT_DISTANCE:
-            refuse(j, "type", "a distance joint is a constraint between two links, not a tree's joint")
-        elif kinematic[a] or (b != WORLD and kinematic[b]):
-            refuse(j, "bodies", "a kinematic body in a tree is not modelled yet")
-        else:
-            usable.append(j)
-    n_bodies = model.body_count
+    # what the trees do not hold (joint_spec.tree_refusals: the same rules the loader's default applies)
+    for j, key, reason, expected in tree_refusals(bodies, joints):
+        refuse(j, key, reason, expected or MAXIMAL)
     if issues:
         raise SceneError(issues)
+    n_bodies = model.body_count
 
     def vertex(body: int) -> int:
         return GROUND if body == WORLD or static[body] else body
 
-    # union-find over the dynamic bodies and the ground: a joint whose ends are already joined closes a loop
-    root_of = list(range(n_bodies + 1))  # index n_bodies: the ground
-
-    def find(v: int) -> int:
-        v = n_bodies if v == GROUND else v
-        while root_of[v] != v:
-            root_of[v] = root_of[root_of[v]]
-            v = root_of[v]
-        return v
-
     adjacency: dict[int, list[tuple[int, int]]] = {v: [] for v in [GROUND, *range(n_bodies)]}
-    for j in usable:
+    for j in range(0 if table is None else table.kind.shape[0]):
         assert table is not None
         a, b = vertex(int(table.body_a[j])), vertex(int(table.body_b[j]))
-        ra, rb = find(a), find(b)
-        if ra == rb:
-            through = "the ground (two joints to the world or static bodies)" if GROUND in (a, b) or (
-                find(GROUND) == ra) else "its bodies"  # fmt: skip
-            refuse(j, "bodies", f"it closes a loop through {through}: a tree has one path from each body to its root",
-                   "a loop on a maximal integrator (split2 with RATTLE holds loops), or a tree")  # fmt: skip
-            continue
-        root_of[ra] = rb
         adjacency[a].append((b, j))
         adjacency[b].append((a, j))
-    if issues:
-        raise SceneError(issues)
 
     # breadth first from the ground, then from each floating component's heaviest body
     order: list[tuple[int, int, int]] = []  # (body, parent body or GROUND, joint or -1 for a free root)
@@ -144,10 +114,21 @@ def compile_trees(
                     queue.append(w)
 
     sweep()
+    # the floating components (no joint to the ground): each dynamic body not reached, labelled by a walk
+    component: dict[int, int] = {}
+    for v in dynamic:
+        if v in seen or v in component:
+            continue
+        component[v], stack = v, [v]
+        while stack:
+            for w, _ in adjacency[stack.pop()]:
+                if w != GROUND and w not in component:
+                    component[w] = v
+                    stack.append(w)
     components: dict[int, list[int]] = {}
     for v in dynamic:
         if v not in seen:
-            components.setdefault(find(v), []).append(v)
+            components.setdefault(component[v], []).append(v)
     for members in sorted(components.values(), key=lambda m: min(m)):
         heaviest = max(members, key=lambda v: (float(model.body_mass[v]), -v))
         seen.add(heaviest)

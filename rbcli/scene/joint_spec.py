@@ -277,15 +277,25 @@ def _cone(value: dict[str, Any], path: YamlPath, issues: IssueCollector) -> Join
     return JointCone(_frozen(axis, (3,)), _frozen(reference, (3,)), swing, twist)
 
 
-def joints_form_trees(bodies: Sequence[Any], joints: Sequence[JointSpec], limit_rows: int) -> bool:
-    """Whether the scene's joints can run in joint coordinates (scene/compile_trees.py holds them): no
-    distance joint, no kinematic body at either end, no loop (static bodies and the world are one vertex,
-    the ground: two joints to it close a loop), at most `limit_rows` limit and motor rows (counted two per
-    joint that has limits, a cone or a motor: a bound above the table's). Decided on the scene's names
-    alone, before compiling: a loop of welds alone (merged into one body when compiled) counts as a loop,
-    so a scene this accepts always compiles to trees. bodies: BodySpec (name, static, kinematic)."""
+LOOP_EXPECTED = "a loop on a maximal integrator (split2 with RATTLE holds loops), or a tree"
+
+
+def tree_refusals(bodies: Sequence[Any], joints: Sequence[JointSpec]) -> list[tuple[int, str, str, str | None]]:
+    """Why the joints cannot run in joint coordinates (scene/compile_trees.py), from the scene's names:
+    (joint index, the key at fault, the reason, what is expected instead or None for the default advice),
+    empty where they form trees. First a distance joint or a kinematic body at either end; where there is
+    none, each joint that closes a loop (static bodies and the world are one vertex, the ground: two joints
+    to it close one), found by union-find in the joints' order. bodies: BodySpec (name, static, kinematic)."""
     ground = {WORLD_NAME} | {b.name for b in bodies if b.static}
     kinematic = {b.name for b in bodies if b.kinematic}
+    refusals: list[tuple[int, str, str, str | None]] = []
+    for j, joint in enumerate(joints):
+        if joint.kind == "distance":
+            refusals.append((j, "type", "a distance joint is a constraint between two links, not a tree's joint", None))
+        elif kinematic.intersection(joint.bodies):
+            refusals.append((j, "bodies", "a kinematic body in a tree is not modelled yet", None))
+    if refusals:
+        return refusals
     root = {b.name: b.name for b in bodies}
     root[WORLD_NAME] = WORLD_NAME
 
@@ -296,13 +306,23 @@ def joints_form_trees(bodies: Sequence[Any], joints: Sequence[JointSpec], limit_
             name = root[name]
         return name
 
-    rows = 0
-    for joint in joints:
-        if joint.kind == "distance" or kinematic.intersection(joint.bodies):
-            return False
+    for j, joint in enumerate(joints):
         a, b = find(joint.bodies[0]), find(joint.bodies[1])
         if a == b:
-            return False
+            grounded = bool(ground.intersection(joint.bodies)) or find(WORLD_NAME) == a
+            through = "the ground (two joints to the world or static bodies)" if grounded else "its bodies"
+            reason = f"it closes a loop through {through}: a tree has one path from each body to its root"
+            refusals.append((j, "bodies", reason, LOOP_EXPECTED))
+            continue
         root[a] = b
-        rows += 2 if (joint.limits is not None or joint.motor is not None or joint.cone is not None) else 0
-    return rows <= limit_rows
+    return refusals
+
+
+def joints_form_trees(bodies: Sequence[Any], joints: Sequence[JointSpec], limit_rows: int) -> bool:
+    """Whether the scene's joints can run in joint coordinates: no `tree_refusals`, and at most
+    `limit_rows` limit and motor rows (counted two per joint that has limits, a cone or a motor: a bound
+    above the table's). Decided on the scene's names alone, before compiling, where welds are not merged
+    yet: a loop of welds alone (one body when compiled) counts as a loop, so a scene this accepts always
+    compiles to trees."""
+    rows = sum(2 for joint in joints if joint.limits is not None or joint.motor is not None or joint.cone is not None)
+    return rows <= limit_rows and not tree_refusals(bodies, joints)

@@ -206,37 +206,38 @@ def _along(tree, k, row, vector) -> float:  # noqa: ANN001
     return total
 
 
+@numba.njit(cache=True, inline="always")
+def _add_along(tree, k, row, weight, vector) -> None:  # noqa: ANN001
+    """vector += weight j_k over row k's link's rates (J^T's column k: _along's transpose)."""
+    link = tree.limits.link_kind[k, 0]
+    d0, d1 = tree.dof_start[link], tree.dof_start[link + 1]
+    for e in range(d1 - d0):
+        vector[d0 + e] += weight * row[k, e]
+
+
 @numba.njit(cache=True)
 def _respond(tree, tree_data, count) -> None:  # noqa: ANN001
-    """lw.delta = M^-1 J^T lambda for the first `count` active rows' lambda (lw.stage_impulse)."""
+    """response.delta = M^-1 J^T lambda for the first `count` active rows' lambda (lw.stage_impulse)."""
     lw, rw = tree_data.limits, tree_data.response
-    tau = rw.tau
-    for d in range(tau.shape[0]):
-        tau[d] = 0.0
+    for d in range(rw.tau.shape[0]):  # element loops: a slice assignment compiles a shape check
+        rw.tau[d] = 0.0
     for a in range(count):
         k = lw.active[a]
-        link = tree.limits.link_kind[k, 0]
-        d0, d1 = tree.dof_start[link], tree.dof_start[link + 1]
-        for e in range(d1 - d0):
-            tau[d0 + e] += lw.row[k, e] * lw.stage_impulse[k]
-    tree_response(tree, tree_data.work, tau, rw.delta, rw.force, rw.acc)
+        _add_along(tree, k, lw.row, lw.stage_impulse[k], rw.tau)
+    tree_response(tree, tree_data.work, rw.tau, rw.delta, rw.force, rw.acc)
 
 
 @numba.njit(cache=True)
 def _solve(tree, tree_data, count) -> None:  # noqa: ANN001
     """lambda (lw.stage_impulse) of the first `count` active rows: A lambda = target within [low, high]
-    by projected Gauss-Seidel on the dense A = J M^-1 J^T (one response pass per row), then lw.delta =
+    by projected Gauss-Seidel on the dense A = J M^-1 J^T (one response pass per row), then response.delta =
     M^-1 J^T lambda."""
     lw, rw = tree_data.limits, tree_data.response
     A, tau = lw.delassus, rw.tau
     for a in range(count):
         for d in range(tau.shape[0]):
             tau[d] = 0.0
-        k = lw.active[a]
-        link = tree.limits.link_kind[k, 0]
-        d0, d1 = tree.dof_start[link], tree.dof_start[link + 1]
-        for e in range(d1 - d0):
-            tau[d0 + e] = lw.row[k, e]
+        _add_along(tree, lw.active[a], lw.row, 1.0, tau)
         tree_response(tree, tree_data.work, tau, rw.delta, rw.force, rw.acc)
         for b in range(count):
             A[b, a] = _along(tree, lw.active[b], lw.row, rw.delta)
