@@ -58,7 +58,7 @@ joints:
 """
 
 
-@pytest.mark.parametrize("integrator", list(REDUCED_INTEGRATORS))
+@pytest.mark.parametrize("integrator", ["split2", *REDUCED_INTEGRATORS])
 def test_every_limit_of_a_tree_holds_to_round_off_whichever_end_its_link_is(integrator):
     """2 s of the thrown chain: every step, each joint's coordinate as the maximal joints measure it from
     the bodies' poses (hinge angle, ball twist, swing measure c <= 1) is within its bounds to 1e-12 (the
@@ -67,7 +67,8 @@ def test_every_limit_of_a_tree_holds_to_round_off_whichever_end_its_link_is(inte
     chaotic: which one depends on everything before)."""
     sim = Simulation(load_scene_text(CHAIN.replace("integrator: split2", f"integrator: {integrator}")))
     table = sim.model.joint
-    assert sim.model.tree is not None and sim.model.tree.joint_side.tolist() == [1, -1, -1]
+    if integrator != "split2":  # maximal coordinates: the same limits solved together (joints/limit_solve.py)
+        assert sim.model.tree is not None and sim.model.tree.joint_side.tolist() == [1, -1, -1]
     low, high, worst = np.full((3, 2), np.inf), np.full((3, 2), -np.inf), 0.0
     for _ in range(2000):
         sim.step(1)

@@ -22,7 +22,8 @@ coordinate with the joints held (one solve with the stage's factor of A).
   rate pointing out of the range, is stopped (r = 0: an inelastic stop; the position push alone would
   reflect it, a bounce). A limit only ever pushes into the range (lambda of one sign:
   the active set is "beyond or at the bound and moving out"), never pulls.
-Several drives and limits act one after another (one Gauss-Seidel sweep per stage).
+Motors and dampers act one joint after another; the limits of a stage are solved together, their
+coupling through the joints included (joints/limit_solve.py).
 """
 
 from __future__ import annotations
@@ -98,7 +99,7 @@ def coordinate_row(table, j, x, q):  # noqa: ANN001, ANN202
 
 
 @numba.njit(cache=True, inline="always")
-def _weigh(work, body, jac):  # noqa: ANN001, ANN202
+def weigh(work, body, jac):  # noqa: ANN001, ANN202
     """W_body jac (a 6-tuple) for one end (zero for the world and ground bodies)."""
     if body < 0:
         return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
@@ -118,7 +119,7 @@ def _weigh(work, body, jac):  # noqa: ANN001, ANN202
 def effective_inverse(table, work, a, b, ja, jb) -> float:  # noqa: ANN001
     """k = J W J^T - (G W J^T)^T A^-1 (G W J^T) with the stage's W, G (work.jac_*) and factor of A;
     leaves y = A^-1 G W J^T in work.delta (the joints' share of an impulse along J)."""
-    wa, wb = _weigh(work, a, ja), _weigh(work, b, jb)
+    wa, wb = weigh(work, a, ja), weigh(work, b, jb)
     for k in range(table.kind.shape[0]):  # G W J^T: only rows on a or b couple
         ak, bk = table.body_a[k], table.body_b[k]
         for r in range(table.row_start[k], table.row_start[k] + table.row_count[k]):
@@ -162,7 +163,7 @@ def _push(table, work, j, a, b, ja, jb, impulse, P, L) -> None:  # noqa: ANN001
 
 
 @numba.njit(cache=True, inline="always")
-def _rate(model, q, P, L, a, b, ja, jb) -> float:  # noqa: ANN001
+def limit_rate(model, q, P, L, a, b, ja, jb) -> float:  # noqa: ANN001
     """J V from the bodies' own velocities (a ground body's too)."""
     inv = 1.0 / model.body_mass[a]
     oa0, oa1, oa2 = body_omega(model, q, L, a)
@@ -174,7 +175,7 @@ def _rate(model, q, P, L, a, b, ja, jb) -> float:  # noqa: ANN001
     return rate
 
 
-# inline="always" (numba's, before typing), as _stop below: called from Python's view a small function,
+# inline="always" (numba's, before typing): called from Python's view a small function,
 # but LLVM left each a call, and a call passes the joint table and work by value (~30 arrays each); a
 # hinge-limit scene (the ragdoll without cones) stepped ~9 % slower than when its limits called
 # coordinate_row directly
@@ -189,29 +190,13 @@ def limit_row(table, j, swing, x, q):  # noqa: ANN001, ANN202
 
 
 @numba.njit(cache=True, inline="always")
-def _bounds(table, j, slot):  # noqa: ANN001, ANN202
+def limit_bounds(table, j, slot):  # noqa: ANN001, ANN202
     """(lower, upper) of joint j's limit `slot`: 0 its coordinate's, 1 a ball joint's cone (c <= 1)."""
     if slot == 0:
         return table.limit_lower[j], table.limit_upper[j]
     if table.cone[j, 8] > 0.0:  # tables.CONE_SWING: a swing limit
         return -math.inf, 1.0
     return -math.inf, math.inf
-
-
-@numba.njit(cache=True, inline="always")
-def _stop(model, table, work, j, slot, c, a, b, ja, jb, q, P, L) -> None:  # noqa: ANN001
-    """The velocity stage's inelastic stop of joint j's limit `slot` (module docstring)."""
-    lower, upper = _bounds(table, j, slot)
-    at_upper = c >= upper - LIMIT_CONTACT
-    at_lower = c <= lower + LIMIT_CONTACT
-    hit = work.limit_hit[j, slot]
-    if at_upper or at_lower or hit:
-        rate = _rate(model, q, P, L, a, b, ja, jb)
-        # pushed back in this step: stop it (the push alone would reflect it, a bounce)
-        if hit or (at_upper and rate > 0.0) or (at_lower and rate < 0.0):
-            k_inv = effective_inverse(table, work, a, b, ja, jb)
-            if k_inv > 0.0:
-                _push(table, work, j, a, b, ja, jb, -rate / k_inv, P, L)
 
 
 @numba.njit(cache=True)
@@ -225,82 +210,33 @@ def _ball_damper(model, table, work, j, a, b, h, q, P, L) -> None:  # noqa: ANN0
         ja, jb = (0.0, 0.0, 0.0, e0, e1, e2), (0.0, 0.0, 0.0, -e0, -e1, -e2)
         k_inv = effective_inverse(table, work, a, b, ja, jb)
         if k_inv > 0.0:
-            rate = _rate(model, q, P, L, a, b, ja, jb)
+            rate = limit_rate(model, q, P, L, a, b, ja, jb)
             _push(table, work, j, a, b, ja, jb, rate * (math.exp(-table.damping[j] * k_inv * h) - 1.0) / k_inv, P, L)
 
 
 @separately_compiled
 @numba.njit(cache=True)
 def drive_velocities(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
-    """The velocity stage's motors and dampers, then its limit stops (module docstring), with the end
-    configuration's W, G and factor."""
+    """The velocity stage's motors and dampers (module docstring), one joint after another, with the end
+    configuration's W, G and factor; the limits' stops follow, solved together (limit_solve.py)."""
     for j in range(table.kind.shape[0]):
         motor, damper = table.motor_cap[j] > 0.0, table.damping[j] > 0.0
-        bounded = table.limit_lower[j] > -math.inf or table.limit_upper[j] < math.inf
-        swing = table.cone[j, 8] > 0.0
-        if not (motor or damper or bounded or swing):
+        if not (motor or damper):
             continue
         a, b = table.body_a[j], table.body_b[j]
         if table.kind[j] == JOINT_BALL:
             if damper:
                 _ball_damper(model, table, work, j, a, b, h, q, P, L)
-            if bounded:
-                c, ja, jb = limit_row(table, j, False, x, q)
-                _stop(model, table, work, j, 0, c, a, b, ja, jb, q, P, L)
-        elif motor or damper or bounded:
-            c, ja, jb = limit_row(table, j, False, x, q)
-            if motor or damper:
-                k_inv = effective_inverse(table, work, a, b, ja, jb)
-                if k_inv > 0.0:  # 0: the coordinate cannot move (both ends fixed, or the joints forbid it)
-                    rate = _rate(model, q, P, L, a, b, ja, jb)
-                    impulse = 0.0
-                    if motor:
-                        cap = table.motor_cap[j] * h
-                        impulse = min(max((table.motor_speed[j] - rate) / k_inv, -cap), cap)
-                        rate += k_inv * impulse
-                    if damper:
-                        impulse += rate * (math.exp(-table.damping[j] * k_inv * h) - 1.0) / k_inv
-                    _push(table, work, j, a, b, ja, jb, impulse, P, L)
-            if bounded:
-                _stop(model, table, work, j, 0, c, a, b, ja, jb, q, P, L)
-        if swing:
-            c, ja, jb = limit_row(table, j, True, x, q)
-            _stop(model, table, work, j, 1, c, a, b, ja, jb, q, P, L)
-
-
-@separately_compiled
-@numba.njit(cache=True)
-def limit_positions(table, work, h, x, q, P, L, onto) -> bool:  # noqa: ANN001
-    """The position stage's limits: each coordinate beyond a bound at the end of the step is put back by
-    an impulse along J at the start configuration (one simplified Newton step with the start's W, G and
-    factor, h k lambda = bound - c) applied to P and L; True when any was moved (the caller then drifts
-    the bodies again, restores the joints and calls again). With `onto`, a coordinate pushed in this
-    step is also put onto its bound from inside: the start's k is off the true response by ~ h |omega|,
-    so one push lands that fraction short (3.6e-9 rad for a rod hitting its limit at 3.6 rad/s), and a
-    round or two more land it to round-off. Not in every round: limits that push each other (a hip and
-    a knee stopped in the same step) would then converge as a Gauss-Seidel sweep on their coupling,
-    measured up to 128 iterations a step; past the first rounds an overshoot into the range stays.
-    A ball joint has two limits, its twist (slot 0) and its cone (slot 1), each as a hinge's."""
-    moved = False
-    for j in range(table.kind.shape[0]):
-        for slot in range(2):
-            lower, upper = _bounds(table, j, slot)
-            if lower == -math.inf and upper == math.inf:
-                continue
-            swing = slot == 1
-            c = limit_row(table, j, swing, x, q)[0]
-            hit = work.limit_hit[j, slot]  # +1 / -1: pushed onto the upper / lower bound in this step
-            bound = upper if hit > 0.0 or (hit == 0.0 and c > upper) else lower
-            # off by more than a few ulps of the bound: below that the correction would be round-off
-            slack = 4e-16 * max(1.0, abs(bound))
-            if lower - slack <= c <= upper + slack and (hit == 0.0 or not onto or abs(c - bound) <= slack):
-                continue
-            a, b = table.body_a[j], table.body_b[j]
-            _, ja, jb = limit_row(table, j, swing, work.x_start, work.q_start)
-            k_inv = effective_inverse(table, work, a, b, ja, jb)
-            if not k_inv > 0.0:
-                continue
-            _push(table, work, j, a, b, ja, jb, -(c - bound) / (h * k_inv), P, L)
-            work.limit_hit[j, slot] = 1.0 if bound == upper else -1.0
-            moved = True
-    return moved
+            continue
+        _, ja, jb = limit_row(table, j, False, x, q)
+        k_inv = effective_inverse(table, work, a, b, ja, jb)
+        if k_inv > 0.0:  # 0: the coordinate cannot move (both ends fixed, or the joints forbid it)
+            rate = limit_rate(model, q, P, L, a, b, ja, jb)
+            impulse = 0.0
+            if motor:
+                cap = table.motor_cap[j] * h
+                impulse = min(max((table.motor_speed[j] - rate) / k_inv, -cap), cap)
+                rate += k_inv * impulse
+            if damper:
+                impulse += rate * (math.exp(-table.damping[j] * k_inv * h) - 1.0) / k_inv
+            _push(table, work, j, a, b, ja, jb, impulse, P, L)

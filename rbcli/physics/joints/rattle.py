@@ -33,7 +33,8 @@ free drift. The iterate does not change the step's map: the Newton stops at the 
 round-off (the reversibility and energy tests hold either way).
 
 A limit beyond its bound at the end is pushed back by an impulse along its coordinate's row at the
-start, h k lambda = bound - c, alternating with the joints' Newton (drives.limit_positions).
+start, h k lambda = bound - c, the active limits together, alternating with the joints' Newton
+(limit_solve.limit_positions).
 
 Kinematic bodies are put at their exact end pose (kinematic_end) before the Newton, so the rows close
 on the prescribed pose; static and kinematic bodies take no impulse (W = 0). Dampers and drag (the
@@ -54,8 +55,8 @@ from rbcli.physics.forces.damping import dissipation_present
 from rbcli.physics.forces.wrench import accumulate_wrench
 from rbcli.physics.integrators.split2 import free_drift
 from rbcli.physics.joints.dissipation import joint_dissipation
-from rbcli.physics.joints.drives import limit_positions
 from rbcli.physics.joints.impulses import apply_body_impulses, body_impulses, gather_impulses, joint_impulses
+from rbcli.physics.joints.limit_solve import limit_positions
 from rbcli.physics.joints.rows import joint_rows
 from rbcli.physics.joints.solver import solve_rows
 from rbcli.physics.joints.stages import factor_at, project_momenta
@@ -79,11 +80,9 @@ NEWTON_ITERATIONS = 50
 # that halve by chance, and iterating on costs ~15 % of a chain's step for nothing)
 ROUNDOFF_ULPS = 16.0
 EPS = 2.220446049250313e-16
-# rounds of (limits onto their bounds, joints again) in one position stage: each round gains the
-# simplified Newton's factor ~ h |omega| on both, so a few reach round-off; in the first
-# LIMIT_ONTO_ROUNDS a limit pushed in this step is put onto its bound from either side (drives.py)
-LIMIT_ROUNDS = 8
-LIMIT_ONTO_ROUNDS = 3
+# rounds of (limits onto their bounds together, joints again) in one position stage at most: each round
+# gains the simplified Newton's factor ~ h |omega| on both, so three or four reach round-off
+LIMIT_ROUNDS = 12
 
 
 @empty_without("table", "work")
@@ -99,6 +98,7 @@ def joint_update(
         return False
     work.joint_impulse[:, :] = 0.0  # this step's reactions, gathered by the stages below
     work.limit_hit[:, :] = 0.0
+    work.limit_push[:, :] = 0.0
     for b in range(x.shape[0]):
         for c in range(3):
             work.x_start[b, c] = x[b, c]
@@ -197,8 +197,8 @@ def joint_position(model, table, work, h, x, q, P, L, guessed) -> None:  # noqa:
         work.guess[1, r] = work.guess[0, r]
         work.guess[0, r] = work.impulse[r]
     work.guess_count[0] = min(work.guess_count[0] + 1.0, 2.0)
-    for sweep in range(LIMIT_ROUNDS):  # limits reached in this step: onto the bound, then the joints again
-        if not limit_positions(table, work, h, x, q, P, L, sweep < LIMIT_ONTO_ROUNDS):
+    for _ in range(LIMIT_ROUNDS):  # limits reached in this step: onto their bounds, then the joints again
+        if not limit_positions(table, work, h, x, q, P, L):
             break
         for b in range(x.shape[0]):
             if not table.body_ground[b]:

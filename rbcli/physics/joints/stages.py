@@ -36,6 +36,7 @@ import numba
 
 from rbcli.physics.joints.drives import drive_velocities
 from rbcli.physics.joints.impulses import apply_body_impulses, body_weights, gather_impulses, row_velocities
+from rbcli.physics.joints.limit_solve import limit_stops
 from rbcli.physics.joints.rows import joint_rows
 from rbcli.physics.joints.solver import factor_rows, solve_rows
 from rbcli.physics.joints.tables import STAT_VELOCITY
@@ -52,11 +53,12 @@ VELOCITY_SLACK = 1e-12
 @numba.njit(**STEP_KERNEL)
 def joint_velocity(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
     """The velocity stage: (P, L) -= G^T mu with G V = 0 after it, G at the end configuration; then the
-    motors and dampers, then the limits that are reached (drives.py)."""
+    motors and dampers (drives.py), then the limits that are reached, together (limit_solve.py)."""
     if table is None or work is None:
         return
     project_momenta(model, table, work, x, q, P, L)
     drive_velocities(model, table, work, h, x, q, P, L)
+    limit_stops(model, table, work, x, q, P, L)
     work.stats[STAT_VELOCITY] = row_velocities(model, table, work, q, P, L)
     for b in range(P.shape[0]):
         for c in range(3):

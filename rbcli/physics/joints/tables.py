@@ -87,6 +87,23 @@ class JointTable(NamedTuple):
     graph: JointGraph  # the solver's ordering (joints/solver.py: leaves first, loop joints apart)
 
 
+# the most limits solved together in one block (joints/limit_solve.py); a stage with more active limits
+# solves them in blocks of this many, one block after another: the scratch below is O(block x rows)
+LIMIT_BLOCK = 64
+
+
+class LimitScratch(NamedTuple):
+    """The limit solve's arrays for one block of active limits (joints/limit_solve.py), C = min(limit
+    slots of the scene, LIMIT_BLOCK), R rows."""
+
+    ends: np.ndarray  # (C, 4) int64: joint, body_a, body_b, slot (0 the coordinate's, 1 a ball's cone)
+    jacs: np.ndarray  # (C, 12): the limit's row J_a, J_b (world)
+    bounds: np.ndarray  # (C, 3): target of K lambda, lambda's lower and upper bound
+    lam: np.ndarray  # (C,)
+    y: np.ndarray  # (C, R): A^-1 G W J^T of each limit (the joints' share of a unit impulse along it)
+    k: np.ndarray  # (C, C): K, the limits' coupling with the joints held
+
+
 class JointWork(NamedTuple):
     """The joint stages' mutable arrays, allocated once per run (`make_joint_work`), in Data.joint."""
 
@@ -104,6 +121,10 @@ class JointWork(NamedTuple):
     # (J, 2): +1 / -1 where this step's position stage pushed a limit back onto its upper / lower bound;
     # column 0 the joint's coordinate (hinge angle, slider travel, ball twist), 1 a ball joint's swing
     limit_hit: np.ndarray
+    # [N s or N m s] (J, 2): the impulse this step's position stage gave each limit so far (its sign is
+    # the side it pushes from: joints/limit_solve.py keeps it so)
+    limit_push: np.ndarray
+    limit_scratch: LimitScratch
     # [N s, N m s] (J, 12), world frame: each joint's impulse on its bodies over the last (sub-)step, its
     # rows', motor's, damper's and limit's summed: [0:3] linear and [3:6] angular (about the centre of
     # mass) on body_a, [6:12] on body_b (zero for the world); / h it is the joint's reaction force and
@@ -202,13 +223,25 @@ def joint_row_total(table: JointTable) -> int:
     return int(table.row_count.sum())
 
 
+def limit_slots(table: JointTable) -> int:
+    """How many limits `table` has: a bounded coordinate, a ball joint's cone (joints/drives.py)."""
+    bounded = np.isfinite(table.limit_lower) | np.isfinite(table.limit_upper)
+    return int(bounded.sum() + (table.cone[:, 8] > 0.0).sum())
+
+
 def make_joint_work(table: JointTable) -> JointWork:
     """Zeroed work arrays for `table`'s rows and bodies."""
     rows, bodies = joint_row_total(table), table.body_ground.shape[0]
+    block = min(limit_slots(table), LIMIT_BLOCK)
+    scratch = LimitScratch(
+        np.zeros((block, 4), dtype=np.int64), np.zeros((block, 12)), np.zeros((block, 3)), np.zeros(block),
+        np.zeros((block, rows)), np.zeros((block, block)),
+    )  # fmt: skip
     return JointWork(
         np.zeros((rows, 6)), np.zeros((rows, 6)), np.zeros(rows), np.zeros(rows), np.zeros(rows), np.zeros(rows),
         np.zeros((bodies, 3)), np.zeros((bodies, 4)), np.zeros(bodies), np.zeros((bodies, 3, 3)),
-        np.zeros((bodies, 6)), np.zeros((table.kind.shape[0], 2)), np.zeros((table.kind.shape[0], 12)),
+        np.zeros((bodies, 6)), np.zeros((table.kind.shape[0], 2)), np.zeros((table.kind.shape[0], 2)), scratch,
+        np.zeros((table.kind.shape[0], 12)),
         np.zeros(STAT_COUNT), make_solver_work(table.graph), np.zeros((bodies, 3)), np.zeros((bodies, 4)), np.zeros(2),
         np.zeros((2, rows)), np.zeros(1), np.zeros((bodies, 3)), np.zeros((bodies, 3)), np.zeros((bodies, 3)),
         np.zeros((bodies, 3)),
