@@ -25,12 +25,13 @@ each iteration re-running the drift of every body the impulse moved from the sta
 momenta, until |g| is at round-off (ROUNDOFF_ULPS ulps of the largest body position) or stops falling
 (each iteration gains a factor ~ h |omega|). A is the factor the last velocity stage built at this very
 configuration (stages.factor_at reuses it when the state is bitwise that configuration), so a step
-factors once. The first iterate is the line through the last two steps' Lambda (`_first_iterate`):
-measured on the 10-link chains of bench_joints, it starts ~1/100 of the free drift's residual away and
-saves one iteration of ~5 (a chain whipping about changes Lambda too fast for the line to gain more);
-one that does not reach round-off (an impact, a limit) is dropped and the Newton runs again from the
-free drift. The iterate does not change the step's map: the Newton stops at the same root, to
-round-off (the reversibility and energy tests hold either way).
+factors once. The first iterate extrapolates Lambda from the last steps' by a polynomial of degree 0 to
+GUESS_ORDER (5), the degree that predicted the last step's best (`_first_iterate`, `_remember`): on the
+10-link chains of bench_joints the line through the last two took 4.33 iterations a step, the chosen
+degree 2.90 (a smooth motion takes a high degree; an impact or a limit one that overshoots less: the
+shipped particle ragdoll 3.59 -> 2.08). One that does not reach round-off is dropped and the Newton runs
+again from the free drift, as a run's first step does. The iterate does not change the step's map: the
+Newton stops at the same root, to round-off (the reversibility and energy tests hold either way).
 
 A limit beyond its bound at the end is pushed back by an impulse along its coordinate's row at the
 start, h k lambda = bound - c, the active limits together, alternating with the joints' Newton
@@ -47,7 +48,10 @@ break the velocity rows by O(h), made the step first order (docs/integrators.md,
 
 from __future__ import annotations
 
+import math
+
 import numba
+import numpy as np
 from numba.extending import overload
 
 from rbcli.physics.dispatch import DISPATCH_OPTIONS, absent, kernel_only
@@ -61,6 +65,7 @@ from rbcli.physics.joints.rows import joint_rows
 from rbcli.physics.joints.solver import solve_rows
 from rbcli.physics.joints.stages import factor_at, project_momenta
 from rbcli.physics.joints.tables import (
+    GUESS_ORDER,
     STAT_FLOOR,
     STAT_ITERATIONS,
     STAT_POSITION,
@@ -83,6 +88,12 @@ EPS = 2.220446049250313e-16
 # rounds of (limits onto their bounds together, joints again) in one position stage at most: each round
 # gains the simplified Newton's factor ~ h |omega| on both, so three or four reach round-off
 LIMIT_ROUNDS = 12
+# the Newton's first iterate extrapolates Lambda by a polynomial of degree <= GUESS_ORDER (tables.py)
+# through the last steps' (`_first_iterate`); measured on the 10-link chains of bench_joints, each degree
+# fixed: 1 (the line) 4.33 Newton iterations a step, 2: 3.86, 3: 3.48, 4: 3.15, 5: 2.87
+# backward-difference extrapolation weights, row d: (-1)^k C(d + 1, k + 1), k = 0..d
+EXTRAPOLATION = np.array([[(-1.0) ** k * math.comb(d + 1, k + 1) if k <= d else 0.0 for k in range(GUESS_ORDER + 1)]
+                          for d in range(GUESS_ORDER + 1)])  # fmt: skip
 
 
 @empty_without("table", "work")
@@ -137,23 +148,31 @@ def _kick(has_torque, s, P, L, F, tau) -> None:  # noqa: ANN001
             L[b, 2] += s * tau[b, 2]
 
 
+@numba.njit(cache=True, inline="always")
+def _extrapolate(guess, order, r) -> float:  # noqa: ANN001
+    """Row r's next Lambda from the polynomial of degree `order` through the last order + 1 steps' (guess
+    row 0 the last): sum_k (-1)^k C(order + 1, k + 1) Lambda_k, the backward-difference extrapolation."""
+    total = 0.0
+    for k in range(order + 1):
+        total += EXTRAPOLATION[order, k] * guess[k, r]
+    return total
+
+
 @numba.njit(**STEP_KERNEL)
 def _first_iterate(table, work, P, L, redundant) -> bool:  # noqa: ANN001
-    """The Newton's first iterate: Lambda extrapolated from the last two steps' (2 Lambda_1 - Lambda_2, or
-    Lambda_1 after one step), applied to (P, L) along G at the start configuration (the factor's rows);
-    the kicked momenta are kept in work.P_kicked, L_kicked for a restart. False, applying nothing, on a
-    run's first step, and where the start's factor dropped rows as redundant (a loop): the guess would
-    push along a dropped row, which the Newton can only offset through the rows nearly parallel to it,
-    with multipliers of 1e6-1e8 that cancel (measured on the four-bar, whose dropped set changes from
-    step to step) and bury the reactions in round-off. Measured on the chains, the line through the
-    last two starts ~1/100 of the free drift's residual away: one iteration fewer (module docstring)."""
+    """The Newton's first iterate: Lambda extrapolated from the last steps' by the polynomial whose degree
+    (0 to GUESS_ORDER) predicted the last step's Lambda best (`_remember`), applied to (P, L) along G at
+    the start configuration (the factor's rows); the kicked momenta are kept in work.P_kicked, L_kicked
+    for a restart. False, applying nothing, on a run's first step, and where the start's factor dropped
+    rows as redundant (a loop): the guess would push along a dropped row, which the Newton can only
+    offset through the rows nearly parallel to it, with multipliers of 1e6-1e8 that cancel (measured on
+    the four-bar, whose dropped set changes from step to step) and bury the reactions in round-off."""
     work.impulse[:] = 0.0
-    count = work.guess_count[0]
-    if count == 0.0 or redundant != 0:
+    if work.guess_count[0] == 0.0 or redundant != 0:
         return False
+    order = int(work.guess_count[1])
     for r in range(work.delta.shape[0]):
-        last = work.guess[0, r]
-        work.delta[r] = 2.0 * last - work.guess[1, r] if count >= 2.0 else last
+        work.delta[r] = _extrapolate(work.guess, order, r)
         work.impulse[r] = work.delta[r]
     for b in range(P.shape[0]):
         for c in range(3):
@@ -193,10 +212,7 @@ def joint_position(model, table, work, h, x, q, P, L, guessed) -> None:  # noqa:
         worst, more = _newton(model, table, work, h, x, q, P, L, False)
         iterations += more
     joint_impulses(table, work, work.impulse)  # the rows' Lambda on each joint's bodies, once
-    for r in range(work.impulse.shape[0]):  # the joints' Lambda alone (the limits' pushes are not rows)
-        work.guess[1, r] = work.guess[0, r]
-        work.guess[0, r] = work.impulse[r]
-    work.guess_count[0] = min(work.guess_count[0] + 1.0, 2.0)
+    _remember(work)
     for _ in range(LIMIT_ROUNDS):  # limits reached in this step: onto their bounds, then the joints again
         if not limit_positions(table, work, h, x, q, P, L):
             break
@@ -207,6 +223,29 @@ def joint_position(model, table, work, h, x, q, P, L, guessed) -> None:  # noqa:
         iterations += more
     work.stats[STAT_ITERATIONS] = iterations
     work.stats[STAT_POSITION] = worst
+
+
+@numba.njit(cache=True)
+def _remember(work) -> None:  # noqa: ANN001
+    """The converged Lambda (the joints' alone: the limits' pushes are not rows) into the history
+    (work.guess), and the degree for the next step's guess: the one whose extrapolation from the history
+    before it came nearest (max over rows) to this Lambda. A smooth motion takes a high degree (each
+    degree gains a factor ~ h |omega|), an impact or a limit one that overshoots less."""
+    count = int(work.guess_count[0])
+    best, best_order = math.inf, 0
+    for order in range(min(count, GUESS_ORDER + 1)):
+        miss = 0.0
+        for r in range(work.impulse.shape[0]):
+            miss = max(miss, abs(_extrapolate(work.guess, order, r) - work.impulse[r]))
+        if miss < best:
+            best, best_order = miss, order
+    for r in range(work.impulse.shape[0]):
+        for k in range(GUESS_ORDER, 0, -1):
+            work.guess[k, r] = work.guess[k - 1, r]
+        work.guess[0, r] = work.impulse[r]
+    work.guess_count[0] = min(count + 1, GUESS_ORDER + 1)
+    # while the history fills, a degree more than any it could fit yet (the next step has the entry for it)
+    work.guess_count[1] = best_order if count > GUESS_ORDER else min(best_order + 1, count)
 
 
 @separately_compiled

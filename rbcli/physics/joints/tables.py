@@ -87,6 +87,10 @@ class JointTable(NamedTuple):
     graph: JointGraph  # the solver's ordering (joints/solver.py: leaves first, loop joints apart)
 
 
+# the highest degree of the polynomial through the last steps' multipliers that gives the next step's
+# first Newton iterate (joints/rattle.py `_first_iterate`); the history holds GUESS_ORDER + 1 steps
+GUESS_ORDER = 5
+
 # the most limits solved together in one block (joints/limit_solve.py); a stage with more active limits
 # solves them in blocks of this many, one block after another: the scratch below is O(block x rows)
 LIMIT_BLOCK = 64
@@ -138,12 +142,12 @@ class JointWork(NamedTuple):
     x_factor: np.ndarray  # [m] (N, 3)
     q_factor: np.ndarray  # (N, 4)
     factor_state: np.ndarray  # (2,)
-    # the position stage's multipliers Lambda of the last two steps (rows 0: the last, 1: the one before)
-    # and how many of them are set (0-2, in guess_count[0]): the next step's first Newton iterate is their
-    # linear extrapolation (rattle.py `_first_iterate`); carried by checkpoints so a resumed run continues
-    # bitwise, forgotten by Data.clear_work
-    guess: np.ndarray  # [N s or N m s] (2, R)
-    guess_count: np.ndarray  # (1,)
+    # the position stage's multipliers Lambda of the last GUESS_ORDER + 1 steps (row 0 the last), how
+    # many of them are set (guess_count[0]) and the degree of the extrapolation that gives the next step's
+    # first Newton iterate (guess_count[1]; rattle.py `_first_iterate`, `_remember`); carried by
+    # checkpoints so a resumed run continues bitwise, forgotten by Data.clear_work
+    guess: np.ndarray  # [N s or N m s] (GUESS_ORDER + 1, R)
+    guess_count: np.ndarray  # (2,)
     # the momenta after the start kick, before the guess's impulse: the Newton restarts from them when
     # the guess does not converge (rattle.py)
     P_kicked: np.ndarray  # [N s] (N, 3)
@@ -243,6 +247,6 @@ def make_joint_work(table: JointTable) -> JointWork:
         np.zeros((bodies, 6)), np.zeros((table.kind.shape[0], 2)), np.zeros((table.kind.shape[0], 2)), scratch,
         np.zeros((table.kind.shape[0], 12)),
         np.zeros(STAT_COUNT), make_solver_work(table.graph), np.zeros((bodies, 3)), np.zeros((bodies, 4)), np.zeros(2),
-        np.zeros((2, rows)), np.zeros(1), np.zeros((bodies, 3)), np.zeros((bodies, 3)), np.zeros((bodies, 3)),
-        np.zeros((bodies, 3)),
+        np.zeros((GUESS_ORDER + 1, rows)), np.zeros(2), np.zeros((bodies, 3)), np.zeros((bodies, 3)),
+        np.zeros((bodies, 3)), np.zeros((bodies, 3)),
     )  # fmt: skip
