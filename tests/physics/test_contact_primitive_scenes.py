@@ -196,3 +196,38 @@ def test_primitives_false_keeps_the_sphere_carpet():
     assert sim.model.contact.primitive_kind.tolist() == [-1]
     sim.step(200)
     assert stats(sim)[STAT_CONTACTS] == 16 * 8
+
+
+def test_body_pairs_beyond_the_pair_buffer_still_touch(monkeypatch):
+    """A heap of boxes, capsules, spheres and a particle cloud whose body level finds more pairs than a
+    (deliberately tiny) pair buffer holds: the primitive search tests every pair of boxes instead
+    (primitive_search.py), so the run is the run with the full buffer, to round-off (the pairs come in
+    another order), and no contact is lost."""
+    import rbcli.physics.contact.tables as tables
+
+    cloud = "particles: {positions: [[0, 0, 0], [0.03, 0, 0], [0, 0.03, 0], [0, 0, 0.03]], masses: 0.05, radius: 0.02}"
+    shapes = [BOX, CAPSULE, "shape: {type: sphere, radius: 0.035}, spacing: 0.01, density: 700", cloud]
+    bodies = []
+    for i in range(12):
+        x, y, z = 0.09 * (i % 3), 0.09 * ((i // 3) % 2), 0.06 + 0.07 * (i // 6)
+        bodies.append(f"  - {{name: b{i}, {shapes[i % 4]}, position: [{x}, {y}, {z}], angular_velocity: [0, 0, {i}]}}")
+    text = "\n".join(bodies)
+
+    def run(capacity: int | None) -> tuple[np.ndarray, int]:
+        if capacity is not None:
+            full = tables.pair_capacities
+            monkeypatch.setattr(tables, "pair_capacities", lambda *args: (capacity, *full(*args)[1:]))
+        sim = scene(text, "  ground: 0\n", dt=5e-4)
+        most = 0
+        for _ in range(120):
+            sim.step(1)
+            most = max(most, int(sim.data.force.contact.body_sweep[tables.SWEEP_PAIRS]))
+        assert sim.data.force.contact.body_pair.shape[0] == (capacity if capacity is not None else 16 * 12 + 64)
+        s = sim.state
+        return np.concatenate([s.x.ravel(), s.q.ravel(), s.P.ravel(), s.L.ravel()]), most
+
+    full_run, pairs = run(None)
+    small_run, _ = run(2)
+    assert pairs > 2  # the heap does overflow the small buffer
+    scale = np.abs(full_run).max()
+    np.testing.assert_allclose(small_run, full_run, rtol=0, atol=1e-12 * scale)

@@ -142,7 +142,7 @@ def box_clearance(contact, p, c0, c1, c2, h0, h1, h2) -> float:  # noqa: ANN001
 
 
 @numba.njit(cache=True, inline="always")
-def _meet(inv_mass, excluded_pair, lo, hi, a, b, flag) -> bool:  # noqa: ANN001
+def bodies_meet(inv_mass, excluded_pair, lo, hi, a, b, flag) -> bool:  # noqa: ANN001
     """Whether the boxes of bodies a and b overlap on all three axes and one of them can move; flag
     False (quiet.py): also False for a pair that never collides (ContactTable.excluded_pair)."""
     meet = (
@@ -202,7 +202,7 @@ def box_pairs(inv_mass, large, excluded_pair, lo, hi, cell_size, active, cell, b
             if not lo[a, 0] <= hi[a, 0]:
                 continue
             for b in range(a + 1, n):
-                if lo[b, 0] <= hi[b, 0] and _meet(inv_mass, excluded_pair, lo, hi, a, b, flag):
+                if lo[b, 0] <= hi[b, 0] and bodies_meet(inv_mass, excluded_pair, lo, hi, a, b, flag):
                     if not flag:
                         return 1, n * (n - 1) // 2
                     active[a] |= ACTIVE_PAIR
@@ -261,7 +261,7 @@ def box_pairs(inv_mass, large, excluded_pair, lo, hi, cell_size, active, cell, b
                     if count < pairs.shape[0]:
                         pairs[count, 0], pairs[count, 1] = min(a, b), max(a, b)
                     count += meet
-                elif own and _meet(inv_mass, excluded_pair, lo, hi, a, b, flag):
+                elif own and bodies_meet(inv_mass, excluded_pair, lo, hi, a, b, flag):
                     return 1, checks
     for a in range(n):  # large bodies against every body (large pairs once)
         if not large[a] or not lo[a, 0] <= hi[a, 0]:
@@ -270,7 +270,7 @@ def box_pairs(inv_mass, large, excluded_pair, lo, hi, cell_size, active, cell, b
             if b == a or not lo[b, 0] <= hi[b, 0] or (large[b] and b < a):
                 continue
             checks += 1
-            if _meet(inv_mass, excluded_pair, lo, hi, a, b, flag):
+            if bodies_meet(inv_mass, excluded_pair, lo, hi, a, b, flag):
                 if not flag:
                     return 1, checks
                 active[a] |= ACTIVE_PAIR
