@@ -63,7 +63,7 @@ from rbcli.physics.joints.impulses import apply_body_impulses, body_impulses, ga
 from rbcli.physics.joints.limit_solve import limit_positions
 from rbcli.physics.joints.rows import joint_rows
 from rbcli.physics.joints.solver import solve_rows
-from rbcli.physics.joints.stages import factor_at, project_momenta
+from rbcli.physics.joints.stages import at_factor, factor_at, project_momenta
 from rbcli.physics.joints.tables import (
     GUESS_ORDER,
     STAT_FLOOR,
@@ -115,7 +115,12 @@ def joint_update(
             work.x_start[b, c] = x[b, c]
         for c in range(4):
             work.q_start[b, c] = q[b, c]
-    redundant = factor_at(model, table, work, work.x_start, work.q_start)
+    # the factor the last velocity stage left is this configuration's (stages.factor_at), checked here
+    # first: the call passes the joint table and work (~100 ns)
+    if at_factor(work, work.x_start, work.q_start):
+        redundant = int(work.factor_state[1])
+    else:
+        redundant = factor_at(model, table, work, work.x_start, work.q_start)
     dissipative = dissipation_present(forces.spring, forces.drag)
     if dissipative:  # D(h/2) on the joints' tangent space, on the momenta the last velocity stage left
         joint_dissipation(model, forces.spring, forces.drag, table, work, 0.5 * h, x, q, P, L)
@@ -213,7 +218,9 @@ def joint_position(model, table, work, h, x, q, P, L, guessed) -> None:  # noqa:
         iterations += more
     joint_impulses(table, work, work.impulse)  # the rows' Lambda on each joint's bodies, once
     _remember(work)
-    for _ in range(LIMIT_ROUNDS):  # limits reached in this step: onto their bounds, then the joints again
+    # limits reached in this step: onto their bounds, then the joints again (a scene without limits has
+    # an empty scratch, tables.py, and makes no call)
+    for _ in range(LIMIT_ROUNDS if work.limit_scratch.lam.shape[0] > 0 else 0):
         if not limit_positions(table, work, h, x, q, P, L):
             break
         for b in range(x.shape[0]):

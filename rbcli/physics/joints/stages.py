@@ -57,13 +57,25 @@ def joint_velocity(model, table, work, h, x, q, P, L) -> None:  # noqa: ANN001
     if table is None or work is None:
         return
     project_momenta(model, table, work, x, q, P, L)
-    drive_velocities(model, table, work, h, x, q, P, L)
-    limit_stops(model, table, work, x, q, P, L)
+    # each is a call passing the joint table and work (~100 arrays, ~100 ns): only where the scene has any
+    if _has_drives(table):
+        drive_velocities(model, table, work, h, x, q, P, L)
+    if work.limit_scratch.lam.shape[0] > 0:  # the scratch is sized by the scene's limits (tables.py)
+        limit_stops(model, table, work, x, q, P, L)
     work.stats[STAT_VELOCITY] = row_velocities(model, table, work, q, P, L)
     for b in range(P.shape[0]):
         for c in range(3):
             work.P_left[b, c] = P[b, c]
             work.L_left[b, c] = L[b, c]
+
+
+@numba.njit(cache=True, inline="always")
+def _has_drives(table) -> bool:  # noqa: ANN001
+    """Whether any joint has a motor or a damper (drives.py)."""
+    for j in range(table.kind.shape[0]):
+        if table.motor_cap[j] > 0.0 or table.damping[j] > 0.0:
+            return True
+    return False
 
 
 @separately_compiled
@@ -79,7 +91,7 @@ def joint_begin(model, table, work, x, q, P, L) -> None:  # noqa: ANN001
     of a 10-link chain's ~17 us step)."""
     if table is None or work is None:
         return
-    if not _at_factor(work, x, q):
+    if not at_factor(work, x, q):
         work.factor_state[0] = 0.0  # the rows below are not the factor's any more
         joint_rows(table, x, q, work.jac_a, work.jac_b, work.residual, True)
     elif work.stats[STAT_VELOCITY] <= VELOCITY_SLACK and _momenta_left(work, P, L):
@@ -89,7 +101,7 @@ def joint_begin(model, table, work, x, q, P, L) -> None:  # noqa: ANN001
 
 
 @numba.njit(**STEP_KERNEL)
-def _at_factor(work, x, q) -> bool:  # noqa: ANN001
+def at_factor(work, x, q) -> bool:  # noqa: ANN001
     """Whether the factor in work is set and belongs to the configuration (x, q), bit for bit."""
     if work.factor_state[0] != 1.0:
         return False
@@ -119,7 +131,7 @@ def factor_at(model, table, work, x, q) -> int:  # noqa: ANN001
     """The factor of A = G W G^T at (x, q) in work.solver, with G (work.jac_a, jac_b) and W (work.inv_mass,
     inv_inertia) there: the one already in work when it belongs to (x, q), else a new one (module
     docstring); returns the rows the factor dropped as redundant."""
-    if _at_factor(work, x, q):
+    if at_factor(work, x, q):
         return int(work.factor_state[1])
     body_weights(model, table, work, q)
     joint_rows(table, x, q, work.jac_a, work.jac_b, work.residual, True)
