@@ -52,66 +52,68 @@ def primitive_pairs(contact, work, sink) -> None:  # noqa: ANN001
     search.pairs_of_bodies only where the work has primitive arrays (a scene without primitives compiles
     none of it). The pairs are the body level's buffer (body_phase.py); where the level found more than
     the buffer holds (16 a body + 64: a dense heap of long shapes beside small ones), every pair of
-    boxes that meet is tested here instead, O(bodies^2) for that evaluation, so no contact is lost (the
-    spheres' own pairs go to the walk then: narrow.py)."""
+    boxes that meet is taken here instead, O(bodies^2) for that evaluation, so no contact is lost (the
+    spheres' own pairs go to the walk then: narrow.py). One loop over either source: the pair's code
+    once, in place (a call per pair passing the tables cost a heap of capsules ~40 % of its step)."""
     out = Manifold(work.manifold_point, work.manifold_normal, work.manifold_depth, work.manifold_feature)
-    kind, lo, hi = contact.primitive_kind, work.body_lo, work.body_hi
-    found = work.body_sweep[SWEEP_PAIRS]
-    if found <= work.body_pair.shape[0]:
-        for p in range(found):
-            a, b = work.body_pair[p, 0], work.body_pair[p, 1]
-            if kind[a] >= 0 or kind[b] >= 0:
-                _pair_contacts(contact, work, sink, out, a, b)
-        return
-    inv_mass = contact.body_inv_contact_mass
-    for a in range(kind.shape[0]):
-        if not lo[a, 0] <= hi[a, 0]:  # an empty box: a body that touches nothing
-            continue
-        for b in range(a + 1, kind.shape[0]):
-            if (kind[a] >= 0 or kind[b] >= 0) and lo[b, 0] <= hi[b, 0]:
-                if bodies_meet(inv_mass, contact.excluded_pair, lo, hi, a, b, True):
-                    _pair_contacts(contact, work, sink, out, a, b)
-
-
-@numba.njit(**STEP_KERNEL)
-def _pair_contacts(contact, work, sink, out, a, b) -> None:  # noqa: ANN001
-    """The contacts of bodies a < b, one of them a primitive (module docstring), handed to the sink."""
     start, kind, shape = contact.body_sphere_start, contact.primitive_kind, work.primitive_shape
     centre, frame, lo, hi = work.primitive_centre, work.primitive_frame, work.body_lo, work.body_hi
     sphere = shape.shape[0] - 1  # the scratch row of a cloud sphere's size (r, 0, 0)
-    if contact.excluded_pair.shape[0] and excluded(contact, a, b):
-        return
-    ka, kb = contact.body_stiffness[a], contact.body_stiffness[b]
-    k = ka if ka == kb else 2.0 * ka * kb / (ka + kb)
-    zeta = min(contact.body_damping_ratio[a], contact.body_damping_ratio[b])
-    mu = contact.body_friction_root[a] * contact.body_friction_root[b]
-    if kind[a] >= 0 and kind[b] >= 0:
-        count = primitive_pair(kind[a], centre[a], frame[a], shape[a], kind[b], centre[b], frame[b],
-                               shape[b], out)  # fmt: skip
-        if count == 0:
-            return
-        shared = zeta / math.sqrt(count)
-        na, nb = start[a + 1] - start[a], start[b + 1] - start[b]
-        for i in range(count):
-            key = feature_key(out.feature[i])
-            contact_found(sink, contact, work, start[a] + key % na, start[b] + (key // na) % nb, a, b,
-                          out.normal[i, 0], out.normal[i, 1], out.normal[i, 2], out.depth[i],
-                          out.point[i, 0], out.point[i, 1], out.point[i, 2], k, shared, mu)  # fmt: skip
-        return
-    cloud, prim = (a, b) if kind[a] < 0 else (b, a)
-    pos, radius = work.sphere_position, contact.sphere_radius
-    for i in range(start[cloud], start[cloud + 1]):
-        r = radius[i]
-        if not (
-            (pos[i, 0] + r >= lo[prim, 0]) & (pos[i, 0] - r <= hi[prim, 0])
-            & (pos[i, 1] + r >= lo[prim, 1]) & (pos[i, 1] - r <= hi[prim, 1])
-            & (pos[i, 2] + r >= lo[prim, 2]) & (pos[i, 2] - r <= hi[prim, 2])
-        ):  # fmt: skip
+    found, bodies = work.body_sweep[SWEEP_PAIRS], kind.shape[0]
+    buffered = found <= work.body_pair.shape[0]
+    p, a, b = 0, 0, 0
+    while True:
+        if buffered:
+            if p == found:
+                break
+            a, b = work.body_pair[p, 0], work.body_pair[p, 1]
+            p += 1
+        else:  # the next pair (a, b > a) whose boxes meet
+            b += 1
+            if b >= bodies:
+                a += 1
+                b = a + 1
+                if b >= bodies:
+                    break
+            if not (lo[a, 0] <= hi[a, 0] and lo[b, 0] <= hi[b, 0]):  # an empty box touches nothing
+                continue
+            if not bodies_meet(contact.body_inv_contact_mass, contact.excluded_pair, lo, hi, a, b, True):
+                continue
+        if kind[a] < 0 and kind[b] < 0:
             continue
-        shape[sphere, 0] = r
-        count = primitive_pair(PRIMITIVE_SPHERE, pos[i], frame[prim], shape[sphere], kind[prim],
-                               centre[prim], frame[prim], shape[prim], out)  # fmt: skip
-        if count:  # sphere-X: one point, normal from the primitive to the sphere (the owner)
-            contact_found(sink, contact, work, i, start[prim], cloud, prim,
-                          out.normal[0, 0], out.normal[0, 1], out.normal[0, 2], out.depth[0],
-                          out.point[0, 0], out.point[0, 1], out.point[0, 2], k, zeta, mu)  # fmt: skip
+        if contact.excluded_pair.shape[0] and excluded(contact, a, b):
+            continue
+        ka, kb = contact.body_stiffness[a], contact.body_stiffness[b]
+        k = ka if ka == kb else 2.0 * ka * kb / (ka + kb)
+        zeta = min(contact.body_damping_ratio[a], contact.body_damping_ratio[b])
+        mu = contact.body_friction_root[a] * contact.body_friction_root[b]
+        if kind[a] >= 0 and kind[b] >= 0:
+            count = primitive_pair(kind[a], centre[a], frame[a], shape[a], kind[b], centre[b], frame[b],
+                                   shape[b], out)  # fmt: skip
+            if count == 0:
+                continue
+            shared = zeta / math.sqrt(count)
+            na, nb = start[a + 1] - start[a], start[b + 1] - start[b]
+            for i in range(count):
+                key = feature_key(out.feature[i])
+                contact_found(sink, contact, work, start[a] + key % na, start[b] + (key // na) % nb, a, b,
+                              out.normal[i, 0], out.normal[i, 1], out.normal[i, 2], out.depth[i],
+                              out.point[i, 0], out.point[i, 1], out.point[i, 2], k, shared, mu)  # fmt: skip
+            continue
+        cloud, prim = (a, b) if kind[a] < 0 else (b, a)
+        pos, radius = work.sphere_position, contact.sphere_radius
+        for i in range(start[cloud], start[cloud + 1]):
+            r = radius[i]
+            if not (
+                (pos[i, 0] + r >= lo[prim, 0]) & (pos[i, 0] - r <= hi[prim, 0])
+                & (pos[i, 1] + r >= lo[prim, 1]) & (pos[i, 1] - r <= hi[prim, 1])
+                & (pos[i, 2] + r >= lo[prim, 2]) & (pos[i, 2] - r <= hi[prim, 2])
+            ):  # fmt: skip
+                continue
+            shape[sphere, 0] = r
+            count = primitive_pair(PRIMITIVE_SPHERE, pos[i], frame[prim], shape[sphere], kind[prim],
+                                   centre[prim], frame[prim], shape[prim], out)  # fmt: skip
+            if count:  # sphere-X: one point, normal from the primitive to the sphere (the owner)
+                contact_found(sink, contact, work, i, start[prim], cloud, prim,
+                              out.normal[0, 0], out.normal[0, 1], out.normal[0, 2], out.depth[0],
+                              out.point[0, 0], out.point[0, 1], out.point[0, 2], k, zeta, mu)  # fmt: skip
