@@ -162,16 +162,21 @@ def _slack(bound) -> float:  # noqa: ANN001
     return 4e-16 * max(1.0, abs(bound))
 
 
-@numba.njit(cache=True, inline="always")
-def _position_side(work, j, slot, c, lower, upper) -> int:  # noqa: ANN001
-    """+1 / -1: the upper / lower bound holds limit (j, slot) in this round (pushed onto it earlier in the
-    step, or at or beyond it); 0: free."""
+@numba.njit(cache=True)
+def _position_state(work, table, j, slot, x, q):  # noqa: ANN001, ANN202
+    """Limit (j, slot) in the position stage at (x, q): (side, c, lower, upper), side +1 / -1 where its
+    upper / lower bound holds it in this round (pushed onto it earlier in the step, or at or beyond it),
+    0 where it is free or has no bound."""
+    lower, upper = limit_bounds(table, j, slot)
+    if lower == -math.inf and upper == math.inf:
+        return 0, 0.0, lower, upper
+    c = limit_row(table, j, slot == 1, x, q)[0]
     hit = work.limit_hit[j, slot]
     if hit > 0.0 or (hit == 0.0 and c >= upper - _slack(upper)):
-        return 1
+        return 1, c, lower, upper
     if hit < 0.0 or (hit == 0.0 and c <= lower + _slack(lower)):
-        return -1
-    return 0
+        return -1, c, lower, upper
+    return 0, c, lower, upper
 
 
 @separately_compiled
@@ -183,11 +188,7 @@ def limit_positions(table, work, h, x, q, P, L) -> bool:  # noqa: ANN001
     off = False
     for j in range(table.kind.shape[0]):
         for slot in range(2):
-            lower, upper = limit_bounds(table, j, slot)
-            if lower == -math.inf and upper == math.inf:
-                continue
-            c = limit_row(table, j, slot == 1, x, q)[0]
-            side = _position_side(work, j, slot, c, lower, upper)
+            side, c, lower, upper = _position_state(work, table, j, slot, x, q)
             if side != 0:
                 bound = upper if side > 0 else lower
                 off = off or abs(c - bound) > _slack(bound)
@@ -196,11 +197,7 @@ def limit_positions(table, work, h, x, q, P, L) -> bool:  # noqa: ANN001
     count, moved = 0, False
     for j in range(table.kind.shape[0]):
         for slot in range(2):
-            lower, upper = limit_bounds(table, j, slot)
-            if lower == -math.inf and upper == math.inf:
-                continue
-            c = limit_row(table, j, slot == 1, x, q)[0]
-            side = _position_side(work, j, slot, c, lower, upper)
+            side, c, lower, upper = _position_state(work, table, j, slot, x, q)
             if side == 0:
                 continue
             _, ja, jb = limit_row(table, j, slot == 1, work.x_start, work.q_start)
@@ -218,42 +215,55 @@ def limit_positions(table, work, h, x, q, P, L) -> bool:  # noqa: ANN001
     return moved
 
 
+# what holds a limit in the velocity stage (`_stop_state`)
+FREE, STOPPED, AT_UPPER, AT_LOWER = 0, 1, 2, 3
+
+
+@numba.njit(cache=True)
+def _stop_state(model, table, work, j, slot, x, q, P, L):  # noqa: ANN001, ANN202
+    """Limit (j, slot) in the velocity stage at the end configuration: (state, J_a, J_b, rate), state
+    STOPPED where it was pushed back in this step, AT_UPPER / AT_LOWER within LIMIT_CONTACT of a bound,
+    else FREE (also where it has no bound)."""
+    lower, upper = limit_bounds(table, j, slot)
+    if lower == -math.inf and upper == math.inf:  # no limit: its row is not even evaluated (a hinge has no cone)
+        none = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        return FREE, none, none, 0.0
+    c, ja, jb = limit_row(table, j, slot == 1, x, q)
+    if work.limit_hit[j, slot] != 0.0:
+        state = STOPPED
+    elif c >= upper - LIMIT_CONTACT:
+        state = AT_UPPER
+    elif c <= lower + LIMIT_CONTACT:
+        state = AT_LOWER
+    else:
+        return FREE, ja, jb, 0.0
+    return state, ja, jb, limit_rate(model, q, P, L, table.body_a[j], table.body_b[j], ja, jb)
+
+
 @separately_compiled
 @numba.njit(cache=True)
 def limit_stops(model, table, work, x, q, P, L) -> None:  # noqa: ANN001
-    """The velocity stage's stops (module docstring) at the end configuration, with its W, G and factor."""
+    """The velocity stage's stops (module docstring) at the end configuration, with its W, G and factor: a
+    limit pushed back in this step is stopped (the push alone would reflect it, a bounce); one at a bound
+    may not move out, and is not pulled. Nothing where no limit is stopped or moving out."""
     moving = False
     for j in range(table.kind.shape[0]):
         for slot in range(2):
-            lower, upper = limit_bounds(table, j, slot)
-            if lower == -math.inf and upper == math.inf:
-                continue
-            c, ja, jb = limit_row(table, j, slot == 1, x, q)
-            hit = work.limit_hit[j, slot] != 0.0
-            at_upper, at_lower = c >= upper - LIMIT_CONTACT, c <= lower + LIMIT_CONTACT
-            if hit or at_upper or at_lower:
-                rate = limit_rate(model, q, P, L, table.body_a[j], table.body_b[j], ja, jb)
-                moving = moving or hit or (at_upper and rate > 0.0) or (at_lower and rate < 0.0)
+            state, _, _, rate = _stop_state(model, table, work, j, slot, x, q, P, L)
+            moving = (
+                moving or state == STOPPED or (state == AT_UPPER and rate > 0.0) or (state == AT_LOWER and rate < 0.0)
+            )
     if not moving:
         return
     count = 0
     for j in range(table.kind.shape[0]):
         for slot in range(2):
-            lower, upper = limit_bounds(table, j, slot)
-            if lower == -math.inf and upper == math.inf:
+            state, ja, jb, rate = _stop_state(model, table, work, j, slot, x, q, P, L)
+            if state == FREE:
                 continue
-            c, ja, jb = limit_row(table, j, slot == 1, x, q)
-            hit = work.limit_hit[j, slot] != 0.0
-            at_upper, at_lower = c >= upper - LIMIT_CONTACT, c <= lower + LIMIT_CONTACT
-            if not (hit or at_upper or at_lower):
-                continue
-            target = -limit_rate(model, q, P, L, table.body_a[j], table.body_b[j], ja, jb)
-            if hit:  # pushed back in this step: stopped (the push alone would reflect it, a bounce)
-                _enter(table, work.limit_scratch, count, j, slot, ja, jb, target, -math.inf, math.inf)
-            elif at_upper:  # at a bound: it may not move out, and is not pulled
-                _enter(table, work.limit_scratch, count, j, slot, ja, jb, target, -math.inf, 0.0)
-            else:
-                _enter(table, work.limit_scratch, count, j, slot, ja, jb, target, 0.0, math.inf)
+            low = -math.inf if state != AT_LOWER else 0.0
+            high = math.inf if state != AT_UPPER else 0.0
+            _enter(table, work.limit_scratch, count, j, slot, ja, jb, -rate, low, high)
             count += 1
             if count == LIMIT_BLOCK:
                 _solve(table, work, count)
