@@ -148,9 +148,14 @@ class Data:
             mine[TREE_REACTIONS][...] = np.nan
             del mine[TREE_REACTIONS]
         for name in JOINT_GUESS:
-            if name in mine and name not in arrays:  # likewise: the first step after it starts cold
-                mine[name][...] = 0.0
-                del mine[name]
+            # likewise, and a log whose history of multipliers has another length (written before the
+            # first iterate's degree was chosen: joints/rattle.py): the first step after it starts cold
+            if name in mine and (name not in arrays or np.shape(arrays[name]) != mine[name].shape):
+                for other in JOINT_GUESS:
+                    mine[other][...] = 0.0
+                    del mine[other]
+                arrays = {key: value for key, value in arrays.items() if key not in JOINT_GUESS}
+                break
         if set(arrays) != set(mine):
             missing, extra = sorted(set(mine) - set(arrays)), sorted(set(arrays) - set(mine))
             raise ValueError(f"checkpoint arrays do not fit this run: missing {missing}, unexpected {extra}")

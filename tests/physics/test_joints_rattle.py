@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from joint_scenes import (
     BOX_CORNERS,
     CLOUD_MASSES,
@@ -186,3 +187,19 @@ def test_the_extrapolated_first_iterate_saves_iterations_and_reaches_the_same_st
     assert np.abs(q - q_cold).max() <= 1e-12
     assert np.abs(L - L_cold).max() <= 1e-12 * np.abs(L_cold).max()
     assert guessed < cold - 0.5, (guessed, cold)
+
+
+def test_a_checkpoint_from_before_the_chosen_degree_resumes_cold():
+    """A log written when RATTLE kept two steps' multipliers (guess (2, R), guess_count (1,)) still
+    resumes: the history of another length is dropped and the next step starts from the free drift (a
+    step's map does not depend on its first iterate, so the run goes on at the same root)."""
+    sim = Simulation(load_scene_text(CHAIN))
+    sim.step(20)
+    carried = sim.data.carried()
+    old = dict(carried)
+    rows = carried["joint.guess"].shape[1]
+    old["joint.guess"], old["joint.guess_count"] = np.ones((2, rows)), np.array([2.0])
+    sim.data.restore_carried(old)
+    assert sim.data.joint.guess_count.tolist() == [0.0, 0.0] and not sim.data.joint.guess.any()
+    with pytest.raises(ValueError, match="unexpected"):  # the other arrays must still fit
+        sim.data.restore_carried({**old, "joint.extra": np.zeros(1)})
