@@ -1,14 +1,18 @@
 """Each kernel compiled once (physics/kernel_link.py): a second kind of scene reuses the first's compiled
 stages instead of compiling copies of them into its own loop, in the same process and from the cache.
 
-Scene A is a hinge pendulum; scene B is the same pendulum with a drag force: another kind of scene, so
-another signature of the chunk loop (its force tables hold a drag table), whose joint stages take the
-same types as A's. That holds whatever tables the model holds too: the loop hands every stage the model's
-body arrays alone (physics/step.py model_bodies); checked without compiling on a pendulum with a ground
-(a contact table) and a kinematic body (B had a ground to touch before; compiling the contact stages cost
-the suite ~25 CPU-s more). Checked with numba's compile events (they fire only for real compilations) and
-with the machine code of B's loop: it must not define the joint stages' functions (numba's own linking
-puts a copy of every callee's code into each caller, so the loop would define them all)."""
+Scene A is a hinge pendulum in joint coordinates (reduced-euler); scene B is the same pendulum with a drag
+force: another kind of scene, so another signature of the chunk loop (its force tables hold a drag
+table), whose tree stages (forward kinematics, the articulated-body accelerations) take the same types as
+A's. The maximal joint stages of split2 take the same types whatever else the scene holds too: the loop
+hands every stage the model's body arrays alone (physics/step.py model_bodies); checked without compiling
+on the split2 pendulum with a drag force, and with a ground (a contact table) and a kinematic body. The
+compile test runs on the trees because their first compile is cheap (~20 CPU-s for both scenes against
+~160 s for the split2 pendulum's RATTLE stack: the suite's costliest test then) and the mechanism is one
+(kernel_link.separately_compiled, used by both families' stages). Checked with numba's compile events
+(they fire only for real compilations) and with the machine code of B's loop: it must not define the
+stages' functions (numba's own linking puts a copy of every callee's code into each caller, so the loop
+would define them all)."""
 
 from __future__ import annotations
 
@@ -28,7 +32,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 PENDULUM = """\
 name: {name}
-simulation: {{dt: 0.001, duration: 0.1, integrator: split2}}
+simulation: {{dt: 0.001, duration: 0.1, integrator: {integrator}}}
 gravity: [0, 0, -9.81]
 bodies:
   - name: rod
@@ -39,21 +43,23 @@ bodies:
   - {{name: pivot, type: hinge, bodies: [rod, world], anchor: [0, 0, 1], axis: [0, 1, 0]}}
 {forces}"""
 
-SCENE_A = PENDULUM.format(name="pendulum", bodies="", forces="")
+SCENE_A = PENDULUM.format(name="pendulum", integrator="split2", bodies="", forces="")
 DRAG = "forces:\n  - {type: drag, bodies: all, linear: 0.3}\n"
-SCENE_B = PENDULUM.format(name="pendulum-drag", bodies="", forces=DRAG)
+SCENE_B = PENDULUM.format(name="pendulum-drag", integrator="split2", bodies="", forces=DRAG)
+# the compile test's pair: the same two scenes in joint coordinates
+TREE_A = PENDULUM.format(name="pendulum", integrator="reduced-euler", bodies="", forces="")
+TREE_B = PENDULUM.format(name="pendulum-drag", integrator="reduced-euler", bodies="", forces=DRAG)
 # the pendulum again, its model holding a contact and a kinematic table as well as the joint table
 SCENE_C = PENDULUM.format(
     name="pendulum-ground-conveyor",
+    integrator="split2",
     bodies="  - {name: conveyor, shape: {type: box, size: [0.2, 0.2, 0.1]}, spacing: 0.05, density: 1000,\n"
     "     position: [0, 2, -4], kinematic: {velocity: [0.1, 0, 0]}}\n",
     forces="contact: {ground: -5}\n",
 )
 
-# the joint stages the split2 loop calls (physics/joints/stages.py) and the position stage its RATTLE
-# update calls (rattle.py; the update itself is compiled per kind of scene, as the loop is: it holds the
-# force pass), by module-qualified name
-JOINT_STAGES = ("stages.joint_begin", "rattle.joint_position", "stages.joint_velocity", "stages.joint_record")
+# the tree stages the reduced loop calls by symbol (physics/tree/aba.py), by module-qualified name
+TREE_STAGES = ("aba.forward_kinematics", "aba.tree_accelerations")
 
 SCRIPT = """
 import json, sys
@@ -75,9 +81,9 @@ from rbcli.physics import kernel_link
 from rbcli.physics.integrators import get_integrator
 from rbcli.runner.simulation import Simulation
 
-run_chunk = get_integrator("split2").chunk().run_chunk
+run_chunk = get_integrator(sys.argv[1]).chunk().run_chunk
 out = {"runs": [], "separate": None}
-for path in sys.argv[1:]:
+for path in sys.argv[2:]:
     start = len(compiled)
     sim = Simulation(path)
     sim.step(50)
@@ -92,12 +98,12 @@ print(json.dumps(out))
 """
 
 
-def _run(cache: Path, *scenes: Path, link: bool = False) -> dict:
+def _run(cache: Path, integrator: str, *scenes: Path, link: bool = False) -> dict:
     env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), env.get("PYTHONPATH")]))
     if link:
         env["RBSIM_LINK_KERNELS"] = "1"
-    done = subprocess.run([sys.executable, "-c", SCRIPT, *map(str, scenes)], env=env, cwd=ROOT,
+    done = subprocess.run([sys.executable, "-c", SCRIPT, integrator, *map(str, scenes)], env=env, cwd=ROOT,
                           capture_output=True, text=True, timeout=900)  # fmt: skip
     assert done.returncode == 0, done.stderr[-3000:]
     return json.loads(done.stdout.strip().splitlines()[-1])
@@ -111,35 +117,37 @@ def _verified() -> bool:
 @pytest.mark.skipif(not _verified(), reason="kernel_link is installed only on the numba versions it was verified on")
 def test_a_second_kind_of_scene_compiles_none_of_the_first_ones_functions_and_links_no_copies(tmp_path):
     scene_a, scene_b = tmp_path / "a.yaml", tmp_path / "b.yaml"
-    scene_a.write_text(SCENE_A)
-    scene_b.write_text(SCENE_B)
+    scene_a.write_text(TREE_A)
+    scene_b.write_text(TREE_B)
     cache = tmp_path / "numba_cache"
 
-    first = _run(cache, scene_a, scene_b)
+    first = _run(cache, "reduced-euler", scene_a, scene_b)
     assert first["separate"]
     run_a, run_b = first["runs"]
     compiled_a = {tuple(item) for item in run_a["compiled"]}
     compiled_b = {tuple(item) for item in run_b["compiled"]}
     names_a = {name for name, _ in compiled_a}
-    # the empty cache really compiled A's loop and joint stages, and B compiled a loop of its own types...
-    assert {f"rbcli.physics.joints.{stage}" for stage in JOINT_STAGES} <= names_a, sorted(names_a)
-    assert any(name == "rbcli.physics.chunk_loop.run_chunk[split2]" for name, _ in compiled_b)
+    stages = {f"rbcli.physics.tree.{stage}" for stage in TREE_STAGES}
+    # the empty cache really compiled A's loop and tree stages, and B compiled a loop of its own types...
+    assert stages <= names_a, sorted(names_a)
+    assert any(name == "rbcli.physics.chunk_loop.run_chunk[reduced_euler]" for name, _ in compiled_a)
+    assert any(name == "rbcli.physics.chunk_loop.run_chunk[reduced_euler]" for name, _ in compiled_b)
     # ...but none of rbcli's functions with the types A already compiled it for (its stages are reused, not
     # recompiled; numba's own overload implementations, builtins min and max, are compiled again for each
-    # calling function's options, so B's contact kernels bring their own), and no joint stage at all: B's
-    # model has a contact table, and its joint stages A's types
+    # calling function's options), and no tree stage at all
     again_a = {(name, args) for name, args in compiled_a & compiled_b if name.startswith("rbcli.")}
     assert not again_a, sorted(again_a)
-    assert not {name for name, _ in compiled_b} & {f"rbcli.physics.joints.{s}" for s in JOINT_STAGES}
-    # and neither loop carries a copy of the joint stages' code: they are called by symbol
+    assert not {name for name, _ in compiled_b} & stages
+    # and neither loop carries a copy of the stages' code: they are called by symbol
     assert len(first["loop_functions"]) == 2
     for functions in first["loop_functions"]:
-        stages = [stage.split(".")[1] for stage in (*JOINT_STAGES, "rattle.joint_update")]
-        copies = [name for name in functions if any(f"{len(stage)}{stage}" in name for stage in stages)]
+        names = [stage.split(".")[1] for stage in TREE_STAGES]
+        copies = [name for name in functions if any(f"{len(stage)}{stage}" in name for stage in names)]
         assert not copies, copies
+        assert functions  # the machine code was inspected, not an empty list
 
     # a new process on the same cache compiles nothing, loading each loop's callees before the loop
-    again = _run(cache, scene_b, scene_a)
+    again = _run(cache, "reduced-euler", scene_b, scene_a)
     assert [run["compiled"] for run in again["runs"]] == [[], []]
     assert [run["bits"] for run in again["runs"]] == [run_b["bits"], run_a["bits"]]
 
