@@ -54,11 +54,16 @@ def test_the_four_bar_loop_warns_of_its_redundant_rows_and_still_closes_to_round
     np.testing.assert_allclose(sim.state.omega[0], [0.0, 2.0, 0.0], rtol=0, atol=1e-12)  # the crank
 
 
-def test_the_double_pendulum_energy_error_stays_bounded():
+@pytest.mark.parametrize("integrator", ["split2", None])
+def test_the_double_pendulum_energy_error_stays_bounded(integrator):
     """Chaotic, so no trajectory reference; but split2 with the joint stages keeps E(t) - E(0) small
     and without drift: over 10 s its largest value in the last 2 s is within twice that of the first 2 s
-    (measured ratio below 1), and below 1e-4 of the energy scale M g l."""
-    sim = Simulation(SCENES / "double_pendulum.yaml")
+    (measured ratio below 1), and below 1e-4 of the energy scale M g l. The scene names no integrator, so
+    it runs reduced-rk4 in joint coordinates (docs/trees.md): not symplectic, its error grows (measured
+    1.6e-9 J in the first 2 s, 2.4e-8 J in the last), but at its fourth order it stays far below the same
+    bound."""
+    sim = Simulation(SCENES / "double_pendulum.yaml", integrator=integrator)
+    assert sim.compiled.settings.integrator == (integrator or "reduced-rk4")
     mass = sim.model.body_mass
 
     def energy() -> float:
@@ -72,5 +77,6 @@ def test_the_double_pendulum_energy_error_stays_bounded():
         sim.step(100)
         errors.append(abs(energy() - start))
     errors = np.array(errors)
-    assert errors[-20:].max() <= 2.0 * errors[:20].max(), (errors[:20].max(), errors[-20:].max())
+    if integrator == "split2":
+        assert errors[-20:].max() <= 2.0 * errors[:20].max(), (errors[:20].max(), errors[-20:].max())
     assert errors.max() < 1e-4 * float(mass.sum()) * 9.81, errors.max()

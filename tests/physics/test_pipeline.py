@@ -154,7 +154,7 @@ def test_a_loop_runs_the_joint_stages_only_where_its_integrator_holds_joints():
     from rbcli.physics.data import make_data
     from rbcli.physics.step import empty_buffers
 
-    compiled = prepare(Path(__file__).resolve().parents[2] / "scenes" / "joints" / "pendulum.yaml")
+    compiled = prepare(Path(__file__).resolve().parents[2] / "scenes" / "joints" / "pendulum.yaml", integrator="split2")
     pivot, d, g, steps, dt = np.array([0.0, 0.0, 1.0]), 0.6, 9.81, 200, 1e-3
     x0 = compiled.initial_state.x[0].copy()
     assert abs(np.linalg.norm(x0 - pivot) - d) < 1e-12

@@ -36,7 +36,7 @@ def pendulum_scene(tmp_path: Path, every: int = 1, duration: float = 0.2) -> Pat
     old = "record: {every: 10}}"
     assert old in text
     text = text.replace(old, f"record: {{every: {every}, streams: [bodies, invariants, joint_forces]}}}}")
-    text = text.replace("duration: 5.0", f"duration: {duration}")
+    text = text.replace("duration: 5.0", f"duration: {duration}, integrator: split2")  # the maximal joints' impulses
     path = tmp_path / "pendulum.yaml"
     path.write_text(text)
     return path
