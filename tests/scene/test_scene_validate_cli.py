@@ -244,7 +244,14 @@ def test_validate_says_the_sub_steps_auto_chose_and_what_the_run_will_cost(tmp_p
     from rbcli.api import prepare
     from rbcli.scene.run_cost import COST_BODY, COST_ROW, COST_SHAPE, COST_SPHERE
 
-    path = REPO / "scenes" / "joints" / "capsule_ragdoll.yaml"
+    # on split2 (the scene names no integrator: it runs reduced-rk4), whose estimate counts joint rows
+    text = (REPO / "scenes" / "joints" / "capsule_ragdoll.yaml").read_text()
+    path = tmp_path / "capsule_ragdoll.yaml"
+    path.write_text(
+        text.replace(
+            "simulation: {dt: 0.001, duration: 3.0,", "simulation: {dt: 0.001, duration: 3.0, integrator: split2,"
+        )
+    )
     compiled = prepare(path)
     settings, model = compiled.settings, compiled.model
     assert settings.substeps > 1
@@ -258,6 +265,15 @@ def test_validate_says_the_sub_steps_auto_chose_and_what_the_run_will_cost(tmp_p
     head = f"  estimated run: ~{expected:.2g} s of CPU once compiled ({settings.steps:,} steps x {settings.substeps}"
     assert lines[2].startswith(f"{head} sub-steps; joint rows {sub_steps * COST_ROW * rows:.2g} s"), lines[2]
     assert "warning" not in result.output
+    # as shipped (reduced-rk4: four force evaluations a sub-step, the links in joint coordinates)
+    shipped = runner.invoke(app, ["validate", str(REPO / "scenes" / "joints" / "capsule_ragdoll.yaml")])
+    assert shipped.exit_code == 0 and "warning" not in shipped.output, shipped.output
+    tree = prepare(REPO / "scenes" / "joints" / "capsule_ragdoll.yaml")
+    evaluations = tree.settings.steps * tree.settings.substeps * 4
+    estimate = shipped.output.splitlines()[2]
+    assert f"contact shapes {evaluations * COST_SHAPE * shapes:.2g} s" in estimate and "tree links" in estimate, (
+        estimate
+    )
 
 
 def test_a_run_over_a_minute_is_warned_about_naming_what_drives_it(tmp_path):
