@@ -181,7 +181,14 @@ def _run_lines(spec) -> list[str]:  # noqa: ANN001 - a SceneSpec
     optional = {"contact": kernel_tables.contact, "kinematic": kernel_tables.kinematic, "joints": kernel_tables.joint}
     families += [name for name, table in optional.items() if table is not None]
     loop = f"{settings.integrator} {'adaptive ' if settings.tolerance is not None else ''}loop"
-    return [
+    lines = []
+    tree = compiled.model.tree
+    if tree is not None:  # a reduced integrator: the state is the joints' coordinates (docs/trees.md)
+        links, rates = int(tree.parent.shape[0]), int(tree.dof_start[-1])
+        roots = int((tree.parent < 0).sum())
+        lines.append(f"joint coordinates ({settings.integrator}): {links:,} link{'s' * (links != 1)} in {roots:,} "
+                     f"tree{'s' * (roots != 1)}, {rates:,} degree{'s' * (rates != 1)} of freedom")  # fmt: skip
+    return lines + [
         f"cost: {', '.join(size)}, {cost}",
         f"kernels: the {loop} for {' + '.join(families)} (compiled by the first run of this combination on a "
         "machine, then loaded from numba's cache)",

@@ -237,6 +237,29 @@ def test_verbose_says_a_scene_with_forces_runs_the_loop_of_every_mix_of_force_ty
     assert "forces (gravity, spring, drag: the loop of every mix of force types)" in kernels, kernels
 
 
+# a joint's degrees of freedom in joint coordinates (a free root: 6)
+JOINT_FREEDOMS = {"ball": 3, "hinge": 1, "slider": 1, "fixed": 0}
+
+
+@pytest.mark.parametrize("name", ["double_pendulum", "capsule_ragdoll"])
+def test_verbose_tells_a_tree_scenes_links_and_degrees_of_freedom(name):
+    """A scene that runs in joint coordinates (it names no integrator and its joints form trees): the
+    links, the trees (one per root: a link jointed to the world, or a free body) and the degrees of
+    freedom, against the scene file: each joint's own freedoms, 6 for a root that no joint holds to the
+    world. The four-bar (a loop: maximal coordinates) has no such line."""
+    path = REPO / "scenes" / "joints" / f"{name}.yaml"
+    scene = yaml.safe_load(path.read_text())
+    joints, bodies = scene["joints"], scene["bodies"]
+    to_world = [j for j in joints if "world" in j["bodies"]]
+    free_roots = 1 - len(to_world) if len(joints) == len(bodies) - 1 else 0  # a tree that hangs from nothing
+    freedoms = sum(JOINT_FREEDOMS[j["type"]] for j in joints) + 6 * free_roots
+    trees = len(to_world) + free_roots
+    expected = (f"  joint coordinates (reduced-rk4): {len(bodies)} links in {trees} tree{'s' * (trees != 1)}, "
+                f"{freedoms} degrees of freedom")  # fmt: skip
+    assert expected in verbose_lines(path), verbose_lines(path)
+    assert not any("joint coordinates" in line for line in verbose_lines(REPO / "scenes" / "joints" / "four_bar.yaml"))
+
+
 def test_validate_says_the_sub_steps_auto_chose_and_what_the_run_will_cost(tmp_path):
     """The capsule ragdoll (issue 47 item 3): the contact line counts the sub-steps `substeps: auto` chose
     (settings.substeps, from the stable step), and an estimate line adds the measured costs (scene/run_cost.py)
