@@ -98,11 +98,9 @@ print(json.dumps(out))
 """
 
 
-def _run(cache: Path, integrator: str, *scenes: Path, link: bool = False) -> dict:
+def _run(cache: Path, integrator: str, *scenes: Path) -> dict:
     env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), env.get("PYTHONPATH")]))
-    if link:
-        env["RBSIM_LINK_KERNELS"] = "1"
     done = subprocess.run([sys.executable, "-c", SCRIPT, integrator, *map(str, scenes)], env=env, cwd=ROOT,
                           capture_output=True, text=True, timeout=900)  # fmt: skip
     assert done.returncode == 0, done.stderr[-3000:]
