@@ -209,13 +209,15 @@ def make_data(
     duration: float = 0.0,
     contact_threads: int = 1,
     tree_reactions: bool = False,
+    implicit_contact: bool = False,
 ) -> Data:
     """A Data for `initial` (copied) and the model `model` (either form; its contact and joint tables
     size the contact and joint work): zeroed accumulators, scratch, force data and joint work; with
     `adaptive`, the adaptive loop's arrays (physics/adaptive.py: adaptive_work, their one definition)
     and its error budget `tolerance` for a run `duration` [s] long; contact_threads > 1: the contact
     pair search on that many threads (contact/threaded.py); tree_reactions: in joint coordinates, the run
-    computes the joints' reactions (the joint_forces stream: tree/reactions.py)."""
+    computes the joints' reactions (the joint_forces stream: tree/reactions.py); implicit_contact: the
+    contact stage keeps its contacts for the integrator's implicit correction (contact/implicit_rows.py)."""
     n = initial.x.shape[0]
     state = initial.copy()
     if substeps < 1:
@@ -226,7 +228,8 @@ def make_data(
     joint = None
     if model.joint is not None and model.joint.body_a.shape[0] and tree is None:
         joint = make_joint_work(model.joint)
-    data = Data(state, F, tau, scratch, make_force_data(model, contact_threads), joint, substeps=int(substeps))
+    force_data = make_force_data(model, contact_threads, implicit_contact)
+    data = Data(state, F, tau, scratch, force_data, joint, substeps=int(substeps))
     if tree is not None:  # the trees' state from the bodies' (the velocities the joints allow: tree/coordinates.py)
         from rbcli.physics.tree.coordinates import set_from_bodies
 

@@ -18,6 +18,7 @@ import math
 
 import numpy as np
 
+from rbcli.physics.integrators import implicit_contact
 from rbcli.scene.compile import CompiledScene
 
 # a body's kinetic energy growing more than this factor between two chunk checks, above the floor
@@ -87,7 +88,8 @@ def likely_cause(compiled: CompiledScene, body: int) -> str:
     settings = compiled.settings
     step = settings.dt / max(1, settings.substeps)
     contact = compiled.contact
-    if contact is not None and settings.tolerance is None and step >= contact.stable_step:
+    implicit = implicit_contact(settings.integrator)  # (its step is not bounded by the stable step)
+    if contact is not None and settings.tolerance is None and step >= contact.stable_step and not implicit:
         return (f"the step {step:.3g} s is above the contacts' stable step {contact.stable_step:.3g} s: set "
                 "contact.substeps: auto or a smaller dt")  # fmt: skip
     springs = [w for w in compiled.warnings if "stability limit" in w.message]

@@ -162,6 +162,8 @@ class Simulation:
                 # the spheres the search walks: a shape body's lattice is its mass only (a stack of boxes
                 # has thousands and walks none: no threaded search to compile for it)
                 self.contact_threads = contact_threads(plan.count, touching_spheres(compiled.model.contact))
+                if info.implicit_contact:  # it keeps the contacts in the search's order (implicit_rows.py)
+                    self.contact_threads = 1
             self.threads_why = plan.why
             if max(self.threads, self.contact_threads) > 1:  # numba launches at most NUMBA_NUM_THREADS
                 import numba  # (sweep workers: 1)
@@ -180,6 +182,7 @@ class Simulation:
             self.data = make_data(
                 compiled.initial_state, self.model, chunk.SCRATCH_WIDTH, substeps=self.settings.substeps,
                 contact_threads=self.contact_threads, tree_reactions="joint_forces" in self.settings.streams,
+                implicit_contact=info.implicit_contact,
             )  # fmt: skip
         # welds (scene/welds.py): the scene's bodies on the simulated ones, and the simulated state before the
         # last step, (body_count, 13) x, q, P, L, from which the welds' reactions are read (runner/weld_reactions.py)
@@ -518,7 +521,8 @@ class Simulation:
         tree = self.model.tree
         if tree is None or self.data.tree is None:
             raise ValueError(
-                f"joint coordinates are the state of the reduced integrators (reduced-euler, reduced-rk4); this "
+                "joint coordinates are the state of the reduced integrators (reduced-euler, reduced-rk4, "
+                f"reduced-implicit); this "
                 f"run's integrator {self.settings.integrator!r} holds the joints in maximal coordinates"
             )
         names = [joint.name for joint in self.compiled.simulated_spec.joints]

@@ -23,6 +23,7 @@ from rbcli.physics.contact.parameters import (
     substeps_needed,
     travel_step,
 )
+from rbcli.physics.integrators import implicit_contact
 from rbcli.scene.force_specs import BodyPoint, ForceSpring
 from rbcli.scene.spec import SceneIssue
 
@@ -54,7 +55,9 @@ def contact_warnings(compiled: CompiledScene) -> list[SceneIssue]:
     issues = []
     step = compiled.settings.dt / compiled.settings.substeps
     # with a tolerance dt is only the output spacing: the adaptive steps stay under the stable step
-    if compiled.settings.tolerance is None and step >= contact.stable_step:
+    # an implicit contact step (reduced-implicit) is stable at any stiffness: no stable step to keep
+    implicit = implicit_contact(compiled.settings.integrator)
+    if compiled.settings.tolerance is None and step >= contact.stable_step and not implicit:
         substeps = f" ({compiled.settings.substeps} sub-steps)" if compiled.settings.substeps > 1 else ""
         issues.append(
             SceneIssue(

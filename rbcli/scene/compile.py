@@ -412,7 +412,11 @@ def run_settings(
             if contact is not None:
                 impact = contact.impact
                 travel = travel_step(impact.speed, impact.radius) if impact is not None else math.inf
-                substeps = substeps_for(settings.dt, contact.stable_step, travel)
+                # an implicit contact step is stable at any stiffness: only the travel sets its sub-steps
+                from rbcli.physics.integrators import implicit_contact
+
+                implicit = implicit_contact(settings.integrator)
+                substeps = substeps_for(settings.dt, math.inf if implicit else contact.stable_step, travel)
         if settings.tolerance is not None:
             substeps = 1  # adaptive steps are capped at the contacts' stable step instead (physics/adaptive.py)
         settings = replace(settings, substeps=int(substeps))

@@ -57,7 +57,7 @@ from rbcli.scene.joint_spec import JointSpec, tree_refusals
 from rbcli.scene.spec import BodySpec, SceneError, SceneIssue, SourceLocation
 
 GROUND = -1  # the world and every static body: one vertex of the joints' graph
-REDUCED = "reduced-euler, reduced-rk4"
+REDUCED = "reduced-euler, reduced-rk4, reduced-implicit"
 MAXIMAL = "a maximal integrator (split2) for this scene, or the joint without it"
 
 

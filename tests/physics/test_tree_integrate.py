@@ -29,6 +29,11 @@ from rbcli.physics.integrators import REDUCED_INTEGRATORS, get_integrator
 from rbcli.scene.load import load_scene_text
 from rbcli.scene.spec import SceneError
 
+# the distinct methods in joint coordinates: reduced-implicit is reduced-euler's step and loop without contact
+# (bitwise: test_reduced_implicit_without_contact_is_reduced_euler below), so these run
+# the two methods; its contact has its own tests (test_implicit_contact.py)
+REDUCED_METHODS = [name for name in REDUCED_INTEGRATORS if not get_integrator(name).implicit_contact]
+
 ORDER = {"reduced-euler": 1, "reduced-rk4": 4}
 # steps per quarter period where each order is asymptotic and far above round-off (10 and 170 degrees)
 QUARTER_STEPS = {"reduced-euler": (100, 200, 400), "reduced-rk4": (25, 50, 100)}
@@ -46,7 +51,7 @@ def _phase_error_after_a_quarter_period(integrator: str, theta0: float, steps: i
     return math.hypot(theta, (rate + 2.0 * natural * math.sin(theta0 / 2.0)) / natural)
 
 
-@pytest.mark.parametrize("integrator", list(REDUCED_INTEGRATORS))
+@pytest.mark.parametrize("integrator", list(REDUCED_METHODS))
 @pytest.mark.parametrize("degrees", [10.0, 170.0])
 def test_the_pendulum_reaches_its_exact_quarter_period_state_at_the_integrator_s_order(integrator, degrees):
     theta0 = math.radians(degrees)
@@ -57,7 +62,7 @@ def test_the_pendulum_reaches_its_exact_quarter_period_state_at_the_integrator_s
     assert errors[-1] < (1e-2 if integrator == "reduced-euler" else 1e-6), errors
 
 
-@pytest.mark.parametrize("integrator", list(REDUCED_INTEGRATORS))
+@pytest.mark.parametrize("integrator", list(REDUCED_METHODS))
 @pytest.mark.parametrize("case", [GENERIC, FLIP], ids=["generic", "flip"])
 def test_a_free_body_is_a_free_root_at_the_integrator_s_order(integrator, case):
     """The torque-free asymmetric body (and near the intermediate-axis separatrix), 20 s, against the
@@ -296,7 +301,7 @@ def test_a_joint_damper_is_implicit_in_reduced_euler_and_fourth_order_in_reduced
     assert abs(fitted_slope([0.1, 0.05, 0.025], errors) - 4.0) < 0.25, errors
 
 
-@pytest.mark.parametrize("integrator", list(REDUCED_INTEGRATORS))
+@pytest.mark.parametrize("integrator", list(REDUCED_METHODS))
 def test_the_pivot_s_reaction_at_release_is_the_compound_pendulum_s(integrator):
     """Released from rest at 60 degrees, the rod's centre of mass accelerates along its circle at
     d theta'' (theta'' = -M g d sin(theta0) / I_pivot, no centripetal part at rest): the pivot pushes it with
@@ -407,3 +412,15 @@ def test_a_kinematic_paddle_pushes_a_link_through_contact_alike_in_both_families
     gap = {dt: np.abs(ends[("split2", dt)] - ends[("reduced-rk4", dt)]).max() for dt in (1e-3, 5e-4)}
     own = np.abs(ends[("split2", 1e-3)] - ends[("split2", 5e-4)]).max()
     assert gap[1e-3] < 0.25 * own and gap[5e-4] < gap[1e-3], (gap, own)
+
+
+def test_reduced_implicit_without_contact_is_reduced_euler():
+    """reduced-implicit differs from reduced-euler only in its contact forces (tree/implicit_contact.py):
+    without contact the two run the same compiled loop (the quarter-period pendulum's) and agree bitwise,
+    so the tests here that run reduced-euler hold for it."""
+    runs = {}
+    for name in ("reduced-euler", "reduced-implicit"):
+        sim = Simulation(load_scene_text(pendulum_text(math.radians(170.0), 1e-3, steps=500, integrator=name)))
+        sim.step(500)
+        runs[name] = np.concatenate([sim.state.x, sim.state.q, sim.state.P, sim.state.L], axis=1)
+    assert np.array_equal(runs["reduced-euler"], runs["reduced-implicit"])

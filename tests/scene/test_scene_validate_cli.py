@@ -254,7 +254,8 @@ def test_verbose_tells_a_tree_scenes_links_and_degrees_of_freedom(name):
     free_roots = 1 - len(to_world) if len(joints) == len(bodies) - 1 else 0  # a tree that hangs from nothing
     freedoms = sum(JOINT_FREEDOMS[j["type"]] for j in joints) + 6 * free_roots
     trees = len(to_world) + free_roots
-    expected = (f"  joint coordinates (reduced-rk4): {len(bodies)} links in {trees} tree{'s' * (trees != 1)}, "
+    integrator = scene["simulation"].get("integrator", "reduced-rk4")  # a tree scene's default
+    expected = (f"  joint coordinates ({integrator}): {len(bodies)} links in {trees} tree{'s' * (trees != 1)}, "
                 f"{freedoms} degrees of freedom")  # fmt: skip
     assert expected in verbose_lines(path), verbose_lines(path)
     assert not any("joint coordinates" in line for line in verbose_lines(REPO / "scenes" / "joints" / "four_bar.yaml"))
@@ -265,16 +266,13 @@ def test_validate_says_the_sub_steps_auto_chose_and_what_the_run_will_cost(tmp_p
     (settings.substeps, from the stable step), and an estimate line adds the measured costs (scene/run_cost.py)
     of its joint rows, shapes, spheres and bodies over steps x sub-steps; nothing warns under a minute."""
     from rbcli.api import prepare
+    from rbcli.physics.integrators import get_integrator
     from rbcli.scene.run_cost import COST_BODY, COST_ROW, COST_SHAPE, COST_SPHERE
 
-    # on split2 (the scene names no integrator: it runs reduced-rk4), whose estimate counts joint rows
+    # on split2 (the scene names reduced-implicit, in joint coordinates), whose estimate counts joint rows
     text = (REPO / "scenes" / "joints" / "capsule_ragdoll.yaml").read_text()
     path = tmp_path / "capsule_ragdoll.yaml"
-    path.write_text(
-        text.replace(
-            "simulation: {dt: 0.001, duration: 3.0,", "simulation: {dt: 0.001, duration: 3.0, integrator: split2,"
-        )
-    )
+    path.write_text(text.replace("integrator: reduced-implicit}", "integrator: split2}"))
     compiled = prepare(path)
     settings, model = compiled.settings, compiled.model
     assert settings.substeps > 1
@@ -288,11 +286,13 @@ def test_validate_says_the_sub_steps_auto_chose_and_what_the_run_will_cost(tmp_p
     head = f"  estimated run: ~{expected:.2g} s of CPU once compiled ({settings.steps:,} steps x {settings.substeps}"
     assert lines[2].startswith(f"{head} sub-steps; joint rows {sub_steps * COST_ROW * rows:.2g} s"), lines[2]
     assert "warning" not in result.output
-    # as shipped (reduced-rk4: four force evaluations a sub-step, the links in joint coordinates)
+    # as shipped (reduced-implicit: one force evaluation a sub-step, the links in joint coordinates; its
+    # implicit contact is not bounded by the stable step, so no warning at its 2 sub-steps)
     shipped = runner.invoke(app, ["validate", str(REPO / "scenes" / "joints" / "capsule_ragdoll.yaml")])
     assert shipped.exit_code == 0 and "warning" not in shipped.output, shipped.output
     tree = prepare(REPO / "scenes" / "joints" / "capsule_ragdoll.yaml")
-    evaluations = tree.settings.steps * tree.settings.substeps * 4
+    assert tree.settings.integrator == "reduced-implicit" and tree.settings.substeps < settings.substeps
+    evaluations = tree.settings.steps * tree.settings.substeps * get_integrator("reduced-implicit").force_evals
     estimate = shipped.output.splitlines()[2]
     assert f"contact shapes {evaluations * COST_SHAPE * shapes:.2g} s" in estimate and "tree links" in estimate, (
         estimate

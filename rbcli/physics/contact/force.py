@@ -33,6 +33,7 @@ import math
 
 import numba
 
+from rbcli.physics.contact.implicit_rows import implicit_begin
 from rbcli.physics.contact.law import body_velocities, velocity_at
 from rbcli.physics.contact.quiet import try_quiet
 from rbcli.physics.contact.search import sphere_positions
@@ -134,6 +135,7 @@ def accumulate_contact(model, contact, work, t, x, q, P, L, F, tau) -> None:  # 
         work.body_trial[body] = 1 if work.body_active[body] else 0
     work.stats[:] = 0.0
     work.counters[COUNT_EVALUATIONS] += 1
+    implicit_begin(work)  # the contacts kept for reduced-implicit (implicit_rows.py) are this evaluation's
     s = t - work.clock[0]
     work.clock[2] = s
     if not flagged:  # nothing can touch: no search (search.py)

@@ -27,6 +27,7 @@ import numpy as np
 from numba.core import types
 from numba.extending import overload
 
+from rbcli.physics.contact.implicit_rows import implicit_record
 from rbcli.physics.contact.law import (
     ContactGeometry,
     apply_contact,
@@ -97,6 +98,8 @@ def _contact_sink(sink, contact, work, owner, partner, ba, bb, n0, n1, n2, overl
             geometry = ContactGeometry(owner, partner, ba, bb, (n0, n1, n2), overlap, (c0, c1, c2))
             outcome = contact_values(contact, work, sink.x, sink.s, geometry, k, zeta, mu)
             apply_contact(work, sink.x, sink.F, sink.tau, geometry, mu > 0.0, outcome)
+            # kept for the implicit correction (reduced-implicit's runs only; else compiled to nothing)
+            implicit_record(contact, work, sink.x, sink.s, geometry, k, zeta, mu, outcome.force)
         elif sink.purpose == SINK_STATE:
             # the normal spring's energy at the overlap and the tangential one's that the history holds
             energy = 0.5 * k * overlap * overlap

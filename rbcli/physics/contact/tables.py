@@ -236,6 +236,18 @@ class ContactWork(NamedTuple):
     # [m] (body_count + 1, 3): ContactTable.primitive_size, writable (primitive_search.py passes each pair's
     # sizes from one array type, so primitive_pair compiles once), and a last row for a cloud sphere's (r, 0, 0)
     primitive_shape: np.ndarray | None = None
+    # the contacts of the last force evaluation for linearly implicit contact (implicit_rows.py; None
+    # unless the integrator has `implicit_contact`: numba then compiles none of it): their bodies, their
+    # values (implicit_rows.IMP_* columns), how many (and how many past the capacity), and the tree
+    # stage's scratch (tree/implicit_contact.py)
+    implicit_int: np.ndarray | None = None
+    implicit_float: np.ndarray | None = None
+    implicit_count: np.ndarray | None = None
+    implicit_matrix: np.ndarray | None = None
+    implicit_row: np.ndarray | None = None
+    implicit_force: np.ndarray | None = None
+    implicit_torque: np.ndarray | None = None
+    implicit_link: np.ndarray | None = None
 
 
 def _ro(values: object, dtype: type, *shape: int) -> np.ndarray:
@@ -430,10 +442,16 @@ def pair_capacities(body_count: int, sphere_count: int, level_off: bool, largest
     return 16 * body_count + 64, 4 * sphere_count + 64, largest_body
 
 
-def make_contact_work(contact: ContactTable, body_count: int, *, history: bool = True, threads: int = 1) -> ContactWork:
+def make_contact_work(
+    contact: ContactTable, body_count: int, *, history: bool = True, threads: int = 1, implicit: bool = False
+) -> ContactWork:
     """Zeroed work arrays for `contact` (0-sized without contact spheres: nothing is allocated).
     history=False: no history or trial slots (a scratch for the search alone: contact/points.py);
-    threads > 1: the pair search runs on that many threads (threaded.py), with its record blocks."""
+    threads > 1: the pair search runs on that many threads (threaded.py), with its record blocks;
+    implicit: the force stage keeps its contacts for linearly implicit contact (implicit_rows.py; the
+    search then runs serially)."""
+    if implicit:
+        threads = 1
     s = contact.sphere_radius.shape[0]
     b = body_count if s else 0
     threaded = threads > 1 and history and s > 0
@@ -500,7 +518,14 @@ def make_contact_work(contact: ContactTable, body_count: int, *, history: bool =
         record_count=np.zeros(blocks, dtype=np.int64) if threaded else None,
         record_candidates=np.zeros(blocks, dtype=np.int64) if threaded else None,
         **primitive_work(contact, b),
+        **(_implicit_work(b) if implicit and history and s else {}),
     )
+
+
+def _implicit_work(body_count: int) -> dict[str, np.ndarray]:
+    from rbcli.physics.contact.implicit_rows import implicit_arrays  # (it imports the force law, which imports this)
+
+    return implicit_arrays(body_count)
 
 
 def primitive_work(contact: ContactTable, body_count: int) -> dict[str, np.ndarray | None]:

@@ -225,14 +225,15 @@ class ForceData(NamedTuple):
     contact: ContactWork | None
 
 
-def make_force_data(model: Model | KernelModel, contact_threads: int = 1) -> ForceData:
+def make_force_data(model: Model | KernelModel, contact_threads: int = 1, implicit_contact: bool = False) -> ForceData:
     """A zeroed ForceData for the model `model` (Model, KernelModel: the same ForceData; what it needs is
     the model's contact table); contact_threads > 1: the contact pair search runs on that many threads
-    (contact/threaded.py)."""
+    (contact/threaded.py); implicit_contact: the contact stage keeps its contacts for the linearly implicit
+    correction (contact/implicit_rows.py)."""
     contact: ContactTable | None = model.contact
     return ForceData(
         term_evaluations=np.zeros(len(TERM_NAMES), dtype=np.int64),
-        contact=make_contact_work(contact, model.body_mass.shape[0], threads=contact_threads)
+        contact=make_contact_work(contact, model.body_mass.shape[0], threads=contact_threads, implicit=implicit_contact)
         if contact is not None and contact_present(contact)
         else None,
     )

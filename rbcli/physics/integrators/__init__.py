@@ -59,6 +59,10 @@ class IntegratorInfo:
     # a link of a tree (a free root where no joint holds it), the joints hold by construction; its loop
     # runs its module's `step` as the tree_update stage. Listed apart (REDUCED_INTEGRATORS)
     reduced: bool = False
+    # its contact forces are linearly implicit (tree/implicit_contact.py): the contact work keeps each
+    # evaluation's contacts, the search runs serially, and `substeps: auto` follows the contacts' travel
+    # alone (their stiffness does not limit its step)
+    implicit_contact: bool = False
 
     def load(self) -> ModuleType:
         """Import the integrator's module: step, step_numpy, SCRATCH_WIDTH (pulls in numba)."""
@@ -228,6 +232,21 @@ REDUCED_INTEGRATORS: dict[str, IntegratorInfo] = {
             "coordinates and rates, quaternion coordinates normalised.",
             reduced=True,
         ),
+        IntegratorInfo(
+            "reduced-implicit",
+            # reduced-euler's step and chunk loop (its cache files too): what differs is the contact work,
+            # which keeps its contacts for the correction (implicit_contact), so a scene without contact
+            # runs reduced-euler's compiled loop as it is and one with contact compiles its own types
+            "rbcli.physics.tree.reduced_euler",
+            order=1,
+            symplectic=False,
+            conserves="joints exactly (by construction); P in body-body contact",
+            force_evals=1,
+            summary="reduced-euler with the contact springs and dashpots linearly implicit (backward "
+            "Euler, one dense solve over the contacts a step): stiff contact without sub-steps.",
+            reduced=True,
+            implicit_contact=True,
+        ),
     ]
 }
 
@@ -319,6 +338,13 @@ def get_integrator(name: str) -> IntegratorInfo:
     info = _known(name)
     assert info is not None
     return info
+
+
+def implicit_contact(name: object) -> bool:
+    """Whether integrator `name` (a known one) takes its contact forces linearly implicit, so that the
+    contacts' stable step does not bound its step (tree/implicit_contact.py); False for an unknown name."""
+    info = _known(name)
+    return info is not None and info.implicit_contact
 
 
 def integrator_names() -> tuple[str, ...]:

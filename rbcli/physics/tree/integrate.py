@@ -43,12 +43,12 @@ from numba.extending import overload
 from rbcli.physics import kernel_cache
 from rbcli.physics.dispatch import DISPATCH_OPTIONS, absent, kernel_only, member
 from rbcli.physics.forces.wrench import accumulate_wrench
-from rbcli.physics.joints.tables import JOINT_BALL
 from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.step import STEP_ENTRY, STEP_KERNEL
 from rbcli.physics.tree.aba import forward_kinematics, tree_accelerations
 from rbcli.physics.tree.flow import advance_coords, coord_rate, normalise_quaternions
-from rbcli.physics.tree.limits import limit_stage, tree_response
+from rbcli.physics.tree.implicit_contact import implicit_contact_stage
+from rbcli.physics.tree.limits import generalized_momentum, limit_stage, tree_response
 from rbcli.physics.tree.reactions import joint_wrench_stage
 
 kernel_cache.install()
@@ -110,6 +110,9 @@ def step_euler(model, forces, contact, force_data, tree, tree_data, t, h, x, q, 
     joint_wrench_stage(tree_data.wrench, tree, tree_data, F, tau, 1.0, True)
     for k in range(rate.shape[0]):
         rate[k] += h * qdd[k]
+    # reduced-implicit: the contact forces taken to the end of the step (implicit_contact.py; compiled to
+    # nothing where the contact work keeps no contacts: reduced-euler, scenes without contact)
+    implicit_contact_stage(force_data, tree, tree_data, x, q, P, L, h)
     advance_coords(tree, coord, rate, h)
     # the limits' and motors' impulses, with this step's ABA (limits.py; nothing where the tree has none)
     limit_stage(tree.limits, tree, tree_data, h)
@@ -164,41 +167,6 @@ def step_rk4(model, forces, contact, force_data, tree, tree_data, t, h, x, q, P,
     limit_stage(tree.limits, tree, tree_data, h)  # after the smooth step, with its last ABA (limits.py)
     forward_kinematics(tree, coord, rate, tree_data.work, x, q, P, L)
     tree_data.fk_state[0] = 1.0
-
-
-@numba.njit(**STEP_KERNEL)
-def generalized_momentum(tree, work, P, L, out) -> None:  # noqa: ANN001
-    """out (D,) = J^T h: each rate's share of the bodies' momenta P, L (world, L about the centre of mass),
-    the momentum dual to the rates (Featherstone 2.12), at the configuration `forward_kinematics` last
-    saw. A backward pass: each link's subtree momentum about its centre of mass (its own plus its
-    children's shifted, L + r x P), then S^T of it; a ball's rows are turned into its link frame (its
-    motion columns are world-aligned: aba.py)."""
-    n = tree.parent.shape[0]
-    H = work.bias_force  # scratch (n, 6): the subtree's (angular about x_i, linear) momentum
-    for i in range(n):
-        b = tree.body[i]
-        H[i, 0], H[i, 1], H[i, 2] = L[b, 0], L[b, 1], L[b, 2]
-        H[i, 3], H[i, 4], H[i, 5] = P[b, 0], P[b, 1], P[b, 2]
-    for i in range(n - 1, -1, -1):
-        p = tree.parent[i]
-        d0, d1 = tree.dof_start[i], tree.dof_start[i + 1]
-        for k in range(d0, d1):
-            s = work.motion[k]
-            out[k] = s[0] * H[i, 0] + s[1] * H[i, 1] + s[2] * H[i, 2] + s[3] * H[i, 3] + s[4] * H[i, 4] + s[5] * H[i, 5]
-        if tree.kind[i] == JOINT_BALL:  # world-aligned rows -> the link frame: R^T
-            R = work.rotation[i]
-            o0, o1, o2 = out[d0], out[d0 + 1], out[d0 + 2]
-            out[d0] = R[0, 0] * o0 + R[1, 0] * o1 + R[2, 0] * o2
-            out[d0 + 1] = R[0, 1] * o0 + R[1, 1] * o1 + R[2, 1] * o2
-            out[d0 + 2] = R[0, 2] * o0 + R[1, 2] * o1 + R[2, 2] * o2
-        if p >= 0:  # about the parent's centre of mass: L + r x P, r = x_i - x_p
-            rx, ry, rz = work.xpos[i, 0], work.xpos[i, 1], work.xpos[i, 2]
-            H[p, 0] += H[i, 0] + ry * H[i, 5] - rz * H[i, 4]
-            H[p, 1] += H[i, 1] + rz * H[i, 3] - rx * H[i, 5]
-            H[p, 2] += H[i, 2] + rx * H[i, 4] - ry * H[i, 3]
-            H[p, 3] += H[i, 3]
-            H[p, 4] += H[i, 4]
-            H[p, 5] += H[i, 5]
 
 
 @separately_compiled

@@ -49,6 +49,7 @@ from rbcli.physics.dispatch import DISPATCH_OPTIONS, absent, kernel_only
 from rbcli.physics.joints.cone import swing_measure_row, twist_angle_row
 from rbcli.physics.joints.drives import LIMIT_CONTACT
 from rbcli.physics.joints.rows import quaternion_product
+from rbcli.physics.joints.tables import JOINT_BALL
 from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.rotation_kernels import rotate_inverse
 from rbcli.physics.step import STEP_KERNEL
@@ -78,6 +79,41 @@ PGS_SWEEPS = 500
 # correction, within ~1e-5 of it at a hard stop in the first, at round-off in three or four
 POSITION_ITERATIONS = 8
 POSITION_TOLERANCE = 1e-14
+
+
+@numba.njit(**STEP_KERNEL)
+def generalized_momentum(tree, work, P, L, out) -> None:  # noqa: ANN001
+    """out (D,) = J^T h: each rate's share of the bodies' momenta P, L (world, L about the centre of mass),
+    the momentum dual to the rates (Featherstone 2.12), at the configuration `forward_kinematics` last
+    saw. A backward pass: each link's subtree momentum about its centre of mass (its own plus its
+    children's shifted, L + r x P), then S^T of it; a ball's rows are turned into its link frame (its
+    motion columns are world-aligned: aba.py)."""
+    n = tree.parent.shape[0]
+    H = work.bias_force  # scratch (n, 6): the subtree's (angular about x_i, linear) momentum
+    for i in range(n):
+        b = tree.body[i]
+        H[i, 0], H[i, 1], H[i, 2] = L[b, 0], L[b, 1], L[b, 2]
+        H[i, 3], H[i, 4], H[i, 5] = P[b, 0], P[b, 1], P[b, 2]
+    for i in range(n - 1, -1, -1):
+        p = tree.parent[i]
+        d0, d1 = tree.dof_start[i], tree.dof_start[i + 1]
+        for k in range(d0, d1):
+            s = work.motion[k]
+            out[k] = s[0] * H[i, 0] + s[1] * H[i, 1] + s[2] * H[i, 2] + s[3] * H[i, 3] + s[4] * H[i, 4] + s[5] * H[i, 5]
+        if tree.kind[i] == JOINT_BALL:  # world-aligned rows -> the link frame: R^T
+            R = work.rotation[i]
+            o0, o1, o2 = out[d0], out[d0 + 1], out[d0 + 2]
+            out[d0] = R[0, 0] * o0 + R[1, 0] * o1 + R[2, 0] * o2
+            out[d0 + 1] = R[0, 1] * o0 + R[1, 1] * o1 + R[2, 1] * o2
+            out[d0 + 2] = R[0, 2] * o0 + R[1, 2] * o1 + R[2, 2] * o2
+        if p >= 0:  # about the parent's centre of mass: L + r x P, r = x_i - x_p
+            rx, ry, rz = work.xpos[i, 0], work.xpos[i, 1], work.xpos[i, 2]
+            H[p, 0] += H[i, 0] + ry * H[i, 5] - rz * H[i, 4]
+            H[p, 1] += H[i, 1] + rz * H[i, 3] - rx * H[i, 5]
+            H[p, 2] += H[i, 2] + rx * H[i, 4] - ry * H[i, 3]
+            H[p, 3] += H[i, 3]
+            H[p, 4] += H[i, 4]
+            H[p, 5] += H[i, 5]
 
 
 @separately_compiled
@@ -382,3 +418,7 @@ def tree_limits(tree, tree_data, h) -> None:  # noqa: ANN001
     if stops > 0:
         _solve(tree, tree_data, count)
         _apply(tree, tree_data, count, h, False)
+
+
+# the row pieces implicit_contact.py shares (its contact solve takes the limits at their bounds in)
+limit_value, limit_along, limit_add_along = _evaluate, _along, _add_along
