@@ -254,6 +254,9 @@ def _run_and_report(sim: Simulation, target: Path, quiet: bool, stops: _Stops, r
         raise messages.fail(f"{type(exc).__name__}: {exc}; {note}") from None
     settings = compiled.settings
     if not quiet:
+        from rbcli.physics.integrators import implicit_contact
+
+        implicit = implicit_contact(settings.integrator)  # (its contact line says the stable step binds it not)
         rate = (summary.steps - start) * compiled.model.body_count / max(wall, 1e-9)
         messages.status(
             f"{summary.status}: {summary.steps - start} steps x {compiled.model.body_count} bodies "
@@ -264,7 +267,7 @@ def _run_and_report(sim: Simulation, target: Path, quiet: bool, stops: _Stops, r
                 if summary.steps_accepted is not None
                 else ""
             )
-            + (f"; {compiled.contact.describe(settings.substeps)}" if compiled.contact is not None else "")
+            + (f"; {compiled.contact.describe(settings.substeps, implicit)}" if compiled.contact is not None else "")
             + f"; {sim.threads_report()}"
         )
     if summary.contact_history_overflow:

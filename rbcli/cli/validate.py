@@ -61,7 +61,10 @@ def validate(
         if contact is not None:
             auto = spec.contact is not None and spec.contact.substeps is None
             substeps = compiled.settings.substeps if not isinstance(compiled, str) else None
-            line = contact.describe(substeps)
+            from rbcli.physics.integrators import implicit_contact
+
+            implicit = not isinstance(compiled, str) and implicit_contact(compiled.settings.integrator)
+            line = contact.describe(substeps, implicit)
             if auto:  # say how many auto chose (describe prints a count above 1)
                 line += " (auto)" if substeps is not None and substeps > 1 else "; sub-steps: auto"
             typer.echo(f"  {line}")

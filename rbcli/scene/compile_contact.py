@@ -56,8 +56,9 @@ class ContactSummary:
     capsules: int = 0  # ... as their exact capsule
     shape_spheres: int = 0  # the lattice spheres of those shape bodies: their mass only, they touch nothing
 
-    def describe(self, substeps: int | None = None) -> str:
-        """One line for `rbsim validate` and the run summary."""
+    def describe(self, substeps: int | None = None, implicit: bool = False) -> str:
+        """One line for `rbsim validate` and the run summary; implicit: the integrator's contact is
+        implicit (reduced-implicit), so the explicit stable step does not bound its step."""
         planes = f"{self.plane_count} plane" + "s" * (self.plane_count != 1)
         kinds = (("box", "boxes", self.boxes), ("capsule", "capsules", self.capsules))
         shapes = " and ".join(f"{n} {one if n == 1 else many}" for one, many, n in kinds if n)
@@ -75,6 +76,7 @@ class ContactSummary:
             text += f", {self.kinematic_count} kinematic bod" + ("y" if self.kinematic_count == 1 else "ies")
         if math.isfinite(self.stable_step):
             text += f"; stable step {self.stable_step:.3g} s (body '{self.limiting_body}')"
+            text += " of an explicit step (this integrator's contact is implicit: no bound)" if implicit else ""
         if substeps is not None and substeps > 1:
             text += f"; {substeps} sub-steps per step"
         return text

@@ -136,11 +136,11 @@ def test_the_ragdoll_lands_folds_keeps_its_limits_and_comes_to_rest():
 
 def test_the_capsule_ragdoll_lands_on_its_capsules_without_sinking_and_keeps_its_joints():
     """Issue 47's capsule ragdoll (scenes/joints/capsule_ragdoll.yaml, no stiffness given), dropped 1 m on a
-    plane tilted 10 degrees, 3 s: validate warns of nothing; no part's lowest point goes below the plane
-    by more than 10 % of its radius (the target; the default stiffness aims at 5 %, measured 6.5 % at
-    most), the joints hold to 1e-12 and the hinge limits and the neck's and shoulders' cones and twists
-    to 1e-9. With the stiffness set from each part's own weight alone (before), an arm sank 0.96 of its
-    radius: it lands with the torso behind it."""
+    plane tilted 10 degrees, 3 s, in reduced-implicit's few sub-steps: validate warns of nothing; no part's
+    lowest point goes below the plane by more than 10 % of its radius (the target; the default stiffness
+    aims at 5 %, measured 5.7 % at most), the joints hold to 1e-12 and the hinge limits and the neck's and
+    shoulders' cones and twists to 1e-9. With the stiffness set from each part's own weight alone (before),
+    an arm sank 0.96 of its radius: it lands with the torso behind it."""
     assert not check_scene(SCENES / "capsule_ragdoll.yaml")
     sim = Simulation(SCENES / "capsule_ragdoll.yaml")
     table = sim.model.joint
@@ -154,6 +154,11 @@ def test_the_capsule_ragdoll_lands_on_its_capsules_without_sinking_and_keeps_its
         beyond = max(beyond, _beyond_limits(table, x, q))
     assert sim.time > 2.99
     assert sink.max() <= 0.1, sink
+    # it names reduced-implicit, whose contact solve takes the limits and cones at their bounds in (an arm
+    # pressed against its shoulder's cone carries the torso): 5.7 % measured, 9.9 % with the limits left
+    # to their own stage after the contact solve
+    assert sim.settings.integrator == "reduced-implicit" and sim.settings.substeps <= 3
+    assert sink.max() <= 0.075, sink
     assert sink.max() > 0.0  # it landed
     assert worst <= 1e-12, worst
     assert beyond <= 1e-9, beyond
