@@ -277,6 +277,15 @@ def _run_and_report(sim: Simulation, target: Path, quiet: bool, stops: _Stops, r
             "bodies): their friction restarted each step without its tangential spring (docs/contact.md)",
             expected="contact spheres of similar sizes, so that none touches more than 12 others",
         )
+    if summary.implicit_contact_overflow:
+        from rbcli.physics.contact.implicit_rows import IMPLICIT_CAPACITY
+
+        messages.warning(
+            f"contact: {summary.implicit_contact_overflow} contact evaluations over the run were past the "
+            f"implicit solve's {IMPLICIT_CAPACITY} contacts a step and kept their explicit force, which is "
+            "unstable above the contacts' stable step (docs/contact.md \"Implicit contact\")",
+            expected="fewer bodies in contact at once, or an explicit integrator with contact.substeps: auto",
+        )
     if summary.status == "diverged":
         messages.error(f"{summary.message}; the log up to that point is complete: {target}")
         raise typer.Exit(ExitCode.DIVERGED)

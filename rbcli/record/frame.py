@@ -136,6 +136,8 @@ class RunSummary:
     # the body of the first of them ("" when none)
     contact_history_overflow: int | None = None
     contact_overflow_body: str = ""
+    # reduced-implicit: contacts past its solve's capacity, which kept their explicit force (None: not such a run)
+    implicit_contact_overflow: int | None = None
 
     def fields(self, frames_written: int) -> dict[str, str]:
         """How the run ended, as strings for a file's summary record (t_end as repr, so it reads back

@@ -267,6 +267,7 @@ def run_simulation(
         steps_accepted=None if counts is None else int(counts[0]),
         steps_rejected=None if counts is None else int(counts[1]),
         contact_history_overflow=overflow, contact_overflow_body=overflow_body,
+        implicit_contact_overflow=implicit_overflow(sim),
     )  # fmt: skip
     recorder.close(summary)
     return summary
@@ -283,3 +284,12 @@ def contact_overflow(sim) -> tuple[int | None, str]:  # noqa: ANN001 - a Simulat
     sphere = int(work.overflow_sphere[0])
     body = sim.model.body_names[int(sim.model.contact.sphere_body[sphere])] if sphere >= 0 else ""
     return int(work.counters[COUNT_OVERFLOW]), body
+
+
+def implicit_overflow(sim) -> int | None:  # noqa: ANN001 - a Simulation
+    """reduced-implicit: the contacts so far past its solve's capacity (contact/implicit_rows.py), which kept
+    their explicit force; None in any other run."""
+    work = sim.data.force.contact
+    if work is None or work.implicit_count is None:
+        return None
+    return int(work.implicit_count[1])

@@ -110,3 +110,32 @@ def test_two_stiff_spheres_meeting_keep_their_momentum_and_do_not_pass():
         assert np.abs(sim.state.omega[1:]).max() < 1e-12  # round-off in the contact point only
     assert touched
     assert sim.state.v[1, 0] < 0.0 < sim.state.v[2, 0]  # they parted
+
+
+def test_contacts_past_the_solve_s_capacity_keep_their_force_and_the_run_says_so(tmp_path):
+    """36 boxes resting on the ground touch at 4 corners each, 144 contacts a step, past the solve's 128: the
+    rest keep their explicit force (the boxes still rest, at this moderate stiffness), the count is kept,
+    and `rbsim run` warns, naming the capacity."""
+    from typer.testing import CliRunner
+
+    from rbcli.cli.app import app
+    from rbcli.physics.contact.implicit_rows import IMPLICIT_CAPACITY
+
+    boxes = "\n".join(
+        f"  - {{name: b{i}, {BOX}, position: [{0.3 * (i % 6)}, {0.3 * (i // 6)}, 0.025]}}" for i in range(36)
+    )
+    text = (
+        "name: t\nsimulation: {dt: 0.001, duration: 0.05, integrator: reduced-implicit}\n"
+        "gravity: [0, 0, -9.81]\ncontact:\n  ground: 0\nbodies:\n" + boxes + "\n"
+    )
+    path = tmp_path / "boxes.yaml"
+    path.write_text(text)
+    result = CliRunner().invoke(app, ["run", str(path), "-o", str(tmp_path / "boxes.mcap")])
+    assert result.exit_code == 0, result.output
+    assert f"past the implicit solve's {IMPLICIT_CAPACITY} contacts a step" in result.output, result.output
+    sim = rbcli.Simulation(load_scene_text(text))
+    sim.step(20)  # settled on every corner
+    before = int(sim.data.force.contact.implicit_count[1])
+    sim.step(10)
+    assert sim.data.force.contact.implicit_count[1] - before == 10 * (4 * 36 - IMPLICIT_CAPACITY)
+    assert np.abs(sim.state.v).max() < 1e-3
