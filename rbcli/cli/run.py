@@ -283,7 +283,7 @@ def _run_and_report(sim: Simulation, target: Path, quiet: bool, stops: _Stops, r
         messages.warning(
             f"contact: {summary.implicit_contact_overflow} contact evaluations over the run were past the "
             f"implicit solve's {IMPLICIT_CAPACITY} contacts a step and kept their explicit force, which is "
-            "unstable above the contacts' stable step (docs/contact.md \"Implicit contact\")",
+            'unstable above the contacts\' stable step (docs/contact.md "Implicit contact")',
             expected="fewer bodies in contact at once, or an explicit integrator with contact.substeps: auto",
         )
     if summary.status == "diverged":

@@ -126,7 +126,14 @@ def run_cost_warnings(compiled: CompiledScene) -> list[SceneIssue]:
             f", over {cost.substeps} sub-steps a step: the contacts' stable step is {contact.stable_step:.3g} s{body} "
             f"at {contact.stiffness:.3g} N/m"
         )
-        changes.append("fewer sub-steps (a softer material stiffness, a lower drop or speed, or heavier light parts)")
+        changes.append("fewer sub-steps (a softer material stiffness, a lower drop or speed, or heavier light parts")
+        from rbcli.physics.integrators import implicit_contact
+
+        if not implicit_contact(settings.integrator):  # (docs/contact.md "Implicit contact")
+            changes[-1] += (
+                "; for a few contacts at once, as a ragdoll's, integrator: reduced-implicit, whose stiffness sets none"
+            )
+        changes[-1] += ")"
     if name == "contact spheres":
         changes.append("fewer contact spheres (a larger spacing, or `shape:` bodies that touch as their boxes and "
                        "capsules)")  # fmt: skip

@@ -321,3 +321,4 @@ def test_a_run_over_a_minute_is_warned_about_naming_what_drives_it(tmp_path):
     assert f"the run is estimated at ~{cost.seconds:.0f} s of CPU once compiled" in warning, warning
     assert "mostly contact shapes (10:" in warning and "over 5 sub-steps a step" in warning, warning
     assert "body 'box9'" in warning and "a shorter duration or a larger dt" in warning, warning
+    assert "integrator: reduced-implicit, whose stiffness sets none" in warning, warning  # the implicit option
