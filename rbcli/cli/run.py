@@ -278,7 +278,7 @@ def _run_and_report(sim: Simulation, target: Path, quiet: bool, stops: _Stops, r
             expected="contact spheres of similar sizes, so that none touches more than 12 others",
         )
     if summary.implicit_contact_overflow:
-        from rbcli.physics.contact.implicit_rows import IMPLICIT_CAPACITY
+        from rbcli.physics.contact.tables import IMPLICIT_CAPACITY
 
         messages.warning(
             f"contact: {summary.implicit_contact_overflow} contact evaluations over the run were past the "

@@ -237,17 +237,19 @@ class StudyResult:
 # what the scene admits
 
 
-def applicable_integrators(*, jointed: bool = False, trees: bool = False) -> tuple[str, ...]:
+def applicable_integrators(*, jointed: bool = False, trees: bool = False, contact: bool = False) -> tuple[str, ...]:
     """Every registered integrator (fixed-step ones by dt, adaptive ones by tolerance), except those
     kept only to demonstrate a failure (ask for them by name); for a scene with joints, the ones that
     hold joints (integrators.check_integrator), and when its joints form trees (trees: compile_trees
-    takes them) the ones in joint coordinates beside them: the two families, error against cost."""
+    takes them) the ones in joint coordinates beside them: the two families, error against cost. One with
+    implicit contact (reduced-implicit) only where the scene has contact: without it, it is reduced-euler."""
     maximal = tuple(
         name
         for name, info in INTEGRATORS.items()
         if not getattr(info, "demonstration", False) and (info.joints or not jointed)
     )
-    return maximal + (tuple(REDUCED_INTEGRATORS) if jointed and trees else ())
+    reduced = tuple(name for name, info in REDUCED_INTEGRATORS.items() if contact or not info.implicit_contact)
+    return maximal + (reduced if jointed and trees else ())
 
 
 def _forms_trees(spec: SceneSpec) -> bool:
@@ -450,7 +452,8 @@ def study(
     spec = _study_spec(scene)
     jointed = any(joint.kind != "fixed" for joint in spec.joints)  # welds are merged bodies, no constraints
     trees = jointed and _forms_trees(spec)
-    names = tuple(integrators) if integrators else applicable_integrators(jointed=jointed, trees=trees)
+    contact = spec.contact is not None
+    names = tuple(integrators) if integrators else applicable_integrators(jointed=jointed, trees=trees, contact=contact)
     infos = [get_integrator(name) for name in names]  # KeyError names the known ones
     adaptive = [i for i in infos if is_adaptive(i)]  # also by tolerance (their fixed-step rows fit the order)
     dts = tuple(sorted({float(d) for d in (dts or default_dts(spec.simulation.dt))}, reverse=True))

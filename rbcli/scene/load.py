@@ -27,6 +27,7 @@ from rbcli.scene.schema_path import scene_schema
 from rbcli.scene.spec import (
     SCENE_FORMAT_VERSION,
     BodySpec,
+    ContactSpec,
     ForceSpec,
     RecordSpec,
     SceneError,
@@ -67,6 +68,10 @@ CONTACT_DEFAULT_INTEGRATOR = "split2"
 # that holds loops and distance joints (docs/joints.md)
 TREES_DEFAULT_INTEGRATOR = "reduced-rk4"
 JOINTS_DEFAULT_INTEGRATOR = "split2"
+# ... and where such a tree scene has contact of shapes whose contacts at once cannot pass the implicit
+# solve's capacity (`implicit_contact_fits`): reduced-implicit, whose stiff contact needs no sub-steps
+# (docs/contact.md "Implicit contact": the capsule ragdoll's 2 sub-steps where an explicit step needs 22)
+TREES_CONTACT_DEFAULT_INTEGRATOR = "reduced-implicit"
 
 # the integrator of a scene in joint coordinates (`coordinates: reduced`) that names none: fourth order,
 # cheaper than split2 with RATTLE at every accuracy the pendulum's study measures (docs/trees.md)
@@ -206,7 +211,10 @@ def _analyse(
         joints += joints_from_list(data["joints"], names, issues, clean, taken=chain_joint_names)
     if joints and simulation is not None:
         if "integrator" not in data["simulation"] and simulation.coordinates != "reduced":  # the one that holds them
-            simulation = replace(simulation, integrator=_joints_default(data["simulation"], bodies, joints))
+            default = _joints_default(data["simulation"], bodies, joints)
+            if default == TREES_DEFAULT_INTEGRATOR and contact is not None and implicit_contact_fits(bodies, contact):
+                default = TREES_CONTACT_DEFAULT_INTEGRATOR
+            simulation = replace(simulation, integrator=default)
         if any(joint.kind != "fixed" for joint in joints):  # welds are merged bodies (scene/welds.py)
             _check_joint_integrator(data["simulation"], simulation, issues)
     if issues.error_count or simulation is None:
@@ -289,7 +297,8 @@ def _warn_materials_without_contact(entries: list[Any], issues: IssueCollector) 
 
 def _joints_default(written: dict[str, Any], bodies: list[BodySpec], joints: list[JointSpec]) -> str:
     """The integrator of a jointed scene that names none: reduced-rk4 where its joints (other than welds,
-    which are merged bodies) form trees and it does not say `coordinates: maximal`, else split2."""
+    which are merged bodies) form trees and it does not say `coordinates: maximal`, else split2 (the
+    caller takes reduced-implicit for trees whose contacts fit its solve)."""
     from rbcli.physics.tree.table import MAX_LIMIT_ROWS
     from rbcli.scene.joint_spec import joints_form_trees
 
@@ -297,6 +306,39 @@ def _joints_default(written: dict[str, Any], bodies: list[BodySpec], joints: lis
     if moving and "coordinates" not in written and joints_form_trees(bodies, joints, MAX_LIMIT_ROWS):
         return TREES_DEFAULT_INTEGRATOR
     return JOINTS_DEFAULT_INTEGRATOR
+
+
+# the most contact points a pair can make (manifold.py's table): a sphere touches at 1, a capsule at 2, a
+# box at 4 (box-box clipped to 4; a box's vertices on a plane, the 4 deepest)
+_PRIMITIVE_POINTS = {"sphere": 1, "capsule": 2, "box": 4}
+
+
+def implicit_contact_fits(bodies: list[BodySpec], contact: ContactSpec) -> bool:
+    """Whether every contact the scene can have at once fits reduced-implicit's solve (IMPLICIT_CAPACITY):
+    each colliding body is a sphere, capsule or box that touches as its shape (a cloud's or a mesh's
+    spheres have no such bound), and the points of every pair of them and of each against every plane,
+    at most, sum to the capacity or fewer. An upper bound from the names alone (the ragdoll of capsules:
+    64 of 128)."""
+    from rbcli.physics.contact.tables import IMPLICIT_CAPACITY  # (numpy only: loading a scene compiles nothing)
+
+    if not contact.primitives:
+        return False
+    points = []
+    for body in bodies:
+        if not body.collide:
+            continue
+        if body.contact_primitive is not None:
+            points.append(_PRIMITIVE_POINTS[body.contact_primitive[0]])
+        elif body.contact_geometry == "sphere" and body.contact_spheres is None:
+            points.append(_PRIMITIVE_POINTS["sphere"])
+        else:
+            return False
+    planes = len(contact.planes)
+    total = sum(points) * planes
+    for i, a in enumerate(points):
+        for b in points[i + 1 :]:  # a sphere against anything: 1; box-box: 4; else (capsule pairs, capsule-box): 2
+            total += 1 if min(a, b) == 1 else (4 if a == b == 4 else 2)
+    return total <= IMPLICIT_CAPACITY
 
 
 def _check_joint_integrator(written: dict[str, Any], simulation: SimulationSpec, issues: IssueCollector) -> None:

@@ -119,7 +119,7 @@ def test_contacts_past_the_solve_s_capacity_keep_their_force_and_the_run_says_so
     from typer.testing import CliRunner
 
     from rbcli.cli.app import app
-    from rbcli.physics.contact.implicit_rows import IMPLICIT_CAPACITY
+    from rbcli.physics.contact.tables import IMPLICIT_CAPACITY
 
     boxes = "\n".join(
         f"  - {{name: b{i}, {BOX}, position: [{0.3 * (i % 6)}, {0.3 * (i // 6)}, 0.025]}}" for i in range(36)

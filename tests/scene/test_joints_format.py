@@ -191,7 +191,8 @@ def test_an_integrator_that_does_not_hold_joints_is_refused_naming_the_ones_that
     scene = SCENE.replace("duration: 0.01}", f"duration: 0.01, integrator: {integrator}}}")
     issue = the_error(issues_of("  - {type: ball, bodies: [upper, world], anchor: [0, 0, 1]}\n", scene), "joints")
     assert issue.message.endswith(
-        f"integrator '{integrator}' does not hold joints; the ones that do: split2, reduced-euler, reduced-rk4"
+        f"integrator '{integrator}' does not hold joints; the ones that do: split2, reduced-euler, reduced-rk4, "
+        "reduced-implicit"
     )
     assert at(issue) == (1, col(scene.splitlines()[0], integrator))
 
@@ -230,3 +231,40 @@ def test_validate_a_joint_scene_writes_nothing_and_imports_no_numba(tmp_path):
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, check=True)
     assert out.stdout.strip().splitlines()[-1] == "[]", out.stdout + out.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["pendulum.yaml"]
+
+
+def _tree_with_contact(bodies: str, contact: str = "  ground: 0\n") -> str:
+    return (
+        "name: t\nsimulation: {dt: 0.001, duration: 0.01}\ngravity: [0, 0, -9.81]\ncontact:\n" + contact
+        + "bodies:\n" + bodies + "joints:\n  - {type: ball, bodies: [b1, b0], anchor: [0, 0, 0.5]}\n"
+    )  # fmt: skip
+
+
+def test_a_tree_with_contact_of_a_few_shapes_defaults_to_reduced_implicit():
+    """A jointed tree with contact runs reduced-implicit (docs/trees.md, "Which integrator a jointed scene
+    gets") where the most contact points it can have at once, counted from the shapes (1 with a sphere, 2
+    for capsules, 4 box-box and a box on a plane), fit the solve's capacity; a cloud of particles, more
+    bodies or `primitives: false` keep reduced-rk4. The shipped capsule ragdoll: 15 on its plane, 7 with its
+    head and 42 between its capsules, 64."""
+    from rbcli.physics.contact.tables import IMPLICIT_CAPACITY
+    from rbcli.scene.load import implicit_contact_fits
+
+    capsule = "shape: {type: capsule, radius: 0.05, height: 0.3}, spacing: 0.05, mass: 1"
+    two = f"  - {{name: b0, {capsule}, position: [0, 0, 0.3]}}\n  - {{name: b1, {capsule}, position: [0, 0, 0.7]}}\n"
+    assert load_scene_text(_tree_with_contact(two)).simulation.integrator == "reduced-implicit"
+    primitives_off = _tree_with_contact(two, "  ground: 0\n  primitives: false\n")
+    assert load_scene_text(primitives_off).simulation.integrator == "reduced-rk4"
+    cloud = two.replace(
+        f"name: b1, {capsule}", "name: b1, particles: {positions: [[0, 0, 0], [0.1, 0, 0]], masses: 1.0, radius: 0.05}"
+    )
+    assert load_scene_text(_tree_with_contact(cloud)).simulation.integrator == "reduced-rk4"
+    box = "shape: {type: box, size: [0.2, 0.2, 0.2]}, spacing: 0.05, mass: 1"
+    # n boxes on one plane: 4 n + 4 n (n - 1) / 2 points; 7 fit (112), 8 do not (144)
+    for n, fits in ((7, True), (8, False)):
+        boxes = "".join(f"  - {{name: b{i}, {box}, position: [{0.5 * i}, 0, 0.1]}}\n" for i in range(n))
+        spec = load_scene_text(_tree_with_contact(boxes))
+        assert implicit_contact_fits(list(spec.bodies), spec.contact) is fits
+        assert (4 * n + 2 * n * (n - 1) <= IMPLICIT_CAPACITY) is fits
+        assert spec.simulation.integrator == ("reduced-implicit" if fits else "reduced-rk4")
+    ragdoll = load_scene_text((Path(__file__).resolve().parents[2] / "scenes/joints/capsule_ragdoll.yaml").read_text())
+    assert ragdoll.simulation.integrator == "reduced-implicit"

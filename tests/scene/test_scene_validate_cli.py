@@ -254,7 +254,8 @@ def test_verbose_tells_a_tree_scenes_links_and_degrees_of_freedom(name):
     free_roots = 1 - len(to_world) if len(joints) == len(bodies) - 1 else 0  # a tree that hangs from nothing
     freedoms = sum(JOINT_FREEDOMS[j["type"]] for j in joints) + 6 * free_roots
     trees = len(to_world) + free_roots
-    integrator = scene["simulation"].get("integrator", "reduced-rk4")  # a tree scene's default
+    # a tree scene's default: with contact of a few shapes (the capsule ragdoll) reduced-implicit
+    integrator = "reduced-implicit" if "contact" in scene else "reduced-rk4"
     expected = (f"  joint coordinates ({integrator}): {len(bodies)} links in {trees} tree{'s' * (trees != 1)}, "
                 f"{freedoms} degrees of freedom")  # fmt: skip
     assert expected in verbose_lines(path), verbose_lines(path)
@@ -269,10 +270,14 @@ def test_validate_says_the_sub_steps_auto_chose_and_what_the_run_will_cost(tmp_p
     from rbcli.physics.integrators import get_integrator
     from rbcli.scene.run_cost import COST_BODY, COST_ROW, COST_SHAPE, COST_SPHERE
 
-    # on split2 (the scene names reduced-implicit, in joint coordinates), whose estimate counts joint rows
+    # on split2 (the scene names no integrator: it runs reduced-implicit), whose estimate counts joint rows
     text = (REPO / "scenes" / "joints" / "capsule_ragdoll.yaml").read_text()
     path = tmp_path / "capsule_ragdoll.yaml"
-    path.write_text(text.replace("integrator: reduced-implicit}", "integrator: split2}"))
+    path.write_text(
+        text.replace(
+            "simulation: {dt: 0.001, duration: 3.0,", "simulation: {dt: 0.001, duration: 3.0, integrator: split2,"
+        )
+    )
     compiled = prepare(path)
     settings, model = compiled.settings, compiled.model
     assert settings.substeps > 1

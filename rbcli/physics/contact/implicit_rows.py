@@ -22,11 +22,8 @@ import numpy as np
 from numba.extending import overload
 
 from rbcli.physics.contact.law import history_elongation, relative_velocity
+from rbcli.physics.contact.tables import IMPLICIT_CAPACITY
 from rbcli.physics.dispatch import DISPATCH_OPTIONS, absent, kernel_only, member
-
-# contacts a step treats implicitly (the rows of the dense solve are at most 3 a contact: its normal and,
-# while it sticks, its two tangent directions)
-IMPLICIT_CAPACITY = 128
 
 # implicit_float's columns
 IMP_POINT = 0  # [m] (3) the contact point, world

@@ -136,6 +136,11 @@ class ContactTable(NamedTuple):
     primitive_size: np.ndarray = np.zeros((0, 3))
 
 
+# contacts a step reduced-implicit treats implicitly (implicit_rows.py; the rows of its dense solve are at
+# most 3 a contact: its normal and, with friction, its two tangent directions)
+IMPLICIT_CAPACITY = 128
+
+
 class ContactWork(NamedTuple):
     """The contact stage's mutable arrays, allocated once per run (`make_contact_work`).
 
