@@ -54,7 +54,7 @@ def implicit_arrays(body_count: int) -> dict[str, np.ndarray]:
         implicit_float=np.zeros((IMPLICIT_CAPACITY, IMPLICIT_COLUMNS)),
         implicit_count=np.zeros(2, dtype=np.int64),  # contacts kept, contacts past the capacity (all evaluations)
         implicit_matrix=np.zeros((2, rows, rows)),  # the rows' h A = h J M^-1 J^T, and a factor's scratch
-        implicit_row=np.zeros((rows, 14)),  # tree/implicit_contact.py's per-row scratch
+        implicit_row=np.zeros((rows, 13)),  # tree/implicit_contact.py's per-row scratch
         implicit_force=np.zeros((body_count, 3)),  # a wrench on the bodies (force [N], torque [N m] about x)
         implicit_torque=np.zeros((body_count, 3)),
         implicit_link=np.zeros(body_count, dtype=np.int64),  # each body's link (-1: not a link)

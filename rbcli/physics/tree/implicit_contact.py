@@ -78,51 +78,48 @@ from rbcli.physics.tree.table import LIMIT_LOWER, LIMIT_UPPER, MOTOR
 PGS_SWEEPS = 300  # with joint limits in the solve: projected Gauss-Seidel sweeps at most
 
 # implicit_row's columns: the row's contact (or -1 - k for limit row k), its direction (world), 1 / w
-# (0: a limit, a hard row), c / w, u (start), u_e (after the explicit step), the solution d [N], whether
-# the row is free (1) or held at its released value (0), d's bounds, and the right side b
-ROW_CONTACT, ROW_DIR, ROW_INV_W, ROW_C_OVER_W, ROW_U, ROW_UE, ROW_D, ROW_FREE = 0, 1, 4, 5, 6, 7, 8, 9
-ROW_LO, ROW_HI, ROW_B = 10, 11, 12
-# the law's force before its clamps less the force applied, along the row, over w
-ROW_LAW = 13
-ROW_COLUMNS = 14
+# (0: a limit, a hard row), c / w, u (start), u_e (after the explicit step), the solution d [N], d's
+# bounds, the right side b, and the law's force before its clamps less the force applied, along the row,
+# over w
+ROW_CONTACT, ROW_DIR, ROW_INV_W, ROW_C_OVER_W, ROW_U, ROW_UE, ROW_D = 0, 1, 4, 5, 6, 7, 8
+ROW_LO, ROW_HI, ROW_B, ROW_LAW = 9, 10, 11, 12
+ROW_COLUMNS = 13
 
 
 @numba.njit(cache=True, inline="always")
 def _tangents(n0, n1, n2):  # noqa: ANN001, ANN202
     """Two unit vectors completing n to a right-handed orthonormal basis (any: the solve does not care)."""
     if abs(n0) < 0.57735:
-        a0, a1, a2 = 0.0, n2, -n1  # e_x x n
+        a0, a1, a2 = 0.0, n2, -n1  # n x e_x
     else:
-        a0, a1, a2 = -n2, 0.0, n0  # e_y x n
+        a0, a1, a2 = -n2, 0.0, n0  # n x e_y
     inv = 1.0 / math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
     a0, a1, a2 = a0 * inv, a1 * inv, a2 * inv
     return a0, a1, a2, n1 * a2 - n2 * a1, n2 * a0 - n0 * a2, n0 * a1 - n1 * a0
 
 
 @numba.njit(cache=True, inline="always")
-def _point_velocity(link, velocity, x, body, bodies_v, bodies_w, p0, p1, p2):  # noqa: ANN001, ANN202
-    """The velocity of body `body`'s material point at p: from its link's spatial velocity (omega, v at
-    its centre of mass), or for a body that is no link (static, kinematic) its velocity at the evaluation."""
-    i = link[body]
-    r0, r1, r2 = p0 - x[body, 0], p1 - x[body, 1], p2 - x[body, 2]
-    if i >= 0:
-        w0, w1, w2 = velocity[i, 0], velocity[i, 1], velocity[i, 2]
-        v0, v1, v2 = velocity[i, 3], velocity[i, 4], velocity[i, 5]
-    else:
-        w0, w1, w2 = bodies_w[body, 0], bodies_w[body, 1], bodies_w[body, 2]
-        v0, v1, v2 = bodies_v[body, 0], bodies_v[body, 1], bodies_v[body, 2]
-    return v0 + w1 * r2 - w2 * r1, v1 + w2 * r0 - w0 * r2, v2 + w0 * r1 - w1 * r0
-
-
-@numba.njit(cache=True, inline="always")
 def _link_point_velocity(link, velocity, x, body, p0, p1, p2):  # noqa: ANN001, ANN202
-    """Like _point_velocity for a velocity change: zero for a body that is no link (it does not move)."""
+    """The velocity (or velocity change) of body `body`'s material point at p from its link's spatial
+    velocity (omega, v at its centre of mass) in `velocity`; zero for a body that is no link."""
     i = link[body]
     if i < 0:
         return 0.0, 0.0, 0.0
     r0, r1, r2 = p0 - x[body, 0], p1 - x[body, 1], p2 - x[body, 2]
     w0, w1, w2 = velocity[i, 0], velocity[i, 1], velocity[i, 2]
     v0, v1, v2 = velocity[i, 3], velocity[i, 4], velocity[i, 5]
+    return v0 + w1 * r2 - w2 * r1, v1 + w2 * r0 - w0 * r2, v2 + w0 * r1 - w1 * r0
+
+
+@numba.njit(cache=True, inline="always")
+def _point_velocity(link, velocity, x, body, bodies_v, bodies_w, p0, p1, p2):  # noqa: ANN001, ANN202
+    """The velocity of body `body`'s material point at p: from its link's spatial velocity (omega, v at
+    its centre of mass), or for a body that is no link (static, kinematic) its velocity at the evaluation."""
+    if link[body] >= 0:
+        return _link_point_velocity(link, velocity, x, body, p0, p1, p2)
+    r0, r1, r2 = p0 - x[body, 0], p1 - x[body, 1], p2 - x[body, 2]
+    w0, w1, w2 = bodies_w[body, 0], bodies_w[body, 1], bodies_w[body, 2]
+    v0, v1, v2 = bodies_v[body, 0], bodies_v[body, 1], bodies_v[body, 2]
     return v0 + w1 * r2 - w2 * r1, v1 + w2 * r0 - w0 * r2, v2 + w0 * r1 - w1 * r0
 
 
@@ -162,7 +159,7 @@ def implicit_contact(tree, tree_data, cw, x, q, P, L, h) -> None:  # noqa: ANN00
         link[b] = -1
     for i in range(tree.parent.shape[0]):
         link[tree.body[i]] = i
-    # the rows: each contact's normal, and its tangents while it sticks
+    # the rows: each contact's normal, and with friction its two tangents
     R = 0
     for c in range(count):
         v = vals[c]
@@ -195,7 +192,6 @@ def implicit_contact(tree, tree_data, cw, x, q, P, L, h) -> None:  # noqa: ANN00
                     + (v[IMP_FT_LAW + 2] - v[IMP_FT + 2]) * e2
                 ) / w
             row[ROW_D] = 0.0
-            row[ROW_FREE] = 1.0
             row[ROW_LO] = -v[IMP_FN] if j == 0 else -math.inf  # no pull at the end of the step
             row[ROW_HI] = math.inf
             R += 1
@@ -217,7 +213,7 @@ def implicit_contact(tree, tree_data, cw, x, q, P, L, h) -> None:  # noqa: ANN00
     # limit would be pushed by a contact force sized for the limb alone: limits.py acts only after)
     R = limit_rows(tree.limits, tree, tree_data, rows, R, h)
     # h A, column by column: the unit force along row r's direction (on a, minus on b), its velocity change
-    for r in range(R):
+    for r in range(contact_rows):
         c = int(rows[r, ROW_CONTACT])
         ba, bb = ints[c, 0], ints[c, 1]
         p0, p1, p2 = vals[c, IMP_POINT], vals[c, IMP_POINT + 1], vals[c, IMP_POINT + 2]
@@ -407,7 +403,7 @@ def _limit_rows(limits, tree, tree_data, rows, start, h):  # noqa: ANN001, ANN20
             row = rows[count]
             row[ROW_CONTACT] = -1.0 - k
             row[ROW_INV_W], row[ROW_C_OVER_W], row[ROW_U], row[ROW_UE] = 0.0, 0.0, 0.0, speed
-            row[ROW_D], row[ROW_FREE], row[ROW_LO], row[ROW_HI] = 0.0, 1.0, lo, hi
+            row[ROW_D], row[ROW_LO], row[ROW_HI] = 0.0, lo, hi
             row[ROW_B] = target - speed
             count += 1
         return count
