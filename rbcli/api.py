@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Unpack
 
 from rbcli.physics import integrators as _integrators
+from rbcli.physics.contact.tables import IMPLICIT_CAPACITY  # noqa: F401 - the CLI's run warning names it
 from rbcli.physics.integrators import (
     INTEGRATORS,
     REDUCED_INTEGRATORS,

@@ -254,9 +254,9 @@ def _run_and_report(sim: Simulation, target: Path, quiet: bool, stops: _Stops, r
         raise messages.fail(f"{type(exc).__name__}: {exc}; {note}") from None
     settings = compiled.settings
     if not quiet:
-        from rbcli.physics.integrators import implicit_contact
+        from rbcli.api import integrator_info
 
-        implicit = implicit_contact(settings.integrator)  # (its contact line says the stable step binds it not)
+        implicit = integrator_info(settings.integrator).implicit_contact  # (the stable step does not bind it)
         rate = (summary.steps - start) * compiled.model.body_count / max(wall, 1e-9)
         messages.status(
             f"{summary.status}: {summary.steps - start} steps x {compiled.model.body_count} bodies "
@@ -278,7 +278,7 @@ def _run_and_report(sim: Simulation, target: Path, quiet: bool, stops: _Stops, r
             expected="contact spheres of similar sizes, so that none touches more than 12 others",
         )
     if summary.implicit_contact_overflow:
-        from rbcli.physics.contact.tables import IMPLICIT_CAPACITY
+        from rbcli.api import IMPLICIT_CAPACITY
 
         messages.warning(
             f"contact: {summary.implicit_contact_overflow} contact evaluations over the run were past the "

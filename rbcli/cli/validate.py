@@ -61,9 +61,10 @@ def validate(
         if contact is not None:
             auto = spec.contact is not None and spec.contact.substeps is None
             substeps = compiled.settings.substeps if not isinstance(compiled, str) else None
-            from rbcli.physics.integrators import implicit_contact
+            from rbcli.api import integrator_info
 
-            implicit = not isinstance(compiled, str) and implicit_contact(compiled.settings.integrator)
+            # an implicit contact step is not bounded by the stable step (the line says so)
+            implicit = not isinstance(compiled, str) and integrator_info(compiled.settings.integrator).implicit_contact
             line = contact.describe(substeps, implicit)
             if auto:  # say how many auto chose (describe prints a count above 1)
                 line += " (auto)" if substeps is not None and substeps > 1 else "; sub-steps: auto"

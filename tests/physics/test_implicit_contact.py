@@ -27,6 +27,19 @@ CAPSULE = "shape: {type: capsule, radius: 0.03, height: 0.12, axis: y}, spacing:
 STIFF = 1e7  # [N/m] per contact point: the explicit stable step of these bodies is ~0.1-0.3 ms
 
 
+def test_the_kept_contacts_and_the_solve_s_rows_fit_their_arrays():
+    """The columns implicit_rows.py and implicit_contact.py write fit the widths contact/tables.py allocates
+    (numpy only, so it cannot import them)."""
+    from rbcli.physics.contact import implicit_rows
+    from rbcli.physics.contact.tables import IMPLICIT_COLUMNS, IMPLICIT_ROW_COLUMNS
+    from rbcli.physics.tree import implicit_contact
+
+    kept = [v for k, v in vars(implicit_rows).items() if k.startswith("IMP_")]
+    assert max(kept) + 3 <= IMPLICIT_COLUMNS  # the last is a vector (IMP_FT_LAW)
+    rows = [v for k, v in vars(implicit_contact).items() if k.startswith("ROW_")]
+    assert max(rows) < IMPLICIT_ROW_COLUMNS
+
+
 def scene(bodies: str, contact: str, *, dt: float = 2e-3) -> rbcli.Simulation:
     text = (
         f"name: t\nsimulation: {{dt: {dt!r}, steps: 1, integrator: reduced-implicit}}\n"

@@ -17,13 +17,28 @@ Contacts beyond the capacity (IMPLICIT_CAPACITY) keep their explicit force and a
 from __future__ import annotations
 
 import math
+from typing import Any
 
-import numpy as np
+from numba.core import types
 from numba.extending import overload
 
 from rbcli.physics.contact.law import history_elongation, relative_velocity
-from rbcli.physics.contact.tables import IMPLICIT_CAPACITY
-from rbcli.physics.dispatch import DISPATCH_OPTIONS, absent, kernel_only, member
+from rbcli.physics.step import STEP_KERNEL
+
+_OPTIONS: Any = STEP_KERNEL  # typed Any: numba's stubs type jit_options as a TypedDict without `_nrt`
+
+
+def _absent(work_type: Any) -> bool:  # noqa: ANN401 - a numba NamedTuple type
+    """Whether the contact work type has no implicit arrays (None: not a reduced-implicit run), so the
+    stages below compile to nothing (physics/dispatch.py's pattern, kept here: contact imports nothing
+    above it)."""
+    fields = dict(zip(work_type.fields, work_type.types, strict=True))
+    return isinstance(fields["implicit_float"], types.NoneType)
+
+
+def _kernel_only() -> None:
+    raise TypeError("a contact stage dispatcher runs in compiled kernels only")
+
 
 # implicit_float's columns
 IMP_POINT = 0  # [m] (3) the contact point, world
@@ -43,34 +58,19 @@ IMP_ROWS = 19  # 1: the normal alone (frictionless); 3: with its two tangent dir
 # and applies the clamps itself, to the forces at the end of the step
 IMP_FN_LAW = 20  # [N]
 IMP_FT_LAW = 21  # [N] (3)
-IMPLICIT_COLUMNS = 24
-
-
-def implicit_arrays(body_count: int) -> dict[str, np.ndarray]:
-    """ContactWork's implicit_* arrays (tables.make_contact_work with implicit=True)."""
-    rows = 3 * IMPLICIT_CAPACITY
-    return dict(
-        implicit_int=np.zeros((IMPLICIT_CAPACITY, 2), dtype=np.int64),  # body_a, body_b (-1: a plane)
-        implicit_float=np.zeros((IMPLICIT_CAPACITY, IMPLICIT_COLUMNS)),
-        implicit_count=np.zeros(2, dtype=np.int64),  # contacts kept, contacts past the capacity (all evaluations)
-        implicit_matrix=np.zeros((2, rows, rows)),  # the rows' h A = h J M^-1 J^T, and a factor's scratch
-        implicit_row=np.zeros((rows, 13)),  # tree/implicit_contact.py's per-row scratch
-        implicit_force=np.zeros((body_count, 3)),  # a wrench on the bodies (force [N], torque [N m] about x)
-        implicit_torque=np.zeros((body_count, 3)),
-        implicit_link=np.zeros(body_count, dtype=np.int64),  # each body's link (-1: not a link)
-    )
+# (IMPLICIT_COLUMNS, the row's width, is tables.py's: it allocates the arrays, numpy only)
 
 
 def implicit_record(contact, work, x, s, geometry, k, zeta, mu, force) -> None:  # noqa: ANN001
     """Append one applied contact (module docstring), evaluated at offset s [s] into the step: `geometry` a
     law.ContactGeometry, k, zeta, mu its mixed material, `force` [N] the force the stage applied on
     body_a; nothing where the work has no implicit arrays."""
-    kernel_only()
+    _kernel_only()
 
 
-@overload(implicit_record, jit_options=DISPATCH_OPTIONS)
+@overload(implicit_record, jit_options=_OPTIONS)
 def _implicit_record(contact, work, x, s, geometry, k, zeta, mu, force):  # noqa: ANN001, ANN202
-    if absent(member(work, "implicit_float")):
+    if _absent(work):
         return lambda contact, work, x, s, geometry, k, zeta, mu, force: None
 
     def record(contact, work, x, s, geometry, k, zeta, mu, force):  # noqa: ANN001, ANN202
@@ -112,12 +112,12 @@ def _implicit_record(contact, work, x, s, geometry, k, zeta, mu, force):  # noqa
 
 def implicit_begin(work) -> None:  # noqa: ANN001
     """A force evaluation starts: the kept contacts are cleared (nothing without implicit arrays)."""
-    kernel_only()
+    _kernel_only()
 
 
-@overload(implicit_begin, jit_options=DISPATCH_OPTIONS)
+@overload(implicit_begin, jit_options=_OPTIONS)
 def _implicit_begin(work):  # noqa: ANN001, ANN202
-    if absent(member(work, "implicit_float")):
+    if _absent(work):
         return lambda work: None
 
     def begin(work):  # noqa: ANN001, ANN202

@@ -139,6 +139,8 @@ class ContactTable(NamedTuple):
 # contacts a step reduced-implicit treats implicitly (implicit_rows.py; the rows of its dense solve are at
 # most 3 a contact: its normal and, with friction, its two tangent directions)
 IMPLICIT_CAPACITY = 128
+IMPLICIT_COLUMNS = 24  # implicit_rows.py's IMP_* columns of a kept contact
+IMPLICIT_ROW_COLUMNS = 13  # tree/implicit_contact.py's ROW_* columns of a solve's row
 
 
 class ContactWork(NamedTuple):
@@ -528,9 +530,18 @@ def make_contact_work(
 
 
 def _implicit_work(body_count: int) -> dict[str, np.ndarray]:
-    from rbcli.physics.contact.implicit_rows import implicit_arrays  # (it imports the force law, which imports this)
-
-    return implicit_arrays(body_count)
+    """ContactWork's implicit_* arrays (make_contact_work with implicit=True; implicit_rows.py fills them)."""
+    rows = 3 * IMPLICIT_CAPACITY
+    return dict(
+        implicit_int=np.zeros((IMPLICIT_CAPACITY, 2), dtype=np.int64),  # body_a, body_b (-1: a plane)
+        implicit_float=np.zeros((IMPLICIT_CAPACITY, IMPLICIT_COLUMNS)),  # implicit_rows.IMP_* columns
+        implicit_count=np.zeros(2, dtype=np.int64),  # contacts kept, contacts past the capacity (all evaluations)
+        implicit_matrix=np.zeros((2, rows, rows)),  # the rows' h A = h J M^-1 J^T, and a factor's scratch
+        implicit_row=np.zeros((rows, IMPLICIT_ROW_COLUMNS)),  # tree/implicit_contact.py's per-row scratch
+        implicit_force=np.zeros((body_count, 3)),  # a wrench on the bodies (force [N], torque [N m] about x)
+        implicit_torque=np.zeros((body_count, 3)),
+        implicit_link=np.zeros(body_count, dtype=np.int64),  # each body's link (-1: not a link)
+    )
 
 
 def primitive_work(contact: ContactTable, body_count: int) -> dict[str, np.ndarray | None]:

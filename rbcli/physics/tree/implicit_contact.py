@@ -82,8 +82,7 @@ PGS_SWEEPS = 300  # with joint limits in the solve: projected Gauss-Seidel sweep
 # bounds, the right side b, and the law's force before its clamps less the force applied, along the row,
 # over w
 ROW_CONTACT, ROW_DIR, ROW_INV_W, ROW_C_OVER_W, ROW_U, ROW_UE, ROW_D = 0, 1, 4, 5, 6, 7, 8
-ROW_LO, ROW_HI, ROW_B, ROW_LAW = 9, 10, 11, 12
-ROW_COLUMNS = 13
+ROW_LO, ROW_HI, ROW_B, ROW_LAW = 9, 10, 11, 12  # (contact/tables.py IMPLICIT_ROW_COLUMNS holds them: tested)
 
 
 @numba.njit(cache=True, inline="always")
