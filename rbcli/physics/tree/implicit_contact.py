@@ -61,6 +61,7 @@ from rbcli.physics.contact.implicit_rows import (
     IMP_VN,
     IMP_VT,
 )
+from rbcli.physics.contact.law import push  # a force at a point on a body: force, torque about its centre
 from rbcli.physics.dispatch import DISPATCH_OPTIONS, absent, kernel_only, member
 from rbcli.physics.joints.drives import LIMIT_CONTACT
 from rbcli.physics.kernel_link import separately_compiled
@@ -120,18 +121,6 @@ def _point_velocity(link, velocity, x, body, bodies_v, bodies_w, p0, p1, p2):  #
     w0, w1, w2 = bodies_w[body, 0], bodies_w[body, 1], bodies_w[body, 2]
     v0, v1, v2 = bodies_v[body, 0], bodies_v[body, 1], bodies_v[body, 2]
     return v0 + w1 * r2 - w2 * r1, v1 + w2 * r0 - w0 * r2, v2 + w0 * r1 - w1 * r0
-
-
-@numba.njit(cache=True, inline="always")
-def _add_wrench(force, torque, x, body, p0, p1, p2, f0, f1, f2) -> None:  # noqa: ANN001
-    """A force f at p on `body`: force += f, torque += (p - x_body) x f."""
-    r0, r1, r2 = p0 - x[body, 0], p1 - x[body, 1], p2 - x[body, 2]
-    force[body, 0] += f0
-    force[body, 1] += f1
-    force[body, 2] += f2
-    torque[body, 0] += r1 * f2 - r2 * f1
-    torque[body, 1] += r2 * f0 - r0 * f2
-    torque[body, 2] += r0 * f1 - r1 * f0
 
 
 @numba.njit(cache=True, inline="always")
@@ -217,9 +206,9 @@ def implicit_contact(tree, tree_data, cw, x, q, P, L, h) -> None:  # noqa: ANN00
         ba, bb = ints[c, 0], ints[c, 1]
         p0, p1, p2 = vals[c, IMP_POINT], vals[c, IMP_POINT + 1], vals[c, IMP_POINT + 2]
         e0, e1, e2 = rows[r, ROW_DIR], rows[r, ROW_DIR + 1], rows[r, ROW_DIR + 2]
-        _add_wrench(force, torque, x, ba, p0, p1, p2, e0, e1, e2)
+        push(x, ba, p0, p1, p2, e0, e1, e2, force, torque)
         if bb >= 0:
-            _add_wrench(force, torque, x, bb, p0, p1, p2, -e0, -e1, -e2)
+            push(x, bb, p0, p1, p2, -e0, -e1, -e2, force, torque)
         generalized_momentum(tree, work, force, torque, rw.tau)
         _response_column(tree, work, rw, link, x, ints, vals, rows, contact_rows, A, r, h)
         limit_column(tree.limits, tree, tree_data, rows, contact_rows, R, A, r, h)
@@ -260,9 +249,9 @@ def implicit_contact(tree, tree_data, cw, x, q, P, L, h) -> None:  # noqa: ANN00
         d2 = (fn - fn0) * n2 + t2 - v[IMP_FT + 2]
         p0, p1, p2 = v[IMP_POINT], v[IMP_POINT + 1], v[IMP_POINT + 2]
         ba, bb = ints[c, 0], ints[c, 1]
-        _add_wrench(force, torque, x, ba, p0, p1, p2, d0, d1, d2)
+        push(x, ba, p0, p1, p2, d0, d1, d2, force, torque)
         if bb >= 0:
-            _add_wrench(force, torque, x, bb, p0, p1, p2, -d0, -d1, -d2)
+            push(x, bb, p0, p1, p2, -d0, -d1, -d2, force, torque)
         r += span
     generalized_momentum(tree, work, force, torque, rw.tau)
     limit_apply(tree.limits, tree, tree_data, rows, contact_rows, R, rw.tau)
