@@ -14,7 +14,7 @@ from __future__ import annotations
 
 # Short scenes of each kind; `{integrator}` is the `integrator:` entry of `simulation:` (", integrator:
 # NAME", or "" for the scene format's default: euler-matrix, split2 with contact, reduced-rk4 with joints
-# that form trees, as both jointed kinds' do)
+# that form trees, as both jointed kinds' do, reduced-implicit where such a tree has few contacts)
 KIND_SCENES: dict[str, str] = {
     "free": """\
 name: free-cloud

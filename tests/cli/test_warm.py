@@ -61,8 +61,9 @@ def test_an_invalid_scene_is_refused_before_anything_compiles(tmp_path):
 
 def test_the_kinds_are_scenes_of_those_kinds():
     """What `rbsim warm` without a scene prepares: each kind loads, with the scene format's default
-    integrator (euler-matrix, split2 with contact, reduced-rk4 with joints: the kinds' chains are trees),
-    and is the kind it is named after."""
+    integrator (euler-matrix, split2 with contact, reduced-rk4 with joints: the kinds' chains are trees;
+    reduced-implicit with joints and contact: its chain of capsules has few contacts), and is the kind it
+    is named after."""
     assert sorted(KIND_ORDER) == sorted(KIND_SCENES) and KIND_ORDER[-1] == "joints+contact"
     for kind in KIND_ORDER:
         spec = load_scene_text(kind_scene(kind))
@@ -70,5 +71,6 @@ def test_the_kinds_are_scenes_of_those_kinds():
         assert has["contact"] == ("contact" in kind) and has["joints"] == ("joints" in kind), kind
         assert has["forces"] == (kind == "forces"), kind
         default = "reduced-rk4" if has["joints"] else ("split2" if has["contact"] else "euler-matrix")
+        default = "reduced-implicit" if has["joints"] and has["contact"] else default
         assert spec.simulation.integrator == default, kind
     assert load_scene_text(kind_scene("free", "rk4")).simulation.integrator == "rk4"

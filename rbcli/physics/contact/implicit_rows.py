@@ -4,14 +4,16 @@
 The force stage (sink.py, SINK_FORCE) applies every contact's force explicitly, as for any integrator;
 where the contact work has these arrays (ContactWork.implicit_*: only in a run of an integrator with
 `implicit_contact`, else None and nothing here compiles) it also appends the contact here: its bodies,
-point, normal, the force it applied (normal part and tangential vector), the spring and dashpot
-constants of its normal and tangential laws, the relative velocity it saw and its friction coefficient.
-The tree stage then corrects those forces to the end of the step (backward Euler in the springs and
-dashpots, law.py's formulas linearised) and clears the list; `implicit_begin` clears it at each
-evaluation too, so an evaluation the step does not take (a recorded output's) leaves nothing behind.
+point, normal, the force it applied (normal part and tangential vector), the law's force before its
+clamps (the dashpot that would pull, the tangential spring past mu f_n), the spring and dashpot constants
+of its normal and tangential laws, the relative velocity it saw and its friction coefficient. The tree
+stage then corrects those forces to the end of the step (backward Euler in the springs and dashpots,
+law.py's formulas linearised, its clamps applied to the result) and clears the list; `implicit_begin`
+clears it at each evaluation too, so an evaluation the step does not take (a recorded output's) leaves
+nothing behind.
 
-Contacts beyond the capacity (IMPLICIT_CAPACITY) keep their explicit force and are counted
-(implicit_count[1]).
+Contacts beyond the capacity (tables.py IMPLICIT_CAPACITY) keep their explicit force and are counted
+(implicit_count[1]; `rbsim run` warns).
 """
 
 from __future__ import annotations
