@@ -6,6 +6,8 @@ contact, recording and every output read the state arrays as in maximal coordina
                     rate += h qdd(coord, rate);  coord advanced along the NEW rate: angles and travels
                     + h rate, a ball's u <- u exp(h omega / 2) (omega in the link frame: right
                     multiplication, du/dt = u (0, omega) / 2), a free root's x += h R v, q <- q exp(h omega / 2)
+    reduced-implicit  reduced-euler's step, its contact forces then taken to the end of the step by
+                    backward Euler (implicit_contact.py, between the rates' update and the coordinates')
     reduced-rk4     the classical Runge-Kutta method on y = (coord, rate), dy/dt = (coord_rate(coord, rate),
                     qdd): four force passes and four ABAs a step; quaternion coordinates are summed in
                     R^4 and normalised at each stage and at the end (a projection onto |u| = 1, which
