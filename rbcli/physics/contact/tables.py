@@ -456,9 +456,7 @@ def make_contact_work(
     history=False: no history or trial slots (a scratch for the search alone: contact/points.py);
     threads > 1: the pair search runs on that many threads (threaded.py), with its record blocks;
     implicit: the force stage keeps its contacts for linearly implicit contact (implicit_rows.py; the
-    search then runs serially)."""
-    if implicit:
-        threads = 1
+    Simulation asks for a serial search then: threads 1, as its report says)."""
     s = contact.sphere_radius.shape[0]
     b = body_count if s else 0
     threaded = threads > 1 and history and s > 0
