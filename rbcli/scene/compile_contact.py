@@ -197,7 +197,7 @@ def compile_contact(
                                    [b for b, body in enumerate(spec.bodies) if body.collide], g)  # fmt: skip
     # the landing rule (compile_primitives' docstring): the speed bounds, a shape's fall ending at its size
     carried = assembly_mass(spec, model)
-    exact = landing_spheres(spec, carried, model.body_mass)
+    exact = landing_spheres(carried, model.body_mass, primitive.kind >= 0)
     size = np.where(primitive.kind >= 0, primitive.scale, np.where(exact, min_radius, 0.0))
     speed = speed_bounds(spec, model, state, all_body, all_offset, plane_point, plane_normal, size)[0]
     for b in range(n):
@@ -206,7 +206,7 @@ def compile_contact(
         if primitive.kind[b] >= 0:
             landing = impact_stiffness(carried[b], speed[b], zeta[b], primitive.scale[b])
             primitive.stiffness[b] = max(primitive.stiffness[b], landing)
-        elif exact[b]:  # a `sphere` shape held by joints: its one exact sphere lands as a primitive does
+        elif exact[b]:  # spheres held by joints: the first to touch lands as a primitive's point does
             landing = impact_stiffness(carried[b], speed[b], zeta[b], min_radius[b])
             stiffness[b] = max(stiffness[b], landing)
             plane_k[b] = max(plane_k[b], landing)

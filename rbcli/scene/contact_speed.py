@@ -31,8 +31,8 @@ Depth of an impact at speed v against a plane or a static body: the linear sprin
 to peak_compression(zeta) v / w (parameters.py), w = sqrt(k / m). The estimate takes the first sphere
 to touch as carrying the whole body mass M (its effective mass is at most M, and the next spheres of a
 lattice take part only once it is deep), so it is an upper bound until then: a tilted brick landing on
-a corner sphere. For a primitive held by joints, M is its assembly's mass (`assembly_mass`: a ragdoll's
-arm lands with the torso behind it; `_carried`). It is compared with DEPTH_FRACTION of that sphere's
+a corner sphere. For a body held by joints, M is its assembly's mass (`assembly_mass`: a ragdoll's arm
+lands with the torso behind it; `_carried`). It is compared with DEPTH_FRACTION of that sphere's
 radius, or for a body that touches planes as its primitive (a box or capsule shape), with DEPTH_FRACTION
 of the primitive's size, its first manifold point carrying the whole mass at its per-point stiffness.
 """
@@ -173,28 +173,27 @@ def speed_bounds(
 
 def _landing_shapes(spec: SceneSpec, model: Model, table: ContactTable) -> np.ndarray:
     """bool per body: the bodies whose default stiffness follows their landing (scene/compile_contact.py):
-    primitives, and `sphere` shapes held by joints (`landing_spheres`). Their fall ends at their size."""
+    primitives, and bodies that touch through spheres held by joints (`landing_spheres`). Their fall ends
+    at their size."""
     kind = table.primitive_kind
     primitive = kind >= 0 if kind.shape[0] else np.zeros(model.body_count, dtype=bool)
-    return primitive | landing_spheres(spec, assembly_mass(spec, model), model.body_mass)
+    return primitive | landing_spheres(assembly_mass(spec, model), model.body_mass, primitive)
 
 
 def _carried(spec: SceneSpec, model: Model, table: ContactTable) -> np.ndarray:
     """[kg] per body, the mass the deep-impact estimate puts behind its first contact: for the bodies whose
-    stiffness follows their landing (`_landing_shapes`) their assembly's, for another body its own. A
-    cloud held by joints lands with its assembly too (the particle ragdoll's arms sink 0.74 of a radius,
-    measured), but its default stiffness stays the rest rule's: stiffer by the landing rule, that ragdoll
-    came to rest in only 5 of 12 runs (an arm swung on for seconds), so it is not warned about either
-    (docs/contact.md)."""
+    stiffness follows their landing (`_landing_shapes`) their assembly's, for another body its own."""
     return np.where(_landing_shapes(spec, model, table), assembly_mass(spec, model), model.body_mass)
 
 
-def landing_spheres(spec: SceneSpec, carried: np.ndarray, mass: np.ndarray) -> np.ndarray:
-    """bool per body: a `sphere` shape (one exact contact sphere) held by joints to other movable bodies,
-    which takes the landing rule as a primitive does (the capsule ragdoll's head sank 0.16 of its radius
-    with the rest rule). A lone sphere keeps the rest rule: the piles' balls are stepped as they were."""
-    shape = np.array([body.contact_geometry == "sphere" and body.contact_spheres is None for body in spec.bodies])
-    return shape & (np.asarray(carried) > np.asarray(mass))
+def landing_spheres(carried: np.ndarray, mass: np.ndarray, primitive: np.ndarray) -> np.ndarray:
+    """bool per body: a body that touches through contact spheres (not a `primitive`: a `sphere` shape's
+    one exact sphere, a particle cloud's spheres, a mesh's or a shape's lattice with `primitives: false`)
+    held by joints to other movable bodies. It takes the landing rule as a primitive does, its smallest
+    sphere's radius as its size: it lands with its assembly behind it (with the rest rule the capsule
+    ragdoll's head sank 0.16 of its radius, the particle ragdoll's arms 0.74 of theirs, unwarned). A body
+    not held so keeps the rest rule: the piles' balls and clouds are stepped as they were."""
+    return ~np.asarray(primitive, dtype=bool) & (np.asarray(carried) > np.asarray(mass))
 
 
 def assembly_mass(spec: SceneSpec, model: Model) -> np.ndarray:

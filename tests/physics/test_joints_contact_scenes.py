@@ -101,33 +101,40 @@ def _beyond_limits(table, x: np.ndarray, q: np.ndarray) -> float:  # noqa: ANN00
 
 
 def test_the_ragdoll_lands_folds_keeps_its_limits_and_comes_to_rest():
-    """Dropped and toppling, after 6 s every body lies on the ground (centres between 0.04 and 0.15 m:
-    the spheres' radii are 0.05-0.1 m); from 5 s on every part moves below 1 cm/s (its fastest particle)
-    and none sinks (centres within 0.1 mm of where they were at 5 s); every hinge angle stayed within its
-    limits to 1e-9 rad (the knees reach their lower stop 0), the neck's and shoulders' cones and twists
-    within theirs to 1e-9, and the joints held to round-off. The fall is chaotic: a body moved by 1e-13 m
-    at the start, or the joints' Newton stopping one round-off step elsewhere, changes which way the
-    ragdoll rolls, and when it comes to rest with it: the last time any part moved at 1 cm/s was 3.1-4.5 s
-    in 16 such runs (benchmarks/bench_ragdoll_rest.py), so the test asks for rest from 5 s. Before the
-    neck and shoulders took cones and dampers the head and an arm kept rolling around their ball joints
-    on one contact each (1.2 and 4.3 cm/s at 8 s: rolling without slip loses nothing here, docs/joints.md)."""
+    """The particle ragdoll as shipped (no integrator, no stiffness given: a tree with contact whose 16
+    spheres fit the implicit solve, so reduced-implicit; each jointed cloud's stiffness from its landing
+    with the whole 42 kg behind one sphere, docs/contact.md): validate warns of nothing; dropped and
+    toppling, it sinks less than 10 % of any sphere's radius (the landing rule aims at 5 % from an upper
+    bound; with the rest rule the arms sank 0.74 of theirs, unwarned); after 9 s every body lies low
+    (centres below 0.25 m, from 0.8-2.12 m at the start: on the ground or on another limb); from 8 s on
+    every part moves below 1 cm/s (its fastest particle) and none sinks (centres within 0.1 mm of where
+    they were at 8 s); every hinge angle, cone and twist stayed within its limits to 1e-9 rad and the
+    joints held to round-off. The fall is chaotic: a hinge angle moved by 1e-13 rad at the start changes
+    which way the ragdoll rolls and when it settles: the last time any part moved at 1 cm/s was 2.8-7.8 s
+    in 40 such runs (benchmarks/bench_ragdoll_rest.py; the latest an arm rocking on its one contact, its
+    shoulder damper taking it), so the test asks for rest from 8 s."""
+    assert not check_scene(SCENES / "ragdoll.yaml")
     sim = Simulation(SCENES / "ragdoll.yaml")
+    assert sim.settings.integrator == "reduced-implicit"
     table = sim.model.joint
     hinges = [j for j in range(table.body_a.shape[0]) if table.kind[j] == JOINT_HINGE]
     balls = [j for j in range(table.body_a.shape[0]) if table.kind[j] == JOINT_BALL]
     assert len(hinges) == 4 and len(balls) == 3 and np.all(table.cone[balls, 8:] > 0)
-    worst = beyond = 0.0
+    worst = beyond = sink = 0.0
     rest, z_rest = 0.0, None
-    for _ in range(120):
+    for _ in range(180):
         sim.step(100)
+        x, q = sim.data.state.x, sim.data.state.q
         worst = max(worst, _rows(sim))
-        beyond = max(beyond, _beyond_limits(table, sim.data.state.x, sim.data.state.q))
-        if sim.time >= 5.0 - 1e-9:
+        beyond = max(beyond, _beyond_limits(table, x, q))
+        sink = max(sink, float(depth_below_plane(sim.model.contact, x, q).max()))
+        if sim.time >= 8.0 - 1e-9:
             rest = max(rest, float(_point_speeds(sim).max()))
             z_rest = sim.state.x[:, 2].copy() if z_rest is None else z_rest
-    assert sim.time > 5.99
+    assert sim.time > 8.99
     z = sim.state.x[:, 2]
-    assert np.all((z > 0.04) & (z < 0.15)), z
+    assert np.all(z < 0.25), z
+    assert 0.0 < sink < 0.1, sink
     assert rest < 0.01, rest
     assert np.all(z >= z_rest - 1e-4), z - z_rest
     assert beyond <= 1e-9, beyond

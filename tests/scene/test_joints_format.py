@@ -243,9 +243,11 @@ def _tree_with_contact(bodies: str, contact: str = "  ground: 0\n") -> str:
 def test_a_tree_with_contact_of_a_few_shapes_defaults_to_reduced_implicit():
     """A jointed tree with contact runs reduced-implicit (docs/trees.md, "Which integrator a jointed scene
     gets") where the most contact points it can have at once, counted from the shapes (1 with a sphere, 2
-    for capsules, 4 box-box and a box on a plane), fit the solve's capacity; a cloud of particles, more
-    bodies or `primitives: false` keep reduced-rk4. The shipped capsule ragdoll: 15 on its plane, 7 with its
-    head and 42 between its capsules, 64."""
+    for capsules, 4 box-box and a box on a plane) and the clouds' spheres (one each, against each sphere
+    or shape of the other body), fit the solve's capacity, pairs held by a joint (without `collide`)
+    left out; a sampled lattice (`primitives: false`, a mesh) or more bodies keep reduced-rk4. The shipped
+    capsule ragdoll: 15 on its plane, 6 with its head and 30 between its capsules, 51; the particle
+    ragdoll's 16 spheres: 92."""
     from rbcli.physics.contact.tables import IMPLICIT_CAPACITY
     from rbcli.scene.load import implicit_contact_fits
 
@@ -257,7 +259,16 @@ def test_a_tree_with_contact_of_a_few_shapes_defaults_to_reduced_implicit():
     cloud = two.replace(
         f"name: b1, {capsule}", "name: b1, particles: {positions: [[0, 0, 0], [0.1, 0, 0]], masses: 1.0, radius: 0.05}"
     )
-    assert load_scene_text(_tree_with_contact(cloud)).simulation.integrator == "reduced-rk4"
+    assert load_scene_text(_tree_with_contact(cloud)).simulation.integrator == "reduced-implicit"
+    # 12 spheres each on the plane (24) and against each other (144): past the capacity; held by their
+    # joint (not `collide: true`), the pair never touches: 24
+    row = ", ".join(f"[{0.1 * i}, 0, 0]" for i in range(12))
+    twelve = f"particles: {{positions: [{row}], masses: 1.0, radius: 0.05}}"
+    clouds = two.replace(f"b0, {capsule}", f"b0, {twelve}").replace(f"b1, {capsule}", f"b1, {twelve}")
+    spec = load_scene_text(_tree_with_contact(clouds))
+    assert implicit_contact_fits(list(spec.bodies), spec.contact) is False
+    assert implicit_contact_fits(list(spec.bodies), spec.contact, spec.joints) is True
+    assert spec.simulation.integrator == "reduced-implicit"
     box = "shape: {type: box, size: [0.2, 0.2, 0.2]}, spacing: 0.05, mass: 1"
     # n boxes on one plane: 4 n + 4 n (n - 1) / 2 points; 7 fit (112), 8 do not (144)
     for n, fits in ((7, True), (8, False)):
@@ -268,3 +279,5 @@ def test_a_tree_with_contact_of_a_few_shapes_defaults_to_reduced_implicit():
         assert spec.simulation.integrator == ("reduced-implicit" if fits else "reduced-rk4")
     ragdoll = load_scene_text((Path(__file__).resolve().parents[2] / "scenes/joints/capsule_ragdoll.yaml").read_text())
     assert ragdoll.simulation.integrator == "reduced-implicit"
+    particles = load_scene_text((Path(__file__).resolve().parents[2] / "scenes/joints/ragdoll.yaml").read_text())
+    assert particles.simulation.integrator == "reduced-implicit"
