@@ -139,9 +139,10 @@ def run_chunk(model, forces, data, dt, step0, n_steps, record_every, frames, fil
             # recording steps and at the chunk's end (the stages below read the state only when recording)
             due = (index + 1) % record_every == 0 or k + 1 == n_steps
             integrator_materialise(model, forces, contact, t, dt, x, q, P, L, scratch, due)
-        # contact_record: on recording steps, the state's contact count, deepest overlap and energy
-        contact_record_stage(contact, contact_work, x, q, frames, filled, (index + 1) % record_every == 0)
         due = (index + 1) % record_every == 0
+        if due:  # a call passes the contact table and work by value (~130 arrays): on recording steps only
+            # contact_record: on recording steps, the state's contact count, deepest overlap and energy
+            contact_record_stage(contact, contact_work, x, q, frames, filled, due)
         if HOLDS_JOINTS:
             if due:  # a call passes the joint tables by value (~100 arrays): on recording steps only
                 # joint_record: on recording steps, each joint's reaction over the last (sub-)step into the next frame
