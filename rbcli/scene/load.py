@@ -351,6 +351,8 @@ def implicit_contact_fits(bodies: list[BodySpec], contact: ContactSpec, joints: 
                 total += 1 if min(a, b) == 1 else (4 if a == b == 4 else 2)
             else:  # spheres: each against each sphere or shape of the other
                 total += na * nb
+            if total > IMPLICIT_CAPACITY:  # past it already (a scene of 10^4 links: no 10^8 pairs counted)
+                return False
     return total <= IMPLICIT_CAPACITY
 
 
