@@ -32,7 +32,7 @@ to peak_compression(zeta) v / w (parameters.py), w = sqrt(k / m). The estimate t
 to touch as carrying the whole body mass M (its effective mass is at most M, and the next spheres of a
 lattice take part only once it is deep), so it is an upper bound until then: a tilted brick landing on
 a corner sphere. For a body held by joints, M is its assembly's mass (`assembly_mass`: a ragdoll's arm
-lands with the torso behind it; `_carried`). It is compared with DEPTH_FRACTION of that sphere's
+lands with the torso behind it; `impact_bound`). It is compared with DEPTH_FRACTION of that sphere's
 radius, or for a body that touches planes as its primitive (a box or capsule shape), with DEPTH_FRACTION
 of the primitive's size, its first manifold point carrying the whole mass at its per-point stiffness.
 """
@@ -97,7 +97,9 @@ def impact_bound(spec: SceneSpec, model: Model, state: State, table: ContactTabl
         return None
     radius = np.full(model.body_count, np.inf)
     np.minimum.at(radius, sphere_body, table.sphere_radius)
-    shaped = _landing_shapes(spec, model, table)
+    assembly = assembly_mass(spec, model)
+    shaped = _landing_shapes(model, table, assembly)
+    carried = np.where(shaped, assembly, model.body_mass)  # behind an impact: the assembly where it lands so
     clearance = np.where(shaped, _depth_scale(table, radius), 0.0)
     speed, fall, colliding, movable = speed_bounds(spec, model, state, sphere_body, table.sphere_offset,
                                                    table.plane_point, table.plane_normal, clearance)  # fmt: skip
@@ -111,7 +113,7 @@ def impact_bound(spec: SceneSpec, model: Model, state: State, table: ContactTabl
         body=model.body_names[fastest],
         speed=float(speed[fastest]),
         fall=float(fall[fastest]),
-        deep=_deepest(model, table, speed, _depth_scale(table, radius), movable, _carried(spec, model, table)),
+        deep=_deepest(model, table, speed, _depth_scale(table, radius), movable, carried),
     )
 
 
@@ -171,19 +173,13 @@ def speed_bounds(
     return speed, fall, colliding, movable
 
 
-def _landing_shapes(spec: SceneSpec, model: Model, table: ContactTable) -> np.ndarray:
+def _landing_shapes(model: Model, table: ContactTable, assembly: np.ndarray) -> np.ndarray:
     """bool per body: the bodies whose default stiffness follows their landing (scene/compile_contact.py):
-    primitives, and bodies that touch through spheres held by joints (`landing_spheres`). Their fall ends
-    at their size."""
+    primitives, and bodies that touch through spheres held by joints (`landing_spheres`; `assembly`: the
+    masses of `assembly_mass`). Their fall ends at their size."""
     kind = table.primitive_kind
     primitive = kind >= 0 if kind.shape[0] else np.zeros(model.body_count, dtype=bool)
-    return primitive | landing_spheres(assembly_mass(spec, model), model.body_mass, primitive)
-
-
-def _carried(spec: SceneSpec, model: Model, table: ContactTable) -> np.ndarray:
-    """[kg] per body, the mass the deep-impact estimate puts behind its first contact: for the bodies whose
-    stiffness follows their landing (`_landing_shapes`) their assembly's, for another body its own."""
-    return np.where(_landing_shapes(spec, model, table), assembly_mass(spec, model), model.body_mass)
+    return primitive | landing_spheres(assembly, model.body_mass, primitive)
 
 
 def landing_spheres(carried: np.ndarray, mass: np.ndarray, primitive: np.ndarray) -> np.ndarray:
