@@ -117,7 +117,8 @@ class Data:
         needs (`Simulation.checkpoint`, `rbsim run --resume`). The state in the internal principal frame,
         the integrator's carried work (scratch, F, tau), the stage counters, the contact history and
         statistics, the adaptive controller's arrays. The contact grid and trial arrays are not carried:
-        every force evaluation rebuilds them. Views, not copies."""
+        every force evaluation rebuilds them; nor are the kept body pairs, which change no step
+        (body_phase.kept_box_pairs). Views, not copies."""
         s = self.state
         arrays = {"x": s.x, "q": s.q, "P": s.P, "L": s.L, "F": self.F, "tau": self.tau, "scratch": self.scratch}
         arrays["term_evaluations"] = self.force.term_evaluations

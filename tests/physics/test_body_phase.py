@@ -14,7 +14,15 @@ import numpy as np
 import pytest
 
 from rbcli.physics.contact.body_phase import body_pairs_numpy, body_phase
-from rbcli.physics.contact.tables import ACTIVE_PAIR, SWEEP_CHECKS, contact_table, make_contact_work
+from rbcli.physics.contact.tables import (
+    ACTIVE_PAIR,
+    FAT_AGE,
+    FAT_PAIRS,
+    FAT_WAIT,
+    SWEEP_CHECKS,
+    contact_table,
+    make_contact_work,
+)
 from rbcli.physics.rotation import quat_to_matrix
 
 
@@ -196,3 +204,49 @@ def test_the_force_stage_through_the_body_level_equals_brute_force(outlier):
     scale = np.abs(F_ref).max()
     np.testing.assert_allclose(F, F_ref, rtol=0, atol=1e-12 * scale)
     np.testing.assert_allclose(tau, tau_ref, rtol=0, atol=1e-12 * scale)
+
+
+def test_kept_pairs_follow_small_moves_and_are_found_again_after_large_ones():
+    """More than a few bodies keep their pairs between evaluations (body_phase.kept_box_pairs): after
+    small moves the kept pairs are tested instead of walking the grid (fewer box tests than the first
+    evaluation's walk), and after moves past the pads they are found again; every time the pairs equal
+    brute force, in ascending (a, b) order."""
+    rng = np.random.default_rng(11)
+    table, x, q = _scene(rng, bodies=400, box=0.8)
+    work = make_contact_work(table, x.shape[0])
+    pairs = np.zeros((20000, 2), dtype=np.int64)
+    cell = table.body_cell_size
+    walked = None
+    for move in ("none", "small", "small", "small", "far", "small", "small", "small"):
+        if move == "small":  # well inside the pads (a tenth of a cell)
+            x = x + rng.uniform(-0.01 * cell, 0.01 * cell, size=x.shape)
+        elif move == "far":
+            x = x + rng.uniform(-0.5 * cell, 0.5 * cell, size=x.shape)
+        count = body_phase(table, work, x, q, pairs)
+        found = [(int(a), int(b)) for a, b in pairs[:count]]
+        assert found == sorted(found), move  # the bodies' order, whatever the grid's
+        assert set(found) == body_pairs_numpy(work.body_lo, work.body_hi, table.body_inv_contact_mass), move
+        assert count > 50
+        checks = int(work.body_sweep[SWEEP_CHECKS])
+        if move in ("none", "far"):
+            walked = checks  # the padded boxes walked
+            assert work.fat_state[FAT_AGE] == 1
+        else:
+            assert checks < walked, move  # the kept pairs tested, no walk
+            assert work.fat_state[FAT_AGE] > 1
+
+
+def test_bodies_faster_than_their_pads_walk_the_grid():
+    """Bodies that leave their padded boxes within a few evaluations stop the keeping for a while: the
+    tight boxes are walked, and the pairs still equal brute force in ascending order."""
+    rng = np.random.default_rng(12)
+    table, x, q = _scene(rng, bodies=300, box=0.6)
+    work = make_contact_work(table, x.shape[0])
+    pairs = np.zeros((20000, 2), dtype=np.int64)
+    for _ in range(4):
+        x = x + rng.uniform(-0.5, 0.5, size=x.shape) * table.body_cell_size
+        count = body_phase(table, work, x, q, pairs)
+        found = [(int(a), int(b)) for a, b in pairs[:count]]
+        assert found == sorted(found)
+        assert set(found) == body_pairs_numpy(work.body_lo, work.body_hi, table.body_inv_contact_mass)
+    assert work.fat_state[FAT_WAIT] > 0 and work.fat_state[FAT_PAIRS] < 0  # walking, not keeping

@@ -201,8 +201,8 @@ def test_primitives_false_keeps_the_sphere_carpet():
 def test_body_pairs_beyond_the_pair_buffer_still_touch(monkeypatch):
     """A heap of boxes, capsules, spheres and a particle cloud whose body level finds more pairs than a
     (deliberately tiny) pair buffer holds: the primitive search tests every pair of boxes instead
-    (primitive_search.py), so the run is the run with the full buffer, to round-off (the pairs come in
-    another order), and no contact is lost."""
+    (primitive_search.py), so the run is the run with the full buffer, bitwise (both take the pairs in the
+    bodies' order: body_phase.kept_box_pairs), and no contact is lost."""
     import rbcli.physics.contact.tables as tables
 
     cloud = "particles: {positions: [[0, 0, 0], [0.03, 0, 0], [0, 0.03, 0], [0, 0, 0.03]], masses: 0.05, radius: 0.02}"
@@ -229,5 +229,42 @@ def test_body_pairs_beyond_the_pair_buffer_still_touch(monkeypatch):
     full_run, pairs = run(None)
     small_run, _ = run(2)
     assert pairs > 2  # the heap does overflow the small buffer
-    scale = np.abs(full_run).max()
-    np.testing.assert_allclose(small_run, full_run, rtol=0, atol=1e-12 * scale)
+    np.testing.assert_array_equal(small_run, full_run)
+
+
+def test_kept_body_pairs_do_not_change_a_step():
+    """A heap of 18 shapes (more than the few bodies tested pair by pair) steps bitwise alike whether its
+    body pairs were kept from earlier evaluations, found again from nothing (as in a resumed run, whose
+    kept pairs are not carried) or walked on the grid (bodies faster than their pads): every path hands
+    the pairs on in the bodies' order (body_phase.kept_box_pairs)."""
+    from rbcli.physics.contact.tables import FAT_PAIRS, FAT_WAIT, SWEEP_PAIRS
+
+    shapes = [BOX, CAPSULE, "shape: {type: sphere, radius: 0.035}, spacing: 0.01, density: 700"]
+    bodies = []
+    for i in range(18):  # three layers of six, the middle one across the gaps of the others
+        layer = i // 6
+        x, y, z = 0.25 * (i % 3) + 0.125 * (layer == 1), 0.2 * ((i // 3) % 2) + 0.1 * (layer == 1), 0.04 + 0.08 * layer
+        bodies.append(f"  - {{name: b{i}, {shapes[i % 3]}, position: [{x}, {y}, {z}], angular_velocity: [0, 0, {i}]}}")
+    text = "\n".join(bodies)
+
+    def run(interrupt: str) -> np.ndarray:
+        sim = scene(text, "  ground: 0\n  substeps: auto\n", dt=5e-4)
+        work = sim.data.force.contact
+        kept, most = 0, 0
+        for _ in range(500):
+            sim.step(1)
+            kept += work.fat_state[FAT_PAIRS] >= 0
+            most = max(most, work.body_sweep[SWEEP_PAIRS])
+            if interrupt == "forget":  # the kept pairs dropped: found again at the next evaluation
+                work.fat_state[FAT_PAIRS] = -1
+            elif interrupt == "walk":  # the grid walked at every evaluation
+                work.fat_state[FAT_PAIRS], work.fat_state[FAT_WAIT] = -1, 1000
+        if interrupt == "none":
+            assert kept > 350, kept  # the heap mostly keeps its pairs
+            assert most >= 3, most  # and has pairs to keep
+        s = sim.state
+        return np.concatenate([s.x.ravel(), s.q.ravel(), s.P.ravel(), s.L.ravel()])
+
+    kept = run("none")
+    np.testing.assert_array_equal(run("forget"), kept)
+    np.testing.assert_array_equal(run("walk"), kept)

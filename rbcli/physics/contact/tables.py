@@ -54,6 +54,9 @@ ACTIVE_PLANE = 2  # near a plane: its spheres are tested against the flagged pla
 # ContactWork.body_sweep slots (body_phase.py)
 SWEEP_PAIRS, SWEEP_CHECKS, SWEEP_SPHERES = range(3)
 SWEEP_COUNT = 3
+# ContactWork.fat_state (body_phase.cached_box_pairs): the pairs kept (-1: none), evaluations to wait before
+# keeping pairs again, evaluations since they were found
+FAT_PAIRS, FAT_WAIT, FAT_AGE = range(3)
 # a body whose rho_max is above this many times the median is kept out of the body grid (body_phase.py)
 LARGE_BODY = 4.0
 
@@ -198,6 +201,17 @@ class ContactWork(NamedTuple):
     body_pair: np.ndarray  # int64 (capacity, 2)
     # uint8 (body_count,), 1: its spheres may hold history (set by commit_contacts; all 1 after a restore)
     body_history: np.ndarray
+    # the body pairs kept between evaluations (body_phase.cached_box_pairs): each body's padded box when
+    # they were found [m] (body_count, 3); the pairs of padded boxes that meet, (a, b) ascending, int64
+    # (capacity, 2), and the walk's unsorted list of them; per body the start of its pairs (body_count + 1,);
+    # a scratch of flags (body_count,); int64 (3,) FAT_PAIRS (-1: none kept), FAT_WAIT, FAT_AGE
+    fat_lo: np.ndarray
+    fat_hi: np.ndarray
+    fat_pair: np.ndarray
+    fat_found: np.ndarray
+    fat_start: np.ndarray
+    fat_active: np.ndarray
+    fat_state: np.ndarray
     # the quiet skin (quiet.py): int64 (3,) QUIET_ON, QUIET_WAIT, QUIET_ARMED; each body's position [m]
     # and velocity [m/s] (body_count, 3) when it was set, how far [m] (body_count,) it may stray (max
     # norm) from that straight path, its acceleration [m/s^2] (body_count,) over the last window, and
@@ -504,6 +518,13 @@ def make_contact_work(
         body_pair_none=np.zeros((0, 2), dtype=np.int64),
         body_pair=np.zeros((pair_cap, 2), dtype=np.int64),
         body_history=np.zeros(b, dtype=np.uint8),
+        fat_lo=np.full((b, 3), np.inf),
+        fat_hi=np.full((b, 3), -np.inf),
+        fat_pair=np.zeros((2 * pair_cap, 2), dtype=np.int64),
+        fat_found=np.zeros((2 * pair_cap, 2), dtype=np.int64),
+        fat_start=np.zeros(b + 1, dtype=np.int64),
+        fat_active=np.zeros(b, dtype=np.uint8),
+        fat_state=np.array([-1, 0, 0], dtype=np.int64),
         quiet_state=np.zeros(3, dtype=np.int64),
         quiet_reference=np.zeros((b, 3)),
         quiet_velocity=np.zeros((b, 3)),
