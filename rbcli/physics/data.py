@@ -36,6 +36,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from rbcli.physics.contact.tables import ROWS_HISTORY
 from rbcli.physics.forces.tables import ForceData, make_force_data
 from rbcli.physics.joints.tables import JointWork, make_joint_work
 from rbcli.physics.model import KernelModel, Model
@@ -171,8 +172,8 @@ class Data:
             target[...] = arrays[name]
         if self.tree is not None:  # the state arrays are rewritten by the next step's forward kinematics
             self.tree.fk_state[0] = 0.0
-        if self.force.contact is not None:  # the restored history may sit on any body (body_phase.py)
-            self.force.contact.body_history[:] = 1
+        if self.force.contact is not None:  # the restored history may sit on any row (force.commit_contacts)
+            self.force.contact.row_counts[ROWS_HISTORY] = -1
             self.force.contact.quiet_state[:] = 0  # and the quiet skin is this run's (contact/quiet.py)
 
     def clear_work(self, *, trees_from_state: bool = True) -> None:
@@ -185,6 +186,7 @@ class Data:
         self.scratch[:] = 0.0
         if self.force.contact is not None:  # None: the scene has no contact stage
             self.force.contact.hist_count[:] = 0  # contacts form afresh from the new state
+            self.force.contact.row_counts[ROWS_HISTORY] = 0
             self.force.contact.quiet_state[:] = 0
         if self.joint is not None:  # the joints' Newton starts from the free drift (joints/rattle.py)
             self.joint.guess_count[:] = 0.0

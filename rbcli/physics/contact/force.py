@@ -38,7 +38,7 @@ from rbcli.physics.contact.law import body_velocities, velocity_at
 from rbcli.physics.contact.quiet import try_quiet
 from rbcli.physics.contact.search import sphere_positions
 from rbcli.physics.contact.sink import force_sink
-from rbcli.physics.contact.tables import COUNT_CANDIDATES, COUNT_EVALUATIONS
+from rbcli.physics.contact.tables import COUNT_CANDIDATES, COUNT_EVALUATIONS, ROWS_HISTORY, ROWS_TRIAL
 from rbcli.physics.contact.threaded import contact_search
 from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.step import STEP_KERNEL
@@ -68,46 +68,53 @@ def commit_contacts(model, contact, work, x, q, P, L) -> None:  # noqa: ANN001
     rest = work.clock[1] - s_last
     if rest != 0.0:  # the end-of-step velocities (the evaluation's are no longer needed)
         body_velocities(model, work, x, q, P, L)
-    # only bodies flagged in the last evaluation hold trial contacts, only bodies that held some keep a
-    # history to forget: the others' spheres are not visited (body_phase.py), in sphere order as before
-    start, trial, history = contact.body_sphere_start, work.body_trial, work.body_history
-    held = False
-    for body in range(trial.shape[0]):
-        if trial[body] == 0 and history[body] == 0:
-            continue
-        history[body] = 0
-        for i in range(start[body], start[body + 1]):
-            count = work.trial_count[i]
-            work.hist_count[i] = count
-            if count == 0:
-                continue
-            history[body] = 1
-            held = True
-            ba = contact.sphere_body[i]
-            for k in range(count):
-                partner = work.trial_partner[i, k]
-                if rest == 0.0:  # evaluated at the end of the step (rk4's last stage): nothing to advance
-                    work.hist_partner[i, k] = partner
-                    for j in range(3):
-                        work.hist_xi[i, k, j] = work.trial_xi[i, k, j]
-                    continue
-                c0, c1, c2 = work.trial_point[i, k, 0], work.trial_point[i, k, 1], work.trial_point[i, k, 2]
-                n0, n1, n2 = work.trial_normal[i, k, 0], work.trial_normal[i, k, 1], work.trial_normal[i, k, 2]
-                v0, v1, v2 = velocity_at(work, x, ba, c0, c1, c2)
-                if partner >= 0:
-                    w0, w1, w2 = velocity_at(work, x, contact.sphere_body[partner], c0, c1, c2)
-                    v0, v1, v2 = v0 - w0, v1 - w1, v2 - w2
-                vn = v0 * n0 + v1 * n1 + v2 * n2
-                e0 = work.trial_xi[i, k, 0] + rest * (v0 - vn * n0)
-                e1 = work.trial_xi[i, k, 1] + rest * (v1 - vn * n1)
-                e2 = work.trial_xi[i, k, 2] + rest * (v2 - vn * n2)
-                limit = work.trial_limit[i, k]
-                length2 = e0 * e0 + e1 * e1 + e2 * e2
-                if length2 > limit * limit:
-                    scale = limit / math.sqrt(length2)
-                    e0, e1, e2 = e0 * scale, e1 * scale, e2 * scale
+    # only the rows listed hold trial contacts (law.apply_contact) or history (the last commit): each row
+    # is committed on its own, so visiting the listed rows gives what visiting every row gave; where the
+    # history rows are not known (a restored run), every row is visited once, and listed
+    trial_rows, history_rows, counts = work.trial_rows, work.history_rows, work.row_counts
+    listed = counts[ROWS_HISTORY]
+    if listed < 0:
+        listed = 0
+        for i in range(work.hist_count.shape[0]):
+            if work.hist_count[i]:
+                history_rows[listed] = i
+                listed += 1
+    for k in range(listed):  # contacts not found again are forgotten
+        i = history_rows[k]
+        if work.trial_count[i] == 0:
+            work.hist_count[i] = 0
+    for r in range(counts[ROWS_TRIAL]):
+        i = trial_rows[r]
+        history_rows[r] = i
+        count = work.trial_count[i]
+        work.hist_count[i] = count
+        ba = contact.sphere_body[i]
+        for k in range(count):
+            partner = work.trial_partner[i, k]
+            if rest == 0.0:  # evaluated at the end of the step (rk4's last stage): nothing to advance
                 work.hist_partner[i, k] = partner
-                work.hist_xi[i, k, 0], work.hist_xi[i, k, 1], work.hist_xi[i, k, 2] = e0, e1, e2
+                for j in range(3):
+                    work.hist_xi[i, k, j] = work.trial_xi[i, k, j]
+                continue
+            c0, c1, c2 = work.trial_point[i, k, 0], work.trial_point[i, k, 1], work.trial_point[i, k, 2]
+            n0, n1, n2 = work.trial_normal[i, k, 0], work.trial_normal[i, k, 1], work.trial_normal[i, k, 2]
+            v0, v1, v2 = velocity_at(work, x, ba, c0, c1, c2)
+            if partner >= 0:
+                w0, w1, w2 = velocity_at(work, x, contact.sphere_body[partner], c0, c1, c2)
+                v0, v1, v2 = v0 - w0, v1 - w1, v2 - w2
+            vn = v0 * n0 + v1 * n1 + v2 * n2
+            e0 = work.trial_xi[i, k, 0] + rest * (v0 - vn * n0)
+            e1 = work.trial_xi[i, k, 1] + rest * (v1 - vn * n1)
+            e2 = work.trial_xi[i, k, 2] + rest * (v2 - vn * n2)
+            limit = work.trial_limit[i, k]
+            length2 = e0 * e0 + e1 * e1 + e2 * e2
+            if length2 > limit * limit:
+                scale = limit / math.sqrt(length2)
+                e0, e1, e2 = e0 * scale, e1 * scale, e2 * scale
+            work.hist_partner[i, k] = partner
+            work.hist_xi[i, k, 0], work.hist_xi[i, k, 1], work.hist_xi[i, k, 2] = e0, e1, e2
+    counts[ROWS_HISTORY] = counts[ROWS_TRIAL]
+    held = counts[ROWS_TRIAL] > 0
     if not held:  # nothing touches: the stages may rest while every body stays within its skin (quiet.py)
         try_quiet(contact, work, x)
 
@@ -127,12 +134,11 @@ def accumulate_contact(model, contact, work, t, x, q, P, L, F, tau) -> None:  # 
     """Add every contact's force and torque to F and tau (world frame, about each centre of mass)."""
     body_velocities(model, work, x, q, P, L)
     flagged = sphere_positions(contact, work, x, q)  # the two-level broad phase: flags the bodies that may touch
-    # trial contacts cleared only where the last evaluation could have left some (body_phase.py)
-    start = contact.body_sphere_start
-    for body in range(work.body_trial.shape[0]):
-        if work.body_trial[body]:
-            work.trial_count[start[body] : start[body + 1]] = 0
-        work.body_trial[body] = 1 if work.body_active[body] else 0
+    # trial contacts cleared only in the rows the last evaluation gave some (law.apply_contact lists them)
+    rows = work.trial_rows
+    for k in range(work.row_counts[ROWS_TRIAL]):
+        work.trial_count[rows[k]] = 0
+    work.row_counts[ROWS_TRIAL] = 0
     work.stats[:] = 0.0
     work.counters[COUNT_EVALUATIONS] += 1
     implicit_begin(work)  # the contacts kept for reduced-implicit (implicit_rows.py) are this evaluation's

@@ -15,6 +15,7 @@ import numba
 from rbcli.physics.contact.tables import (
     COUNT_CONTACTS,
     COUNT_OVERFLOW,
+    ROWS_TRIAL,
     STAT_CONTACTS,
     STAT_ENERGY,
     STAT_MAX_PENETRATION,
@@ -204,6 +205,10 @@ def apply_contact(work, x, F, tau, geometry, friction, outcome) -> None:  # noqa
             work.trial_point[owner, slot, 2] = c2
             work.trial_limit[owner, slot] = outcome.limit
             work.trial_count[owner] = slot + 1
+            if slot == 0:  # the row's first trial: listed for the commit and the next clearing
+                listed = work.row_counts[ROWS_TRIAL]
+                work.trial_rows[listed] = owner
+                work.row_counts[ROWS_TRIAL] = listed + 1
         else:
             work.counters[COUNT_OVERFLOW] += 1
             if work.overflow_sphere[0] < 0:

@@ -54,7 +54,9 @@ ACTIVE_PLANE = 2  # near a plane: its spheres are tested against the flagged pla
 # ContactWork.body_sweep slots (body_phase.py)
 SWEEP_PAIRS, SWEEP_CHECKS, SWEEP_SPHERES = range(3)
 SWEEP_COUNT = 3
-# ContactWork.fat_state (body_phase.cached_box_pairs): the pairs kept (-1: none), evaluations to wait before
+# ContactWork.row_counts: the rows listed in trial_rows and in history_rows (-1: history rows not known)
+ROWS_TRIAL, ROWS_HISTORY = range(2)
+# ContactWork.fat_state (body_phase.kept_box_pairs): the pairs kept (-1: none), evaluations to wait before
 # keeping pairs again, evaluations since they were found
 FAT_PAIRS, FAT_WAIT, FAT_AGE = range(3)
 # a body whose rho_max is above this many times the median is kept out of the body grid (body_phase.py)
@@ -195,13 +197,17 @@ class ContactWork(NamedTuple):
     body_plane: np.ndarray  # uint8 (body_count, plane_count), 1: the body's box meets the plane
     body_sweep: np.ndarray  # int64 (SWEEP_COUNT,): body pairs, box tests, spheres gridded
     active_sphere: np.ndarray  # int64 (sphere_count,), the spheres of bodies in body pairs, ascending
-    body_trial: np.ndarray  # uint8 (body_count,), 1: its spheres may hold trial contacts (flagged last evaluation)
+    # the rows (spheres) holding trial contacts of this evaluation, in the order they got their first
+    # (law.apply_contact), and the rows holding history after the last commit (force.commit_contacts):
+    # int64 (sphere_count,) each; ROWS_TRIAL, ROWS_HISTORY their counts (ROWS_HISTORY -1: not known, as
+    # after a restore: the commit then visits every row)
+    trial_rows: np.ndarray
+    history_rows: np.ndarray
+    row_counts: np.ndarray
     body_pair_none: np.ndarray  # int64 (0, 2): quiet.py takes box_pairs' answer, not its pair list
     # the body pairs (a < b) body_phase found (narrow.py; 0 rows where the body level is off)
     body_pair: np.ndarray  # int64 (capacity, 2)
-    # uint8 (body_count,), 1: its spheres may hold history (set by commit_contacts; all 1 after a restore)
-    body_history: np.ndarray
-    # the body pairs kept between evaluations (body_phase.cached_box_pairs): each body's padded box when
+    # the body pairs kept between evaluations (body_phase.kept_box_pairs): each body's padded box when
     # they were found [m] (body_count, 3); the pairs of padded boxes that meet, (a, b) ascending, int64
     # (capacity, 2), and the walk's unsorted list of them; per body the start of its pairs (body_count + 1,);
     # a scratch of flags (body_count,); int64 (3,) FAT_PAIRS (-1: none kept), FAT_WAIT, FAT_AGE
@@ -514,10 +520,11 @@ def make_contact_work(
         body_plane=np.zeros((b, contact.plane_point.shape[0] if s else 0), dtype=np.uint8),
         body_sweep=np.zeros(SWEEP_COUNT, dtype=np.int64),
         active_sphere=np.zeros(s, dtype=np.int64),
-        body_trial=np.zeros(b, dtype=np.uint8),
+        trial_rows=np.zeros(s, dtype=np.int64),
+        history_rows=np.zeros(s, dtype=np.int64),
+        row_counts=np.zeros(2, dtype=np.int64),
         body_pair_none=np.zeros((0, 2), dtype=np.int64),
         body_pair=np.zeros((pair_cap, 2), dtype=np.int64),
-        body_history=np.zeros(b, dtype=np.uint8),
         fat_lo=np.full((b, 3), np.inf),
         fat_hi=np.full((b, 3), -np.inf),
         fat_pair=np.zeros((pair_cap, 2), dtype=np.int64),
