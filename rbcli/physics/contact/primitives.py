@@ -190,13 +190,14 @@ def box_plane(c, R, size, plane_point, plane_normal, out) -> int:  # noqa: ANN00
     return count
 
 
-@numba.njit(**INLINE_KERNEL)
+@numba.njit(**STEP_KERNEL)
 def primitive_pair(kind_a, ca, Ra, sa, kind_b, cb, Rb, sb, out) -> int:  # noqa: ANN001
     """The manifold of primitives a and b (kinds PRIMITIVE_*; module docstring), normals from b to a.
     A pair in the other order (box-sphere) runs its kernel as b-a and turns the normals round: the
-    same points, depths and features. Inlined with `_ordered_pair` into the caller, which then calls the
-    pair's kernel directly: as two calls of their own, passing the primitives' arrays and the manifold
-    by value, they were ~13 % of a settled container_mix's step (perf) and the scene ran 11 % slower."""
+    same points, depths and features. A call of its own, as `_ordered_pair`: the two calls, passing the
+    primitives' arrays and the manifold by value, are ~13 % of a settled container_mix's step (perf), but
+    inlined (numba's inline) they made a primitive scene's first run ~11 s longer (box_drop 92.3 against
+    81.1 CPU-s on an empty cache, 2026-12-06) for 11 % less on container_mix: not kept."""
     if kind_a <= kind_b:
         return _ordered_pair(kind_a, ca, Ra, sa, kind_b, cb, Rb, sb, out)
     count = _ordered_pair(kind_b, cb, Rb, sb, kind_a, ca, Ra, sa, out)
@@ -205,7 +206,7 @@ def primitive_pair(kind_a, ca, Ra, sa, kind_b, cb, Rb, sb, out) -> int:  # noqa:
     return count
 
 
-@numba.njit(**INLINE_KERNEL)
+@numba.njit(**STEP_KERNEL)
 def _ordered_pair(kind_a, ca, Ra, sa, kind_b, cb, Rb, sb, out) -> int:  # noqa: ANN001
     if kind_a == PRIMITIVE_SPHERE:
         if kind_b == PRIMITIVE_SPHERE:
