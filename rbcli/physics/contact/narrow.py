@@ -23,11 +23,13 @@ or the body pairs' tests would cost more than the walk's.
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 
 from rbcli.physics.contact.body_phase import whole_grid_hashed
-from rbcli.physics.contact.broad_phase import grid_box
+from rbcli.physics.contact.broad_phase import _cell
 from rbcli.physics.contact.tables import SWEEP_PAIRS
 from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.step import STEP_KERNEL
@@ -38,6 +40,8 @@ from rbcli.physics.step import STEP_KERNEL
 # 20); a sphere-against-box test counts as half a check (narrow._pairs_of)
 HALF_SHELL_CELLS = 13.5
 _RADIX_BITS = 11
+_INSERTION_SORT = 64  # contacts up to this many are sorted by insertion (n^2 / 4 moves against the radix passes)
+_TAME = 2.0**62  # |p / cell size| below this: a cell index that fits, monotonic in p (broad_phase._cell)
 _CULL = 1.0 + 1e-6  # a sphere's radius in the box test, widened far beyond any rounding of p +- r
 
 
@@ -105,10 +109,54 @@ def _prepare(contact, work, gridded, pairs):  # noqa: ANN001, ANN202
     if gridded == 0:
         work.pair_tests[0] = 0
         return 0, (False, 0, 0, 0, 0, 0, 0, np.int64(0)), np.int64(0)
-    grid = grid_box(contact, work, gridded, whole_grid_hashed(contact, work))
+    grid = _cell_box(contact, work, gridded, whole_grid_hashed(contact, work))
     _, _, _, _, nx, ny, nz, _ = grid
     budget = np.int64(2.0 * HALF_SHELL_CELLS * gridded * (gridded / (nx * ny * nz)))
     return (1 if grid[0] else -1), grid, budget
+
+
+@numba.njit(cache=True, inline="always")
+def _cell_box(contact, work, count, hashed):  # noqa: ANN001, ANN202
+    """broad_phase.grid_box's grid tuple for the spheres work.active_sphere[:count] (count > 0), from the
+    extremes of their positions, without the cell of every sphere: `_pairs_of` needs only the cells of
+    the spheres it finds (the cells of all, 5 us of container_mix's ~170 us evaluation). The cell is
+    monotonic in a coordinate whose cell index fits (|p / size| < 2^62), so the least such coordinate has
+    the least cell; a coordinate beyond it, or NaN, is taken with its own cell (broad_phase._cell)."""
+    pos, spheres = work.sphere_position, work.active_sphere
+    inv = 1.0 / contact.cell_size
+    # per axis: the least and most tame coordinate, the least and most cell of the wild ones
+    x0, x1, xc0, xc1 = math.inf, -math.inf, np.int64(2**62), np.int64(-(2**62))
+    y0, y1, yc0, yc1 = x0, x1, xc0, xc1
+    z0, z1, zc0, zc1 = x0, x1, xc0, xc1
+    for a in range(count):
+        i = spheres[a]
+        x0, x1, xc0, xc1 = _fold(pos[i, 0], inv, x0, x1, xc0, xc1)
+        y0, y1, yc0, yc1 = _fold(pos[i, 1], inv, y0, y1, yc0, yc1)
+        z0, z1, zc0, zc1 = _fold(pos[i, 2], inv, z0, z1, zc0, zc1)
+    lo0, hi0 = _extreme_cells(x0, x1, xc0, xc1, inv)
+    lo1, hi1 = _extreme_cells(y0, y1, yc0, yc1, inv)
+    lo2, hi2 = _extreme_cells(z0, z1, zc0, zc1, inv)
+    buckets = contact.bucket_count
+    nx, ny, nz = hi0 - lo0 + 1, hi1 - lo1 + 1, hi2 - lo2 + 1  # each <= 2^41 + 1: no overflow
+    dense = nx <= buckets and ny <= buckets and nz <= buckets and nx * ny <= buckets and nx * ny * nz <= buckets
+    return (dense and not hashed, lo0, lo1, lo2, nx, ny, nz, np.int64(buckets - 1))
+
+
+@numba.njit(cache=True, inline="always")
+def _fold(p, inv, least, most, least_cell, most_cell):  # noqa: ANN001, ANN202
+    """A coordinate p folded into an axis's extremes (`_cell_box`)."""
+    if abs(p * inv) < _TAME:
+        return min(least, p), max(most, p), least_cell, most_cell
+    c = _cell(p, inv)
+    return least, most, min(least_cell, c), max(most_cell, c)
+
+
+@numba.njit(cache=True, inline="always")
+def _extreme_cells(least, most, least_cell, most_cell, inv):  # noqa: ANN001, ANN202
+    """The least and most cell of an axis from `_fold`'s extremes (no tame coordinate: least > most)."""
+    if least <= most:
+        least_cell, most_cell = min(least_cell, _cell(least, inv)), max(most_cell, _cell(most, inv))
+    return least_cell, most_cell
 
 
 @numba.njit(cache=True, inline="always")
@@ -118,7 +166,7 @@ def _pairs_of(contact, work, grid, first, last, side_a, side_b, near, row0, capa
     -1 when they do not fit or the cost (in half checks: a sphere-box test 1, a sphere pair 2) passes
     the budget."""
     _, i0, j0, k0, nx, ny, _, _ = grid
-    pos, radius, cell = work.sphere_position, contact.sphere_radius, work.sphere_cell
+    pos, radius, inv = work.sphere_position, contact.sphere_radius, 1.0 / contact.cell_size
     start, lo, hi, body_pair = contact.body_sphere_start, work.body_lo, work.body_hi, work.body_pair
     found, keys = work.pair_found, work.pair_key
     spheres = radius.shape[0]
@@ -151,8 +199,8 @@ def _pairs_of(contact, work, grid, first, last, side_a, side_b, near, row0, capa
                     if n == capacity:
                         return -1, tests, cost
                     j = side_b[v]
-                    ki = (((cell[i, 2] - k0) * ny + (cell[i, 1] - j0)) * nx + (cell[i, 0] - i0)) * spheres + i
-                    kj = (((cell[j, 2] - k0) * ny + (cell[j, 1] - j0)) * nx + (cell[j, 0] - i0)) * spheres + j
+                    ki = _walk_key(pos, i, inv, i0, j0, k0, nx, ny, spheres)
+                    kj = _walk_key(pos, j, inv, i0, j0, k0, nx, ny, spheres)
                     row = row0 + n
                     if ki < kj:  # the walker (earlier in bucket order) first
                         found[row, 0], found[row, 1], keys[row, 0], keys[row, 1] = i, j, ki, kj
@@ -160,6 +208,13 @@ def _pairs_of(contact, work, grid, first, last, side_a, side_b, near, row0, capa
                         found[row, 0], found[row, 1], keys[row, 0], keys[row, 1] = j, i, kj, ki
                     n += 1
     return n, tests, cost
+
+
+@numba.njit(cache=True, inline="always")
+def _walk_key(pos, i, inv, i0, j0, k0, nx, ny, spheres):  # noqa: ANN001, ANN202
+    """Sphere i's place in the dense walk's order: its bucket (cell row-major in the grid's box), then i."""
+    c0, c1, c2 = _cell(pos[i, 0], inv), _cell(pos[i, 1], inv), _cell(pos[i, 2], inv)
+    return (((c2 - k0) * ny + (c1 - j0)) * nx + (c0 - i0)) * spheres + i
 
 
 @numba.njit(cache=True, inline="always")
@@ -180,9 +235,10 @@ def _cull(pos, radius, first, last, lo, hi, other, out) -> int:  # noqa: ANN001
 
 @numba.njit(cache=True, inline="always")
 def _sort(work, n) -> None:  # noqa: ANN001
-    """work.pair_found[:n] and pair_key[:n] in the order of the keys (column 0, then 1): a stable LSD
-    radix sort of column 0 (digits of _RADIX_BITS), then an insertion sort of each run of one walker by
-    column 1 (a walker has a few partners)."""
+    """work.pair_found[:n] in the order of the keys pair_key[:n] (column 0, then 1; every contact's pair
+    of keys is its own, so the order is unique): up to _INSERTION_SORT contacts an insertion sort by
+    both, else a stable LSD radix sort of column 0 (digits of _RADIX_BITS), then an insertion sort of each
+    run of one walker by column 1 (a walker has a few partners). pair_key is scratch afterwards."""
     found, keys, order, histogram = work.pair_found, work.pair_key, work.pair_order, work.pair_radix
     if n < 2:
         return
@@ -192,6 +248,17 @@ def _sort(work, n) -> None:  # noqa: ANN001
     src, dst = order[0], order[1]
     for r in range(n):
         src[r] = r
+    if n <= _INSERTION_SORT:  # a few contacts: sorted by both keys at once (the radix passes cost ~2 us)
+        for r in range(1, n):
+            moving = src[r]
+            m0, m1 = keys[moving, 0], keys[moving, 1]
+            s = r
+            while s > 0 and (keys[src[s - 1], 0] > m0 or (keys[src[s - 1], 0] == m0 and keys[src[s - 1], 1] > m1)):
+                src[s] = src[s - 1]
+                s -= 1
+            src[s] = moving
+        _permute(found, keys, src, dst, n)
+        return
     radix = 1 << _RADIX_BITS
     shift = 0
     while (top >> shift) > 0:
@@ -220,7 +287,12 @@ def _sort(work, n) -> None:  # noqa: ANN001
                 s -= 1
             src[s] = moving
         run = end
-    # the rows in that order (through the other permutation buffer's rows as scratch)
+    _permute(found, keys, src, dst, n)
+
+
+@numba.njit(cache=True, inline="always")
+def _permute(found, keys, src, dst, n) -> None:  # noqa: ANN001
+    """found[:n] reordered to found[src[:n]] (through dst and keys' first column as scratch)."""
     for r in range(n):
         dst[r] = found[src[r], 0]
     for r in range(n):

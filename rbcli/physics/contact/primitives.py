@@ -194,20 +194,13 @@ def box_plane(c, R, size, plane_point, plane_normal, out) -> int:  # noqa: ANN00
 def primitive_pair(kind_a, ca, Ra, sa, kind_b, cb, Rb, sb, out) -> int:  # noqa: ANN001
     """The manifold of primitives a and b (kinds PRIMITIVE_*; module docstring), normals from b to a.
     A pair in the other order (box-sphere) runs its kernel as b-a and turns the normals round: the
-    same points, depths and features. A call of its own, as `_ordered_pair`: the two calls, passing the
-    primitives' arrays and the manifold by value, are ~13 % of a settled container_mix's step (perf), but
-    inlined (numba's inline) they made a primitive scene's first run ~11 s longer (box_drop 92.3 against
+    same points, depths and features.
+
+    One call between the primitive search and the pair's kernel: each call passes the primitives' arrays
+    and the manifold by value (~80 numbers), and a second level of dispatch (kinds put in order, then
+    the kernel chosen) was ~5 % of a settled container_mix's step (perf). Inlined into the search
+    (numba's inline) the dispatch made a primitive scene's first run ~11 s longer (box_drop 92.3 against
     81.1 CPU-s on an empty cache, 2026-12-06) for 11 % less on container_mix: not kept."""
-    if kind_a <= kind_b:
-        return _ordered_pair(kind_a, ca, Ra, sa, kind_b, cb, Rb, sb, out)
-    count = _ordered_pair(kind_b, cb, Rb, sb, kind_a, ca, Ra, sa, out)
-    for i in range(count):
-        out.normal[i, 0], out.normal[i, 1], out.normal[i, 2] = -out.normal[i, 0], -out.normal[i, 1], -out.normal[i, 2]
-    return count
-
-
-@numba.njit(**STEP_KERNEL)
-def _ordered_pair(kind_a, ca, Ra, sa, kind_b, cb, Rb, sb, out) -> int:  # noqa: ANN001
     if kind_a == PRIMITIVE_SPHERE:
         if kind_b == PRIMITIVE_SPHERE:
             return sphere_sphere(ca, Ra, sa, cb, Rb, sb, out)
@@ -217,8 +210,18 @@ def _ordered_pair(kind_a, ca, Ra, sa, kind_b, cb, Rb, sb, out) -> int:  # noqa: 
     if kind_a == PRIMITIVE_CAPSULE:
         if kind_b == PRIMITIVE_CAPSULE:
             return capsule_capsule(ca, Ra, sa, cb, Rb, sb, out)
-        return capsule_box(ca, Ra, sa, cb, Rb, sb, out)
-    return box_box(ca, Ra, sa, cb, Rb, sb, out)
+        if kind_b == PRIMITIVE_BOX:
+            return capsule_box(ca, Ra, sa, cb, Rb, sb, out)
+        count = sphere_capsule(cb, Rb, sb, ca, Ra, sa, out)
+    elif kind_b == PRIMITIVE_BOX:
+        return box_box(ca, Ra, sa, cb, Rb, sb, out)
+    elif kind_b == PRIMITIVE_CAPSULE:
+        count = capsule_box(cb, Rb, sb, ca, Ra, sa, out)
+    else:
+        count = sphere_box(cb, Rb, sb, ca, Ra, sa, out)
+    for i in range(count):  # b-a's normals point from a to b
+        out.normal[i, 0], out.normal[i, 1], out.normal[i, 2] = -out.normal[i, 0], -out.normal[i, 1], -out.normal[i, 2]
+    return count
 
 
 @numba.njit(**STEP_KERNEL)
