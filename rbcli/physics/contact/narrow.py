@@ -175,6 +175,11 @@ def _pairs_of(contact, work, grid, first, last, side_a, side_b, near, row0, capa
         a, b = body_pair[k, 0], body_pair[k, 1]
         if contact.primitive_kind[a] >= 0 or contact.primitive_kind[b] >= 0:  # primitive_search.py's pairs
             continue
+        if not (
+            (lo[a, 0] <= hi[b, 0]) & (lo[b, 0] <= hi[a, 0]) & (lo[a, 1] <= hi[b, 1])
+            & (lo[b, 1] <= hi[a, 1]) & (lo[a, 2] <= hi[b, 2]) & (lo[b, 2] <= hi[a, 2])
+        ):  # fmt: skip
+            continue  # the boxes of their spheres (body_phase.place_spheres) do not meet
         na = _cull(pos, radius, start[a], start[a + 1], lo, hi, b, side_a)
         if na == 0:
             continue
