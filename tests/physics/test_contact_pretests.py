@@ -21,21 +21,15 @@ from rbcli.physics.contact.manifold import make_manifold
 from rbcli.physics.contact.narrow import _INSERTION_SORT, _cell_box, _sort
 from rbcli.physics.contact.primitive_search import _bounds_meet, _sphere_may_touch
 from rbcli.physics.contact.primitives import PRIMITIVE_BOX, PRIMITIVE_CAPSULE, PRIMITIVE_SPHERE, primitive_pair
-from rbcli.physics.rotation import quat_to_matrix, random_unit_quaternions
+from tests.physics.test_contact_primitives import random_shape
 
 KINDS = (PRIMITIVE_SPHERE, PRIMITIVE_CAPSULE, PRIMITIVE_BOX)
 
 
 def _shape(rng: np.random.Generator, kind: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A primitive of random size and rotation at the origin: (centre, R, size)."""
-    R = quat_to_matrix(random_unit_quaternions(rng, 1)[0])
-    if kind == PRIMITIVE_SPHERE:
-        size = np.array([rng.uniform(0.02, 0.3), 0.0, 0.0])
-    elif kind == PRIMITIVE_CAPSULE:
-        size = np.array([rng.uniform(0.02, 0.2), rng.uniform(0.0, 0.4), 0.0])
-    else:
-        size = rng.uniform(0.02, 0.4, 3)
-    return np.zeros(3), R, size
+    shape = random_shape(rng, kind)
+    return shape.c, shape.R, shape.size
 
 
 def _touches(kind_a, ca, Ra, sa, kind_b, cb, Rb, sb) -> bool:  # noqa: ANN001
