@@ -134,9 +134,12 @@ class StudyRun:
 
     @property
     def cost_per_sim_second_range(self) -> tuple[float, float]:
-        """(fastest, slowest) sample as wall seconds per simulated second [s/s]."""
-        per_step = self.cost_per_sim_second / self.seconds_per_step if self.seconds_per_step > 0 else 0.0
-        return self.seconds_per_step_min * per_step, self.seconds_per_step_max * per_step
+        """(fastest, slowest) sample as wall seconds per simulated second [s/s], around the median:
+        rescaled by cost / median, a sample equal to the median can round an ulp past the cost (a
+        negative error bar, which matplotlib refuses: seen once in CI), so each is held on its side."""
+        cost = self.cost_per_sim_second
+        per_step = cost / self.seconds_per_step if self.seconds_per_step > 0 else 0.0
+        return min(self.seconds_per_step_min * per_step, cost), max(self.seconds_per_step_max * per_step, cost)
 
 
 @dataclass(frozen=True)

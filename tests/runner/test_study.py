@@ -5,6 +5,7 @@ estimate, files that match the table, the plot, and `rbsim study --quick`. Timin
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import struct
 
@@ -146,6 +147,22 @@ def test_png_is_a_valid_image_of_the_expected_size(tmp_path, torque_free_study):
     width, height = struct.unpack(">II", head[16:24])
     assert (width, height) == (round(PLOT_SIZE_INCHES[0] * PLOT_DPI), round(PLOT_SIZE_INCHES[1] * PLOT_DPI))
     assert svg.read_text().lstrip().startswith("<?xml")
+
+
+def test_the_cost_range_holds_the_cost_and_plots_where_a_sample_is_the_median(tmp_path, torque_free_study):
+    """The range is the samples rescaled by cost / median: a fastest sample equal to the median rounds
+    past the cost for some values (a negative error bar, refused by matplotlib); the range holds it."""
+    rng = np.random.default_rng(3)
+    seconds, cost = next(
+        (s, c) for s, c in zip(rng.uniform(1e-7, 1e-4, 10_000), rng.uniform(1e-6, 1e-3, 10_000), strict=True)
+        if s * (c / s) > c
+    )  # fmt: skip
+    runs = [dataclasses.replace(run, seconds_per_step=seconds, seconds_per_step_min=seconds,
+                                seconds_per_step_max=seconds, cost_per_sim_second=cost)
+            for run in torque_free_study.runs]  # fmt: skip
+    low, high = runs[0].cost_per_sim_second_range
+    assert low <= cost <= high
+    plot_work_precision(dataclasses.replace(torque_free_study, runs=runs), tmp_path / "plot")
 
 
 def test_quick_cli_run_writes_table_files_and_plot(tmp_path):
