@@ -25,6 +25,8 @@ WEB_PORT = 9090  # the web viewer's HTTP port (rerun's default)
 GRPC_PORT = 9876  # the gRPC server the web viewer reads the recording from (rerun's default)
 _STOP_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
 STOP_GRACE_SECONDS = 5.0  # how long the viewer gets to exit after SIGTERM before SIGKILL
+LOG_DRAIN_SECONDS = 1.0  # how long rbsim waits for the viewer's last log lines once its group is gone
+POLL_SECONDS = 0.05  # how often the serving loop looks for a noted stop signal and the viewer's exit
 # The Rerun viewer logs through Rust's `tracing` (coloured "2026-...Z  INFO target: text" lines on its
 # stderr, even into a pipe): it runs with RUST_LOG=warn unless the user set RUST_LOG, and its stderr is
 # read back line by line, colours stripped and INFO/DEBUG/TRACE lines dropped (_forward_viewer_log).
@@ -129,23 +131,21 @@ def _open_in_browser(address: str) -> None:
         webbrowser.open(address)
 
 
-class _Stop(Exception):
-    """A stop signal reached `rbsim replay --web` (raised by its handler in the main thread)."""
-
-    def __init__(self, signum: int) -> None:
-        super().__init__(signum)
-        self.signum = signum
-
-
 def _serve_web(file: Path, command: list[str], ports: tuple[int, int]) -> None:
     """Run the Rerun web viewer until it exits or a stop signal comes, and leave nothing behind.
 
     The viewer (`python -m rerun`, which starts the `rerun` binary as its own child) runs in a process
     group of its own: Ctrl-C in the terminal reaches rbsim only, and rbsim stops the whole group.
     SIGINT, SIGTERM and SIGHUP end it the same way: SIGTERM to the group, SIGKILL after
-    STOP_GRACE_SECONDS, and rbsim waits until no process of the group is left (so its ports are free),
-    then exits 128 + the signal. Before, SIGTERM killed rbsim alone and the rerun server kept running at
-    100 % of a core, holding both ports. (SIGKILL of rbsim itself cannot be handled.)"""
+    STOP_GRACE_SECONDS, and rbsim waits until no process of the group is left (so its ports are free)
+    and its log forwarder has read the viewer's last words, then exits 128 + the signal. Before, SIGTERM
+    killed rbsim alone and the rerun server kept running at 100 % of a core, holding both ports. (SIGKILL
+    of rbsim itself cannot be handled.)
+
+    The signal handler only notes the signal; the main thread polls for it. A handler that raised an
+    exception could land in the middle of any library code the main thread was running (a thread's
+    start, a lock's acquire and the `try` after it), and one CI run saw rbsim still there 30 s after
+    SIGTERM; a noted signal is acted on between two polls, in this function's own code."""
     web, grpc = ports
     for number, what in ((web, "--port"), (grpc, "--grpc-port")):
         if not _port_free(number):
@@ -154,47 +154,50 @@ def _serve_web(file: Path, command: list[str], ports: tuple[int, int]) -> None:
                 expected=f"a free port: stop that server or choose another with {what}",
             )
 
-    def stop(signum: int, frame: object) -> None:
-        raise _Stop(signum)
+    signals_seen: list[int] = []
+
+    def note(signum: int, frame: object) -> None:
+        signals_seen.append(signum)
 
     numbers = [getattr(signal, name) for name in _STOP_SIGNALS if hasattr(signal, name)]
-    previous = {number: signal.signal(number, stop) for number in numbers}
+    previous = {number: signal.signal(number, note) for number in numbers}
     process: subprocess.Popen | None = None
-    stopped_by = 0
+    forward: threading.Thread | None = None
+    code = 0
     try:
-        try:
-            env = dict(os.environ)
-            quiet = "RUST_LOG" not in env  # a RUST_LOG the user set is theirs: every line is forwarded
-            env.setdefault("RUST_LOG", VIEWER_LOG_LEVEL)
+        env = dict(os.environ)
+        quiet = "RUST_LOG" not in env  # a RUST_LOG the user set is theirs: every line is forwarded
+        env.setdefault("RUST_LOG", VIEWER_LOG_LEVEL)
+        if not signals_seen:
             process = subprocess.Popen(command, start_new_session=True, env=env, stderr=subprocess.PIPE)
             forward = threading.Thread(target=_forward_viewer_log, args=(process.stderr, quiet), daemon=True)
             forward.start()
-            if _wait_listening(process, ports):  # an address printed (or opened) earlier would not load yet
-                address = web_viewer_address(web, grpc)
-                messages.status(
-                    f"serving {file} at {address} (the viewer on port {web}, the recording on port {grpc}, "
-                    "bound to 127.0.0.1 only); Ctrl-C to stop"
-                )
-                if browser_available():  # in a thread: a browser command may run until the browser closes
-                    threading.Thread(target=_open_in_browser, args=(address,), daemon=True).start()
-            code = process.wait()
-        except _Stop as exc:
-            stopped_by, code = exc.signum, 0
-        except KeyboardInterrupt:
-            stopped_by, code = signal.SIGINT, 0
+        if process is not None and _wait_listening(process, ports, signals_seen):
+            # an address printed (or opened) before both ports answer would not load yet
+            address = web_viewer_address(web, grpc)
+            messages.status(
+                f"serving {file} at {address} (the viewer on port {web}, the recording on port {grpc}, "
+                "bound to 127.0.0.1 only); Ctrl-C to stop"
+            )
+            if browser_available():  # in a thread: a browser command may run until the browser closes
+                threading.Thread(target=_open_in_browser, args=(address,), daemon=True).start()
+        while process is not None and not signals_seen:
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                code = process.wait(timeout=POLL_SECONDS)
+                break
     finally:
-        for number in numbers:  # a further signal must not cut the clean-up short
-            signal.signal(number, signal.SIG_IGN)
         try:
             if process is not None:
                 _stop_group(process)
+            if forward is not None:  # the pipe ends with the group: its last lines before rbsim's own
+                forward.join(timeout=LOG_DRAIN_SECONDS)
         finally:
             for number, handler in previous.items():
                 signal.signal(number, handler)
-    if stopped_by:
-        name = signal.Signals(stopped_by).name
+    if signals_seen:
+        name = signal.Signals(signals_seen[0]).name
         messages.status(f"stopped the web viewer ({name}); ports {web} and {grpc} are free again")
-        raise typer.Exit(signal_exit(stopped_by))
+        raise typer.Exit(signal_exit(signals_seen[0]))
     if code:
         raise messages.fail(f"the Rerun web viewer exited with code {code}")
 
@@ -216,12 +219,13 @@ def _forward_viewer_log(stream: IO[bytes] | None, quiet: bool) -> None:
                 messages.emit("warning" if traced[1] == "WARN" else "error", f"rerun: {traced[3]}")
 
 
-def _wait_listening(process: subprocess.Popen, ports: tuple[int, ...]) -> bool:
-    """Wait until every port accepts connections on 127.0.0.1 (True) or the viewer exits (False)."""
-    while process.poll() is None:
+def _wait_listening(process: subprocess.Popen, ports: tuple[int, ...], signals_seen: list[int]) -> bool:
+    """Wait until every port accepts connections on 127.0.0.1 (True), or the viewer exits or a stop
+    signal is noted (False)."""
+    while process.poll() is None and not signals_seen:
         if all(_listening(port) for port in ports):
             return True
-        time.sleep(0.05)
+        time.sleep(POLL_SECONDS)
     return False
 
 

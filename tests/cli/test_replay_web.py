@@ -140,7 +140,11 @@ def test_a_stop_signal_leaves_no_process_and_no_bound_port(tmp_path, recording, 
         below = [p for p in descendants(proc.pid) if alive(p)]
         assert len(below) >= 2, below
         proc.send_signal(signum)
-        proc.wait(timeout=30)
+        try:
+            proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:  # say where it hangs: rbsim's log and what is left below it
+            left = {p: _stat(p) for p in descendants(proc.pid)}
+            raise AssertionError(f"rbsim still running 30 s after {signum!r}: {left}\n{log.read_text()}") from None
     finally:
         if proc.poll() is None:  # the test failed: leave nothing either (rbsim killed cannot stop its
             proc.kill()  # viewer: a server left behind kept a core busy for the rest of the suite)
@@ -152,6 +156,38 @@ def test_a_stop_signal_leaves_no_process_and_no_bound_port(tmp_path, recording, 
     assert [p for p in below if alive(p)] == []  # no child, no grandchild left running
     assert "\x1b[" not in text and " INFO " not in text  # rerun's coloured log is not forwarded
     assert can_bind(web) and can_bind(grpc) and not listening(web) and not listening(grpc)
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads the process tree from /proc (Linux)")
+def test_a_stop_signal_while_the_viewer_starts_stops_it_too(tmp_path, recording):
+    """SIGTERM as soon as the viewer's process exists, before its ports answer: rbsim stops waiting for
+    them, stops the viewer's group and exits 143 with both ports free (the signal is noted by the handler
+    and acted on by the waiting loop, which polls for it)."""
+    web, grpc = free_port(), free_port()
+    log = tmp_path / "replay.log"
+    args = [sys.executable, "-m", "rbcli", "replay", str(recording), "--web", "--port", str(web)]
+    with open(log, "w") as out:
+        proc = subprocess.Popen(
+            [*args, "--grpc-port", str(grpc)], cwd=ROOT, stdout=out, stderr=subprocess.STDOUT, env=browser_env(tmp_path)
+        )
+    below: set[int] = set()
+    try:
+        deadline = time.monotonic() + 60.0
+        while not (below := {p for p in descendants(proc.pid) if alive(p)}):
+            assert proc.poll() is None and time.monotonic() < deadline, log.read_text()
+            time.sleep(0.005)
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        _kill_all(below | descendants(proc.pid))
+    text = log.read_text()
+    assert proc.returncode == 143, text
+    assert f"stopped the web viewer (SIGTERM); ports {web} and {grpc} are free" in text
+    assert [p for p in below if alive(p)] == []
+    assert can_bind(web) and can_bind(grpc)
 
 
 def test_a_port_in_use_is_refused_before_starting_the_viewer(recording):
