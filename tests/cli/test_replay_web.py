@@ -179,10 +179,11 @@ def test_a_stop_signal_while_the_viewer_starts_stops_it_too(tmp_path, recording)
         proc.send_signal(signal.SIGTERM)
         proc.wait(timeout=30)
     finally:
+        below |= descendants(proc.pid)  # the viewer's binary too, started after `below` was first taken
         if proc.poll() is None:
             proc.kill()
             proc.wait()
-        _kill_all(below | descendants(proc.pid))
+        _kill_all(below)
     text = log.read_text()
     assert proc.returncode == 143, text
     assert f"stopped the web viewer (SIGTERM); ports {web} and {grpc} are free" in text
