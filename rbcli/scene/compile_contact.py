@@ -37,6 +37,16 @@ from rbcli.physics.rotation import quat_to_matrix
 from rbcli.physics.state import State
 from rbcli.scene.compile_forces import KinematicRow
 from rbcli.scene.contact_speed import ImpactBound, assembly_mass, landing_spheres, speed_bounds
+from rbcli.scene.force_specs import (
+    ForceAtPoint,
+    ForceDrag,
+    ForceField,
+    ForceImpulse,
+    ForceSpring,
+    ForceTorque,
+    Schedule,
+)
+from rbcli.scene.joint_spec import WORLD_NAME
 from rbcli.scene.spec import BodySpec, MaterialSpec, SceneError, SceneIssue, SceneSpec
 
 
@@ -253,6 +263,7 @@ def compile_contact(
         primitive_offset=primitive.offset,
         primitive_rotation=primitive.rotation,
         primitive_size=primitive.size,
+        body_steady_accel=steady_accelerations(spec, model),
     )
     summary = ContactSummary(
         sphere_count=int(table.sphere_radius.shape[0]),
@@ -267,6 +278,84 @@ def compile_contact(
         shape_spheres=int(table.sphere_radius.shape[0]) - touching_spheres(table),
     )
     return table, summary
+
+
+def _constant(schedule: Schedule | None) -> float | None:
+    """The factor of a schedule that is the same at every time (None: none, 1), else None."""
+    if schedule is None:
+        return 1.0
+    if schedule.kind == "constant" and schedule.start == -math.inf and schedule.stop == math.inf:
+        return schedule.value
+    return None
+
+
+def steady_accelerations(spec: SceneSpec, model: Model) -> np.ndarray:
+    """|a_b| [m/s^2] (body_count,) of each body whose linear acceleration is the same at every time and in
+    every state, for the quiet skin's sure windows (contact/quiet.py): gravity, world-frame forces and
+    `per: mass` fields of constant strength (no schedule, or a constant one for all time), any torque. 0
+    for a static body and a kinematic one that keeps its initial velocity; inf for a body that anything
+    else moves: a spring, drag, another field, a force that turns with the body or follows a schedule, an
+    impulse, a joint, a prescribed motion, a term of a kind not known here. (Contact forces are the
+    quiet's own question: it holds only while none can act.)"""
+    n = model.body_count
+    index = {name: b for b, name in enumerate(model.body_names)}
+    gravity = np.zeros(3) if spec.gravity is None else np.asarray(spec.gravity, dtype=float)
+    accel = np.tile(gravity, (n, 1))
+    unsteady = np.zeros(n, dtype=bool)
+
+    def bodies(names: tuple[str, ...] | None) -> list[int] | None:  # None: a name not known here
+        if names is None:
+            return list(range(n))
+        found = [index.get(name) for name in names if name != WORLD_NAME]
+        return None if None in found else [b for b in found if b is not None]
+
+    for term in spec.forces:
+        factor = _constant(getattr(term, "schedule", None))
+        if isinstance(term, ForceTorque):
+            continue
+        if isinstance(term, ForceAtPoint) and term.frame == "world" and factor is not None:
+            which = bodies((term.at.body,))
+            if which is not None:
+                for b in which:
+                    accel[b] += factor * np.asarray(term.vector, dtype=float) / model.body_mass[b]
+                continue
+        elif isinstance(term, ForceField) and term.per == "mass" and term.gradient is None and factor is not None:
+            which = bodies(term.bodies)
+            if which is not None:
+                accel[which] += factor * np.asarray(term.value, dtype=float)
+                continue
+        else:
+            known, touched = _bodies_of(term)
+            which = bodies(touched) if known else None
+            if which is not None:
+                unsteady[which] = True
+                continue
+        unsteady[:] = True  # a term whose bodies are not known here: no body is sure
+    for joint in spec.joints:
+        which = bodies(tuple(joint.bodies))
+        if which is None:
+            unsteady[:] = True
+        else:
+            unsteady[which] = True
+    for b, body in enumerate(spec.bodies):
+        if body.static or (body.kinematic and body.kinematic_motion is None):
+            accel[b], unsteady[b] = 0.0, False
+        elif body.kinematic:
+            unsteady[b] = True
+    with np.errstate(over="ignore"):
+        size = np.linalg.norm(accel, axis=1)
+    return np.where(unsteady | ~np.isfinite(size), math.inf, size)
+
+
+def _bodies_of(term: object) -> tuple[bool, tuple[str, ...] | None]:
+    """(whether this kind of force term is known here, the bodies it acts on: None, every body)."""
+    if isinstance(term, ForceSpring):
+        return True, tuple(end.body for end in (term.end_a, term.end_b) if end is not None)
+    if isinstance(term, (ForceDrag, ForceField)):
+        return True, term.bodies
+    if isinstance(term, (ForceAtPoint, ForceImpulse)):
+        return True, (term.at.body,)
+    return False, None
 
 
 @dataclass(frozen=True)

@@ -38,7 +38,7 @@ from rbcli.physics.contact.law import body_velocities, velocity_at
 from rbcli.physics.contact.quiet import try_quiet
 from rbcli.physics.contact.search import sphere_positions
 from rbcli.physics.contact.sink import force_sink
-from rbcli.physics.contact.tables import COUNT_CANDIDATES, COUNT_EVALUATIONS, ROWS_HISTORY, ROWS_TRIAL
+from rbcli.physics.contact.tables import COUNT_CANDIDATES, COUNT_EVALUATIONS, QUIET_SURE, ROWS_HISTORY, ROWS_TRIAL
 from rbcli.physics.contact.threaded import contact_search
 from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.step import STEP_KERNEL
@@ -46,9 +46,13 @@ from rbcli.physics.step import STEP_KERNEL
 
 @numba.njit(**STEP_KERNEL)
 def begin_contact_step(work, t, h) -> None:  # noqa: ANN001
-    """Note the step [t, t + h) being taken: force evaluations measure their offset into it."""
+    """Note the step [t, t + h) being taken: force evaluations measure their offset into it. A sure quiet
+    window (quiet.py) holds only for steps of the h it was set at: another h (adaptive stepping, a call
+    with another dt) ends its sureness, and the evaluations test the paths again."""
     work.clock[0] = t
     work.clock[1] = h
+    if h != work.quiet_window[2]:
+        work.quiet_state[QUIET_SURE] = 0
 
 
 @separately_compiled

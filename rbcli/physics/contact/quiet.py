@@ -24,6 +24,26 @@ Why paths, not fixed points: bodies falling or flying side by side move far but 
 about a fixed point must grow with the speed, and two bricks falling 5 m apart stopped fitting past
 ~400 m/s (benchmarks/bench_contact.py far: 3.7x the scene without contact in its later blocks, 1.1x now).
 
+Sure windows: where every body's linear acceleration is steady, the same vector a_b at every time and
+in every state (gravity, constant world-frame forces, any torque; ContactTable.body_steady_accel, from
+scene/compile_contact.py steady_accelerations; a static body and a kinematic one at constant velocity
+have a_b = 0), how far the body can be from its straight path is known beforehand, and no evaluation
+needs to look. Every integrator here moves a body of constant acceleration a as x_n = x0 + v0 t_n +
+1/2 a t_n^2 + beta h a t_n (beta = 0 for the second- and higher-order ones, 1/2 for the Euler steps),
+and evaluates its forces at stages t_n + c h, 0 <= c <= 1, whose positions lie within |a| (c h t_n +
+sigma h^2) of that path (x_n + c h v_n + sigma h^2 a; sigma = sum_j a_ij c_j = c^2 / 2 for the Runge-Kutta
+stages, dopri5's included, <= 2 for split4's, whose middle drift runs backwards), so at any evaluation of
+the window at time t0 + tau
+
+    |x - (x0 + v0 tau)| <= |a| (tau + 3 h)^2     (plus the roundings: `steady_drift`),
+
+and a skin at least that makes the window sure (QUIET_SURE): an evaluation tests only that it is within
+the window (two loads), where the paths' test costs ~6-10 ns at 2 bodies, more than the rest of a step
+of euler-quat (issue 47 item 6). The bound holds for steps of the h the window was set at: a step of
+another h (adaptive stepping, a call with another dt) ends the sureness (force.begin_contact_step), and
+the paths are tested again. A scene with a spring, drag, a joint, an impulse or a scheduled force on
+any body has no sure windows: its quiet tests the paths as before.
+
 The window: the longest of WINDOW_STEPS (1024, 128, 16 steps) whose swept boxes fit. The skin: twice
 the drift 1/2 |a| T^2 of the body's acceleration over the last window (the change of its velocity over
 the time since the last try), at least SKIN_FLOOR rho_b (a body at rest, or the first try). A try that
@@ -40,7 +60,7 @@ import numba
 import numpy as np
 
 from rbcli.physics.contact.body_phase import box_clearance, box_pairs
-from rbcli.physics.contact.tables import COUNT_EVALUATIONS, QUIET_ARMED, QUIET_ON, QUIET_WAIT
+from rbcli.physics.contact.tables import COUNT_EVALUATIONS, QUIET_ARMED, QUIET_ON, QUIET_SURE, QUIET_WAIT
 from rbcli.physics.kernel_link import separately_compiled
 from rbcli.physics.step import STEP_KERNEL
 
@@ -48,6 +68,9 @@ WINDOW_STEPS = np.array([1024.0, 128.0, 16.0])  # the windows tried, longest fir
 SKIN_FLOOR = 0.05  # of rho_b: the least skin (a body at rest, or whose acceleration is not known yet)
 RETRY_STEPS = 16  # commits to wait after a try that found bodies within their swept boxes
 _EPS = 2.220446049250313e-16
+# the roundings a sure window allows for, per step of the window, in ulps of the largest position: up to
+# 7 force evaluations a step (dopri5), each rounding x and P once, and P's errors carried into x
+SURE_STEPS_ROUNDED = 64.0
 _GUARD = 1e-9  # of rho_b, beside 8 ulps of |x| + |v| (|t0| + T): the roundings of the box and the test
 
 
@@ -57,6 +80,8 @@ def on_paths(work, x, t) -> bool:  # noqa: ANN001
     path x0 + v0 (t - t0) (max norm; NaN: not)."""
     if work.quiet_state[QUIET_ON] == 0 or not t <= work.quiet_window[1]:
         return False
+    if work.quiet_state[QUIET_SURE]:  # the skins hold every body's steady drift: nothing to test
+        return True
     tau = t - work.quiet_window[0]
     ref, vel, skin = work.quiet_reference, work.quiet_velocity, work.quiet_skin
     for b in range(ref.shape[0]):
@@ -99,8 +124,9 @@ def try_quiet(contact, work, x) -> None:  # noqa: ANN001
     if state[QUIET_WAIT] > 0:
         state[QUIET_WAIT] -= 1
         return
-    state[QUIET_ON] = 0
+    state[QUIET_ON] = state[QUIET_SURE] = 0
     now, h = work.clock[0] + work.clock[1], work.clock[1]
+    sure = _steady(contact)
     v, ref, vel, accel = work.body_velocity, work.quiet_reference, work.quiet_velocity, work.quiet_accel
     # each body's acceleration [m/s^2] over the last window (0 before the first): its skin's scale
     elapsed = now - work.quiet_window[0]
@@ -111,11 +137,11 @@ def try_quiet(contact, work, x) -> None:  # noqa: ANN001
             accel[b] = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) / elapsed
         ref[b, 0], ref[b, 1], ref[b, 2] = x[b, 0], x[b, 1], x[b, 2]
         vel[b, 0], vel[b, 1], vel[b, 2] = v[b, 0], v[b, 1], v[b, 2]
-    work.quiet_window[0] = now
+    work.quiet_window[0], work.quiet_window[2] = now, h
     state[QUIET_ARMED] = 1
     for level in range(WINDOW_STEPS.shape[0]):
         span = WINDOW_STEPS[level] * h
-        cell = _swept_boxes(contact, work, span)
+        cell = _swept_boxes(contact, work, span, h if sure else -1.0)
         if not cell >= 0.0:  # a non-finite state: the full stages deal with it
             return
         if cell == 0.0:
@@ -128,14 +154,39 @@ def try_quiet(contact, work, x) -> None:  # noqa: ANN001
         if not found:
             work.quiet_window[1] = now + span
             state[QUIET_ON] = 1
+            state[QUIET_SURE] = 1 if sure else 0
             return
     state[QUIET_WAIT] = RETRY_STEPS
 
 
+@numba.njit(cache=True, inline="always")
+def _steady(contact) -> bool:  # noqa: ANN001
+    """Whether every body's linear acceleration is known and steady (ContactTable.body_steady_accel)."""
+    steady = contact.body_steady_accel
+    if steady.shape[0] != contact.body_bound_radius.shape[0]:
+        return False
+    for b in range(steady.shape[0]):
+        if not steady[b] < math.inf:
+            return False
+    return True
+
+
+@numba.njit(cache=True, inline="always")
+def steady_drift(accel, span, h, size, speed) -> float:  # noqa: ANN001
+    """How far [m] a body of steady acceleration `accel` [m/s^2] can be from its straight path x0 + v0 tau
+    at any force evaluation of a window of `span` [s] stepped at (sub-)step h [s] (module docstring, "Sure
+    windows"): accel (tau + 3 h)^2, plus the roundings of SURE_STEPS_ROUNDED stages a step over the
+    window's steps, relative to the largest position (size + speed span + accel span^2 [m])."""
+    steps = span / h
+    reach = size + speed * span + accel * span * span
+    return accel * (span + 3.0 * h) * (span + 3.0 * h) + SURE_STEPS_ROUNDED * steps * _EPS * reach
+
+
 @numba.njit(cache=True)
-def _swept_boxes(contact, work, span) -> float:  # noqa: ANN001
+def _swept_boxes(contact, work, span, h) -> float:  # noqa: ANN001
     """For a window of `span` seconds: each body's skin (twice the drift 1/2 |a| span^2 of its
-    acceleration over the last window, work.quiet_accel, at least SKIN_FLOOR rho_b) and the box
+    acceleration over the last window, work.quiet_accel, at least SKIN_FLOOR rho_b; where h >= 0, the
+    window sure at (sub-)step h, at least its steady drift, `steady_drift`) and the box
     its cube of half side rho_b + skin sweeps along x0 + v0 tau, 0 <= tau <= span, into work.body_lo,
     body_hi. Returns the grid cell for box_pairs (the widest box of the bodies that are not large); 0:
     a movable body's box reaches a plane; -1: a box is not finite."""
@@ -153,6 +204,8 @@ def _swept_boxes(contact, work, span) -> float:  # noqa: ANN001
         skin[b] = max(SKIN_FLOOR * rho[b], accel[b] * span * span)
         speed = max(abs(vel[b, 0]), abs(vel[b, 1]), abs(vel[b, 2]))
         size = max(abs(ref[b, 0]), abs(ref[b, 1]), abs(ref[b, 2]))
+        if h >= 0.0:
+            skin[b] = max(skin[b], steady_drift(contact.body_steady_accel[b], span, h, size, speed))
         half = rho[b] + skin[b] + _GUARD * rho[b] + 8.0 * _EPS * (size + speed * (t0 + span))
         if not half < math.inf:
             return -1.0

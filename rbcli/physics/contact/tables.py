@@ -78,8 +78,9 @@ RECORD_FORCE, RECORD_ELONGATION, RECORD_LIMIT, RECORD_ENERGY = 8, 11, 14, 15
 RECORD_COUNT = 16
 
 # ContactWork.quiet_state slots (quiet.py): 1 while no contact is possible within the skins; the commits
-# left to wait before the next try after a failed one
-QUIET_ON, QUIET_WAIT, QUIET_ARMED = range(3)
+# left to wait before the next try after a failed one; 1 once a window has been set; 1 while the window is
+# sure (every body's steady acceleration keeps it within its skin: no evaluation tests the paths)
+QUIET_ON, QUIET_WAIT, QUIET_ARMED, QUIET_SURE = range(4)
 
 
 class ContactTable(NamedTuple):
@@ -139,6 +140,10 @@ class ContactTable(NamedTuple):
     primitive_offset: np.ndarray = np.zeros((0, 3))
     primitive_rotation: np.ndarray = np.zeros((0, 3, 3))
     primitive_size: np.ndarray = np.zeros((0, 3))
+    # [m/s^2] (body_count,): |a| of a body whose linear acceleration is the same at every time and state
+    # (gravity, constant world forces; scene/compile_contact.py steady_accelerations), inf for any other;
+    # the quiet skin's sure windows (quiet.py). Empty: none known (every quiet evaluation tests the paths)
+    body_steady_accel: np.ndarray = np.zeros(0)
 
 
 # contacts a step reduced-implicit treats implicitly (implicit_rows.py; the rows of its dense solve are at
@@ -218,10 +223,10 @@ class ContactWork(NamedTuple):
     fat_start: np.ndarray
     fat_active: np.ndarray
     fat_state: np.ndarray
-    # the quiet skin (quiet.py): int64 (3,) QUIET_ON, QUIET_WAIT, QUIET_ARMED; each body's position [m]
-    # and velocity [m/s] (body_count, 3) when it was set, how far [m] (body_count,) it may stray (max
-    # norm) from that straight path, its acceleration [m/s^2] (body_count,) over the last window, and
-    # the window [t0, t_end] [s] (2,)
+    # the quiet skin (quiet.py): int64 (4,) QUIET_ON, QUIET_WAIT, QUIET_ARMED, QUIET_SURE; each body's
+    # position [m] and velocity [m/s] (body_count, 3) when it was set, how far [m] (body_count,) it may
+    # stray (max norm) from that straight path, its acceleration [m/s^2] (body_count,) over the last
+    # window, and the window [t0, t_end] [s] with the (sub-)step h [s] it was set for (3,)
     quiet_state: np.ndarray
     quiet_reference: np.ndarray
     quiet_velocity: np.ndarray
@@ -306,6 +311,7 @@ def contact_table(
     primitive_offset=None,  # noqa: ANN001
     primitive_rotation=None,  # noqa: ANN001
     primitive_size=None,  # noqa: ANN001
+    body_steady_accel=(),  # noqa: ANN001
 ) -> ContactTable:
     """A ContactTable with consistent dtypes (all empty: a scene without contact). Without primitives
     every body's kind is -1 and its plane contacts take body_inv_contact_mass."""
@@ -367,6 +373,7 @@ def contact_table(
         primitive_offset=_ro(prim_offset, np.float64, 3),
         primitive_rotation=_ro(prim_rotation, np.float64, 3, 3),
         primitive_size=_ro(prim_size, np.float64, 3),
+        body_steady_accel=_ro(body_steady_accel, np.float64),
     )
 
 
@@ -532,12 +539,12 @@ def make_contact_work(
         fat_start=np.zeros(b + 1, dtype=np.int64),
         fat_active=np.zeros(b, dtype=np.uint8),
         fat_state=np.array([-1, 0, 0], dtype=np.int64),
-        quiet_state=np.zeros(3, dtype=np.int64),
+        quiet_state=np.zeros(4, dtype=np.int64),
         quiet_reference=np.zeros((b, 3)),
         quiet_velocity=np.zeros((b, 3)),
         quiet_skin=np.zeros(b),
         quiet_accel=np.zeros(b),
-        quiet_window=np.zeros(2),
+        quiet_window=np.zeros(3),
         pair_side=np.zeros((runs, 2, side_cap), dtype=np.int64) if paired else None,
         pair_near=np.zeros((runs, side_cap, 4)) if paired else None,
         pair_tally=np.zeros((runs, 8), dtype=np.int64) if paired else None,
