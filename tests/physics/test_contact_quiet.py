@@ -146,8 +146,8 @@ def test_windows_are_sure_only_where_every_body_moves_steadily():
     spring, drag, a joint, an impulse, a body-frame or scheduled force acts; a quiet window is sure only
     where every body's is finite, and a scene with one unsteady body is still bitwise (its paths tested)."""
     bodies = [ball("a", (0, 0, 1)), ball("b", (3, 0, 1)), ball("c", (6, 0, 1)), ball("d", (9, 0, 1)),
-              ball("e", (12, 0, 1)), "  - {name: wall, shape: {type: sphere, radius: 0.1}, spacing: 0.05, density: 1000, static: true, "
-              "position: [20, 0, 1]}"]  # fmt: skip
+              ball("e", (12, 0, 1)), "  - {name: wall, shape: {type: sphere, radius: 0.1}, spacing: 0.05, "
+              "density: 1000, static: true, position: [20, 0, 1]}"]  # fmt: skip
 
     def steady(forces: str, joints: str = "") -> np.ndarray:
         text = ("name: q\nsimulation: {dt: 0.001, steps: 10}\ngravity: [0, 0, -9.81]\ncontact:\n  ground: -50\n"
