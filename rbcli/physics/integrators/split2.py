@@ -168,13 +168,18 @@ def _half_kick(model, has_torque, torque_body, kick, q, P, L, F, tau, scratch) -
         P[b, 2] += kick * F[b, 2]
         if has_torque and torque_body[b]:
             t0, t1, t2 = tau[b, 0], tau[b, 1], tau[b, 2]
-            L[b, 0] += kick * t0
-            L[b, 1] += kick * t1
-            L[b, 2] += kick * t2
-            tb0, tb1, tb2 = rotate_inverse(q[b, 0], q[b, 1], q[b, 2], q[b, 3], t0, t1, t2)
-            scratch[b, 0], scratch[b, _M_COMP] = sum_compensated(scratch[b, 0], kick * tb0, scratch[b, _M_COMP])
-            scratch[b, 1], scratch[b, _M_COMP + 1] = sum_compensated(scratch[b, 1], kick * tb1, scratch[b, _M_COMP + 1])
-            scratch[b, 2], scratch[b, _M_COMP + 2] = sum_compensated(scratch[b, 2], kick * tb2, scratch[b, _M_COMP + 2])
+            if t0 != 0.0 or t1 != 0.0 or t2 != 0.0:  # tau = 0: L and m as they are (up to the sign of a zero)
+                L[b, 0] += kick * t0
+                L[b, 1] += kick * t1
+                L[b, 2] += kick * t2
+                tb0, tb1, tb2 = rotate_inverse(q[b, 0], q[b, 1], q[b, 2], q[b, 3], t0, t1, t2)
+                scratch[b, 0], scratch[b, _M_COMP] = sum_compensated(scratch[b, 0], kick * tb0, scratch[b, _M_COMP])
+                scratch[b, 1], scratch[b, _M_COMP + 1] = sum_compensated(
+                    scratch[b, 1], kick * tb1, scratch[b, _M_COMP + 1]
+                )
+                scratch[b, 2], scratch[b, _M_COMP + 2] = sum_compensated(
+                    scratch[b, 2], kick * tb2, scratch[b, _M_COMP + 2]
+                )
             scratch[b, _L_SAVED], scratch[b, _L_SAVED + 1], scratch[b, _L_SAVED + 2] = L[b, 0], L[b, 1], L[b, 2]
 
 
@@ -189,10 +194,18 @@ def _momentum_change_to_body(model, has_torque, torque_body, q, L, scratch) -> N
             d0 = L[b, 0] - scratch[b, _L_SAVED]
             d1 = L[b, 1] - scratch[b, _L_SAVED + 1]
             d2 = L[b, 2] - scratch[b, _L_SAVED + 2]
+            if d0 == 0.0 and d1 == 0.0 and d2 == 0.0:  # the flow left L (no angular damping here): m as it is
+                continue
             db0, db1, db2 = rotate_inverse(q[b, 0], q[b, 1], q[b, 2], q[b, 3], d0, d1, d2)
             scratch[b, 0], scratch[b, _M_COMP] = sum_compensated(scratch[b, 0], db0, scratch[b, _M_COMP])
             scratch[b, 1], scratch[b, _M_COMP + 1] = sum_compensated(scratch[b, 1], db1, scratch[b, _M_COMP + 1])
             scratch[b, 2], scratch[b, _M_COMP + 2] = sum_compensated(scratch[b, 2], db2, scratch[b, _M_COMP + 2])
+
+
+@numba.njit(cache=True, inline="always")
+def _flow_moved(L, scratch, b) -> bool:  # noqa: ANN001
+    """Whether the dissipation flow changed body b's L (L differs from what `_half_kick` saved): its m moved."""
+    return L[b, 0] != scratch[b, _L_SAVED] or L[b, 1] != scratch[b, _L_SAVED + 1] or L[b, 2] != scratch[b, _L_SAVED + 2]
 
 
 @numba.njit(cache=True, inline="always")
@@ -237,8 +250,10 @@ def _kick_and_drift(
 
     kick is h_prev, or h_prev / 2 when the dissipation flow took the other half's place (compose).
     h_next = 0 ends the step (the last two turns are skipped). The torque kick runs only for the bodies
-    torque_body flags whose tau this evaluation is not zero, or all of them when m_moved (the half kick
-    and the dissipation flow of a damped scene changed m since the last turn); the others' m_c is
+    torque_body flags whose tau this evaluation is not zero, or, when m_moved (a damped scene: the half
+    kick and the dissipation flow ran), whose L the flow changed (`_flow_moved`; the half kick leaves m
+    alone where tau is zero, and so does `_momentum_change_to_body` where the flow left L: a damped far
+    contact scene turned every body's last turn again, ~45 ns per body-step); the others' m_c is
     unchanged, so T_c reuses the turn of the previous pass (the very same (cos, sin): the result of the
     torque path with tau = 0, up to the sign of a zero: L = -0.0 plus 0 is +0.0). Why tau is tested,
     not only torque_body: a contact body far from anything, a spring at rest, a torque outside its
@@ -274,7 +289,11 @@ def _kick_and_drift(
         P[b, 0] += kick * F[b, 0]
         P[b, 1] += kick * F[b, 1]
         P[b, 2] += kick * F[b, 2]
-        if has_torque and torque_body[b] and (m_moved or tau[b, 0] != 0.0 or tau[b, 1] != 0.0 or tau[b, 2] != 0.0):
+        if (
+            has_torque
+            and torque_body[b]
+            and (tau[b, 0] != 0.0 or tau[b, 1] != 0.0 or tau[b, 2] != 0.0 or (m_moved and _flow_moved(L, scratch, b)))
+        ):
             t0, t1, t2 = tau[b, 0], tau[b, 1], tau[b, 2]
             L[b, 0] += kick * t0
             L[b, 1] += kick * t1
