@@ -63,7 +63,7 @@ def chunk_runner(scene: SceneSpec, steps: int) -> Callable[[], float]:
     frames = empty_buffers(1, n)
 
     def run(count: int = steps) -> float:
-        data = make_data(compiled.initial_state, compiled.model, chunk.SCRATCH_WIDTH).kernel()
+        data = make_data(compiled.initial_state, compiled.model, chunk.SCRATCH_WIDTH, forces=compiled.forces).kernel()
         started = time.perf_counter()
         chunk.run_chunk(km, forces, data, dt, 0, count, 10**9, frames, 0)
         return (time.perf_counter() - started) / count

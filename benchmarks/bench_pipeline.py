@@ -69,13 +69,13 @@ def compare_chunks(integrator: str, n: int, repeats: int) -> tuple[float, float]
     steps = steps_for(n)
 
     def new() -> float:
-        data = make_data(initial, sim.model, chunk.SCRATCH_WIDTH).kernel()
+        data = make_data(initial, sim.model, chunk.SCRATCH_WIDTH, forces=sim.forces).kernel()
         started = time.perf_counter()
         chunk.run_chunk(km, forces, data, DT, 0, steps, 10**9, frames, 0)
         return (time.perf_counter() - started) / steps
 
     def old() -> float:
-        d = make_data(initial, sim.model, chunk.SCRATCH_WIDTH)
+        d = make_data(initial, sim.model, chunk.SCRATCH_WIDTH, forces=sim.forces)
         s = d.state
         started = time.perf_counter()
         frozen(km, forces, d.force, DT, 0, steps, 10**9, s.x, s.q, s.P, s.L, d.F, d.tau, d.scratch, frames, 0)
@@ -94,7 +94,7 @@ def compare_api(n: int, repeats: int, integrator: str = "split2") -> tuple[float
     sim = rbcli.Simulation(free_bodies(n, integrator))
     km, forces = sim.model.kernel(), sim.forces.kernel()  # what Simulation passes its chunk
     chunk = get_integrator(integrator).chunk()
-    data = make_data(sim.compiled.initial_state, sim.model, chunk.SCRATCH_WIDTH).kernel()
+    data = make_data(sim.compiled.initial_state, sim.model, chunk.SCRATCH_WIDTH, forces=sim.forces).kernel()
     frames = empty_buffers(1, n)
     steps = 1000
     repeats = repeats if n < 10_000 else min(repeats, 5)

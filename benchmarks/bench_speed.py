@@ -221,7 +221,7 @@ def chunk_runner(compiled: CompiledScene, integrator: str) -> Runner:
 
     def make(steps: int) -> Callable[[], float]:
         def run() -> float:
-            data = make_data(compiled.initial_state, compiled.model, chunk.SCRATCH_WIDTH).kernel()
+            data = make_data(compiled.initial_state, compiled.model, chunk.SCRATCH_WIDTH, forces=forces).kernel()
             started = time.perf_counter()
             done, _, status = chunk.run_chunk(km, forces, data, DT, 0, steps, steps, frames, 0)
             elapsed = time.perf_counter() - started
@@ -238,7 +238,7 @@ def dispatch_seconds(compiled: CompiledScene, integrator: str, calls: int = 200)
     """Seconds of one Python call of `run_chunk` for 0 steps: unboxing the arguments, the chunk's fixed cost."""
     chunk = get_integrator(integrator).chunk()
     km, forces, n = compiled.model.kernel(), compiled.forces.kernel(), compiled.model.body_count
-    data = make_data(compiled.initial_state, compiled.model, chunk.SCRATCH_WIDTH).kernel()
+    data = make_data(compiled.initial_state, compiled.model, chunk.SCRATCH_WIDTH, forces=compiled.forces).kernel()
     frames = empty_buffers(2, n)
     best = float("inf")
     for _ in range(5):

@@ -37,7 +37,7 @@ from typing import NamedTuple
 import numpy as np
 
 from rbcli.physics.contact.tables import ROWS_HISTORY
-from rbcli.physics.forces.tables import ForceData, make_force_data
+from rbcli.physics.forces.tables import ForceData, ForceTables, KernelForceTables, make_force_data
 from rbcli.physics.joints.tables import JointWork, make_joint_work
 from rbcli.physics.model import KernelModel, Model
 from rbcli.physics.state import State
@@ -213,6 +213,7 @@ def make_data(
     contact_threads: int = 1,
     tree_reactions: bool = False,
     implicit_contact: bool = False,
+    forces: ForceTables | KernelForceTables | None = None,
 ) -> Data:
     """A Data for `initial` (copied) and the model `model` (either form; its contact and joint tables
     size the contact and joint work): zeroed accumulators, scratch, force data and joint work; with
@@ -220,7 +221,8 @@ def make_data(
     and its error budget `tolerance` for a run `duration` [s] long; contact_threads > 1: the contact
     pair search on that many threads (contact/threaded.py); tree_reactions: in joint coordinates, the run
     computes the joints' reactions (the joint_forces stream: tree/reactions.py); implicit_contact: the
-    contact stage keeps its contacts for the integrator's implicit correction (contact/implicit_rows.py)."""
+    contact stage keeps its contacts for the integrator's implicit correction (contact/implicit_rows.py);
+    forces: the scene's force tables (either form), which size the dampers' work (None: no dampers)."""
     n = initial.x.shape[0]
     state = initial.copy()
     if substeps < 1:
@@ -231,7 +233,7 @@ def make_data(
     joint = None
     if model.joint is not None and model.joint.body_a.shape[0] and tree is None:
         joint = make_joint_work(model.joint)
-    force_data = make_force_data(model, contact_threads, implicit_contact)
+    force_data = make_force_data(model, contact_threads, implicit_contact, forces)
     data = Data(state, F, tau, scratch, force_data, joint, substeps=int(substeps))
     if tree is not None:  # the trees' state from the bodies' (the velocities the joints allow: tree/coordinates.py)
         from rbcli.physics.tree.coordinates import set_from_bodies

@@ -148,7 +148,7 @@ class Simulation:
             self._chunk = info.adaptive_chunk().run_chunk
             self.data = make_data(
                 compiled.initial_state, self.model, 0, adaptive=True, tolerance=tolerance,
-                duration=self.settings.steps * self.settings.dt,
+                duration=self.settings.steps * self.settings.dt, forces=self.forces,
             )  # fmt: skip
         else:
             # threads (runner/threads.py): the loop whose passes over the bodies run on threads, for a
@@ -182,7 +182,7 @@ class Simulation:
             self.data = make_data(
                 compiled.initial_state, self.model, chunk.SCRATCH_WIDTH, substeps=self.settings.substeps,
                 contact_threads=self.contact_threads, tree_reactions="joint_forces" in self.settings.streams,
-                implicit_contact=info.implicit_contact,
+                implicit_contact=info.implicit_contact, forces=self.forces,
             )  # fmt: skip
         # welds (scene/welds.py): the scene's bodies on the simulated ones, and the simulated state before the
         # last step, (body_count, 13) x, q, P, L, from which the welds' reactions are read (runner/weld_reactions.py)

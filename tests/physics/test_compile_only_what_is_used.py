@@ -211,7 +211,7 @@ def test_a_chunk_gives_the_same_bits_with_kernel_tables_as_with_full_tables():
     chunk = get_integrator(INTEGRATOR).chunk()
     results = []
     for forces in (compiled.forces, compiled.forces.kernel()):
-        data = make_data(compiled.initial_state, compiled.model, chunk.SCRATCH_WIDTH)
+        data = make_data(compiled.initial_state, compiled.model, chunk.SCRATCH_WIDTH, forces=compiled.forces)
         frames = empty_buffers(4, 3)
         status = chunk.run_chunk(compiled.model.kernel(), forces, data.kernel(), 1e-3, 0, 20, 5, frames, 0)
         results.append((status, data.state.x, data.state.q, data.state.P, data.state.L, frames.x,

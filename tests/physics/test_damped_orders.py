@@ -119,3 +119,22 @@ def test_damped_off_centre_spring_keeps_the_order(hung_reference, name, order):
         errors.append(max(float(quat_geodesic_angle(q, reference[0])), float(np.abs(x - reference[1]).max())))
     assert min(errors) > 1e-10, errors  # far above the reference's error
     assert abs(fitted_slope(dts, errors) - order) < 0.2, errors
+
+
+@pytest.mark.parametrize("name", ["split2", "exact"])
+def test_a_step_with_dampers_refuses_force_data_without_their_work(name):
+    """The dissipation flow keeps each damper's constants in ForceData.damper (a row per spring row): a
+    ForceData made without the force tables has none, and the step says so instead of writing past it."""
+    from rbcli.physics.forces.tables import make_force_data
+    from rbcli.physics.integrators import get_integrator
+
+    compiled = compile_scene(load_scene(SCENE))
+    kernel = get_integrator(name).load()
+    km, forces, s = compiled.model.kernel(), compiled.forces.kernel(), compiled.initial_state.copy()
+    n = compiled.model.body_count
+    F, tau, scratch = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, kernel.SCRATCH_WIDTH))
+    s.x[:, 0] += np.arange(n)  # no spring at zero length
+    args = (0.0, 1e-3, s.x, s.q, s.P, s.L, F, tau, scratch)
+    kernel.step(km, forces, km.contact, make_force_data(km, forces=forces), *args)
+    with pytest.raises(ValueError, match="make_force_data"):
+        kernel.step(km, forces, km.contact, make_force_data(km), *args)

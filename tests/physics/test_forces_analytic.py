@@ -34,7 +34,7 @@ def wrench_at_start(compiled):  # noqa: ANN001, ANN201
     s = compiled.initial_state
     n = compiled.model.body_count
     F, tau = np.zeros((n, 3)), np.zeros((n, 3))
-    force_data, km = make_force_data(compiled.model), compiled.model.kernel()
+    force_data, km = make_force_data(compiled.model, forces=compiled.forces), compiled.model.kernel()
     accumulate_wrench(km, compiled.forces, km.contact, force_data, 0.0, s.x, s.q, s.P, s.L, F, tau)
     return F, tau
 
@@ -48,8 +48,9 @@ def run_steps(compiled, steps, integrator="euler-matrix"):  # noqa: ANN001, ANN2
     F, tau, scratch = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, kernel.SCRATCH_WIDTH))
     P_history = [s.P.copy()]
     for k in range(steps):
-        apply_impulses(km, forces, make_force_data(km), k * dt, (k + 1) * dt, s.x, s.q, s.P, s.L)
-        kernel.step(km, forces, km.contact, make_force_data(km), k * dt, dt, s.x, s.q, s.P, s.L, F, tau, scratch)
+        data = make_force_data(km, forces=forces)
+        apply_impulses(km, forces, data, k * dt, (k + 1) * dt, s.x, s.q, s.P, s.L)
+        kernel.step(km, forces, km.contact, data, k * dt, dt, s.x, s.q, s.P, s.L, F, tau, scratch)
         P_history.append(s.P.copy())
     return s, np.array(P_history)
 
@@ -97,7 +98,7 @@ def test_impulse_changes_P_by_J_and_L_by_r_cross_J_exactly():
         compiled = prepare(with_forces(make_scene([body]), spec))
         s = compiled.initial_state.copy()
         P0, L0 = s.P.copy(), s.L.copy()
-        force_data = make_force_data(compiled.model)
+        force_data = make_force_data(compiled.model, forces=compiled.forces)
         assert apply_impulses(compiled.model.kernel(), compiled.forces, force_data, 0.0, 0.01, s.x, s.q, s.P, s.L) == 1
         np.testing.assert_allclose(s.P[0] - P0[0], J_world, rtol=0, atol=1e-15)
         np.testing.assert_allclose(s.L[0] - L0[0], np.cross(R @ (p - centre), J_world), rtol=0, atol=1e-15)
@@ -130,7 +131,7 @@ def test_impulse_step_indices_follow_apply_impulses_rule():
     compiled = prepare(with_forces(make_scene([make_body("h")]), *specs))
     km, forces, dt = compiled.model.kernel(), compiled.forces, 0.1
     s = compiled.initial_state.copy()
-    force_data = make_force_data(km)
+    force_data = make_force_data(km, forces=forces)
     applied = {n: apply_impulses(km, forces, force_data, n * dt, (n + 1) * dt, s.x, s.q, s.P, s.L) for n in range(30)}
     assert impulse_step_indices(forces, dt).tolist() == [n for n, count in applied.items() if count]
     assert sum(applied.values()) == len(times) - 1  # all but the one before t = 0

@@ -155,7 +155,7 @@ def _run_chunk(name, compiled, forces, steps):  # noqa: ANN001, ANN202
     from rbcli.physics.data import make_data
 
     chunk = get_integrator(name).chunk()
-    data = make_data(compiled.initial_state, compiled.model, chunk.SCRATCH_WIDTH)
+    data = make_data(compiled.initial_state, compiled.model, chunk.SCRATCH_WIDTH, forces=compiled.forces)
     n, dt = compiled.model.body_count, compiled.settings.dt
     never = np.iinfo(np.int64).max
     handles = as_runner_passes(compiled.model.kernel(), forces, data.kernel(), empty_buffers(1, n))

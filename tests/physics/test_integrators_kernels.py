@@ -69,7 +69,7 @@ def test_compiled_step_matches_numpy_reference(name, kind):
     scratch = np.zeros((BODY_COUNT, kernel.SCRATCH_WIDTH))
     carried, carried_scratch = compiled.initial_state.copy(), np.zeros_like(scratch)
     dt = 0.01
-    contact, force_data = kmodel.contact, make_force_data(kmodel)  # no contact: force_data holds counters only
+    contact, force_data = kmodel.contact, make_force_data(kmodel, forces=forces)  # no contact stage
     for k in range(30):
         scratch[:] = 0.0
         kernel.step(kmodel, forces, contact, force_data, k * dt, dt, a.x, a.q, a.P, a.L, F, tau, scratch)
@@ -93,7 +93,7 @@ def test_chunk_loop_equals_repeated_steps(name):
     # the kernel form of the tables, as Simulation passes them (a plain ForceTables compiles every stage:
     # test_compile_only_what_is_used covers that form once, instead of once per integrator here)
     kmodel, forces = compiled.model.kernel(), _forces("torque-free").kernel()
-    data = make_data(compiled.initial_state, compiled.model, chunk.SCRATCH_WIDTH)
+    data = make_data(compiled.initial_state, compiled.model, chunk.SCRATCH_WIDTH, forces=forces)
     a, b = data.state, compiled.initial_state.copy()
     F, tau, scratch = np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, kernel.SCRATCH_WIDTH))
     frames = empty_buffers(4, 3)
@@ -101,7 +101,7 @@ def test_chunk_loop_equals_repeated_steps(name):
     done, filled, status = chunk.run_chunk(*handles[:3], 0.01, 0, 10, 3, handles[3], 0)
     assert (done, filled, status) == (10, 3, 0)
     assert frames.step[:3].tolist() == [3, 6, 9]
-    contact, force_data = kmodel.contact, make_force_data(kmodel)
+    contact, force_data = kmodel.contact, make_force_data(kmodel, forces=forces)
     for k in range(10):
         kernel.step(kmodel, forces, contact, force_data, k * 0.01, 0.01, b.x, b.q, b.P, b.L, F, tau, scratch)
         if k == 8:

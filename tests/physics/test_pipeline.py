@@ -160,7 +160,7 @@ def test_a_loop_runs_the_joint_stages_only_where_its_integrator_holds_joints():
     assert abs(np.linalg.norm(x0 - pivot) - d) < 1e-12
     for name in ("split2", "rk4"):
         chunk = get_integrator(name).chunk()
-        data = make_data(compiled.initial_state, compiled.model, chunk.SCRATCH_WIDTH)
+        data = make_data(compiled.initial_state, compiled.model, chunk.SCRATCH_WIDTH, forces=compiled.forces)
         frames = empty_buffers(1, 1, 1)
         handles = as_runner_passes(compiled.model.kernel(), compiled.forces.kernel(), data.kernel(), frames)
         done, _, status = chunk.run_chunk(*handles[:3], dt, 0, steps, 10**9, handles[3], 0)

@@ -38,6 +38,8 @@ if TYPE_CHECKING:
 NO_SCHEDULE = -1
 # Row column `body_b` of a spring meaning "the second end is a world anchor".
 WORLD = -1
+# Columns of ForceData.damper: a damper row's constants over one dissipation flow (forces/damping.py).
+DAMPER_COLUMNS = 19
 
 SCHEDULE_CONSTANT = 0
 SCHEDULE_PIECEWISE_LINEAR = 1
@@ -219,23 +221,36 @@ class ForceData(NamedTuple):
     contact: the contact stage's grid, per-evaluation arrays and contact history (contact/tables.py);
       None when the scene has no contact stage (`contact_present`), as KernelModel.contact is. The force
       pass's contact stage writes it; the pipeline's contact stages start, commit and record it.
+    damper: float64 (spring rows, forces/damping.py DAMPER_COLUMNS): each damper's constants over one
+      dissipation flow D(h) of the splitting integrators (its line, moment arms and weight, computed once
+      for the palindrome's two passes); 0 rows in a scene without a damper.
     """
 
     term_evaluations: np.ndarray
     contact: ContactWork | None
+    damper: np.ndarray
 
 
-def make_force_data(model: Model | KernelModel, contact_threads: int = 1, implicit_contact: bool = False) -> ForceData:
+def make_force_data(
+    model: Model | KernelModel,
+    contact_threads: int = 1,
+    implicit_contact: bool = False,
+    forces: ForceTables | KernelForceTables | None = None,
+) -> ForceData:
     """A zeroed ForceData for the model `model` (Model, KernelModel: the same ForceData; what it needs is
-    the model's contact table); contact_threads > 1: the contact pair search runs on that many threads
-    (contact/threaded.py); implicit_contact: the contact stage keeps its contacts for the linearly implicit
-    correction (contact/implicit_rows.py)."""
+    the model's contact table) and its force tables `forces` (either form; what it needs is the spring
+    table's size; None: a scene without dampers); contact_threads > 1: the contact pair search runs on
+    that many threads (contact/threaded.py); implicit_contact: the contact stage keeps its contacts for
+    the linearly implicit correction (contact/implicit_rows.py)."""
     contact: ContactTable | None = model.contact
+    spring = forces.spring if forces is not None else None
+    dampers = spring.damping.shape[0] if spring is not None and np.any(spring.damping != 0.0) else 0
     return ForceData(
         term_evaluations=np.zeros(len(TERM_NAMES), dtype=np.int64),
         contact=make_contact_work(contact, model.body_mass.shape[0], threads=contact_threads, implicit=implicit_contact)
         if contact is not None and contact_present(contact)
         else None,
+        damper=np.zeros((dampers, DAMPER_COLUMNS)),
     )
 
 

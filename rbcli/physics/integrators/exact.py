@@ -234,7 +234,8 @@ def _step(model, forces, contact, force_data, t, h, x, q, P, L, F, tau, scratch)
         kick = 0.5 * h
         _mark_damped(forces.spring, forces.drag, scratch)
         _half_kick(kick, P, L, F, tau, scratch)
-        dissipation_flow(model, forces.spring, forces.drag, h, x, scratch, P, L)  # at x and q of the midpoint
+        # at x and q of the midpoint
+        dissipation_flow(model, forces.spring, forces.drag, force_data.damper, h, x, scratch, P, L)
     for b in range(n):
         row = scratch[b]
         if row[ROT_ANCHORED] != 1.0:  # a torque: kick L, then the second half-flow from the midpoint
@@ -338,7 +339,7 @@ def compose(model, forces, contact, force_data, t, h, weights, x, q, P, L, F, ta
         h_next = weights[i + 1] * h if i + 1 < count else 0.0
         if dissipative:  # K_c(h/2) D(h) K_c(h/2) (forces/damping.py)
             _kick(model, torque, forces.torque_body, 0.5 * h_prev, P, L, F, tau)
-            dissipation_flow(model, forces.spring, forces.drag, h_prev, x, q_now, P, L)
+            dissipation_flow(model, forces.spring, forces.drag, force_data.damper, h_prev, x, q_now, P, L)
             _kick(model, torque, forces.torque_body, 0.5 * h_prev, P, L, F, tau)
         else:
             _kick(model, torque, forces.torque_body, h_prev, P, L, F, tau)

@@ -136,7 +136,7 @@ def compose(model, forces, contact, force_data, t, h, weights, x, q, P, L, F, ta
         if dissipative:
             kick = 0.5 * h_prev
             _half_kick(model, forces.has_torque, forces.torque_body, kick, q, P, L, F, tau, scratch)
-            dissipation_flow(model, forces.spring, forces.drag, h_prev, x, q, P, L)
+            dissipation_flow(model, forces.spring, forces.drag, force_data.damper, h_prev, x, q, P, L)
             _momentum_change_to_body(model, forces.has_torque, forces.torque_body, q, L, scratch)
         _kick_and_drift(
             model,
