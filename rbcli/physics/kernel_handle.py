@@ -47,6 +47,11 @@ class KernelHandleType(types.Type):
 register_model(KernelHandleType)(models.OpaqueModel)  # the buffer's address
 
 
+# bytes of a value's native form, per numba type: a Simulation makes four handles, and a run of few steps
+# (a sweep's variant, a test) paid ~0.7 ms sizing them again
+_NATIVE_SIZES: dict[types.Type, int] = {}
+
+
 class KernelHandle:
     """`value` in numba's native form, for kernels that open it (`opened`). Keep the handle while a kernel
     may use it, and the arrays of `value` where they are (the buffer holds their addresses)."""
@@ -57,10 +62,12 @@ class KernelHandle:
         from numba.core.registry import cpu_target
 
         inner = numba.typeof(value)  # what the dispatcher would find for `value` as an argument
-        context = cpu_target.target_context
-        size = context.get_abi_sizeof(context.get_data_type(inner))
+        size = _NATIVE_SIZES.get(inner)
+        if size is None:  # llvmlite parses the type's IR to size it: ~0.2 ms, paid once per type
+            context = cpu_target.target_context
+            size = _NATIVE_SIZES[inner] = int(context.get_abi_sizeof(context.get_data_type(inner)))
         self.value = value
-        self._buffer = np.zeros(max(int(size), 8), dtype=np.uint8)  # malloc's alignment: 16 bytes
+        self._buffer = np.zeros(max(size, 8), dtype=np.uint8)  # malloc's alignment: 16 bytes
         self.address = int(self._buffer.ctypes.data)
         self._numba_type_ = KernelHandleType(inner)
         _store(self._buffer, value)
