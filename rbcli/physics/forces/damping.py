@@ -223,6 +223,9 @@ def dissipation_flow(model, spring, drag, rows, h, x, q, P, L) -> None:  # noqa:
     through the rows (symmetric, second order; module docstring). Tables may be None (kernel form).
     rows: the dampers' constants, ForceData.damper (a row per spring row where any spring damps)."""
     half = 0.5 * h
+    # the passes' bounds as int64 values, not literals: a literal 0, 1 or -1 typed each pass apart, and
+    # numba compiled each sweep twice (once per direction) for every damped scene's first run
+    zero, one = np.int64(0), np.int64(1)
     dampers = False
     if spring is not None:
         count = spring.damping.shape[0]
@@ -231,14 +234,15 @@ def dissipation_flow(model, spring, drag, rows, h, x, q, P, L) -> None:  # noqa:
             raise ValueError("ForceData.damper has fewer rows than the spring table: make_force_data(forces=...)")
         if dampers:
             _damper_constants(model, spring, half, x, q, rows)
-            _damper_sweep(spring.body_a, spring.body_b, rows, 0, count, 1, P, L)
+            _damper_sweep(spring.body_a, spring.body_b, rows, zero, count, one, P, L)
     if drag is not None:
         count = drag.body.shape[0]
-        _drag_sweep(model.body_mass, model.body_inertia_inv, drag, half, 0, count, 1, q, P, L)
-        _drag_sweep(model.body_mass, model.body_inertia_inv, drag, half, count - 1, -1, -1, q, P, L)
+        _drag_sweep(model.body_mass, model.body_inertia_inv, drag, half, zero, count, one, q, P, L)
+        _drag_sweep(model.body_mass, model.body_inertia_inv, drag, half, count - one, -one, -one, q, P, L)
     if spring is not None:
         if dampers:
-            _damper_sweep(spring.body_a, spring.body_b, rows, spring.damping.shape[0] - 1, -1, -1, P, L)
+            count = spring.damping.shape[0]
+            _damper_sweep(spring.body_a, spring.body_b, rows, count - one, -one, -one, P, L)
 
 
 def dissipation_flow_numpy(model, spring, drag, h, x, q, P, L) -> None:  # noqa: ANN001
